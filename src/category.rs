@@ -1,0 +1,91 @@
+//! The 19 object categories of the paper's Table 2, and SUN RGB-D name normalisation.
+
+/// The detector's categories, in the paper's order (Table 2). The first ten are the "large" benchmark
+/// categories of SUN RGB-D.
+pub const CATEGORIES: [&str; 19] = [
+    "bed",
+    "chair",
+    "sofa",
+    "table",
+    "desk",
+    "toilet",
+    "bathtub",
+    "dresser",
+    "nightstand",
+    "bookshelf",
+    "box",
+    "door",
+    "counter",
+    "garbage_bin",
+    "sink",
+    "pillow",
+    "monitor",
+    "tv",
+    "lamp",
+];
+
+/// The ten large categories of the SUN RGB-D 3D detection benchmark.
+pub const LARGE_CATEGORIES: [&str; 10] = [
+    "bed",
+    "chair",
+    "sofa",
+    "table",
+    "desk",
+    "toilet",
+    "bathtub",
+    "dresser",
+    "nightstand",
+    "bookshelf",
+];
+
+/// Annotation names that are room structure, not objects; the frame reader skips them.
+pub const STRUCTURE_NAMES: [&str; 4] = ["wall", "floor", "ceiling", "room"];
+
+/// Splits a SUN RGB-D annotation name `class:label` into (class, label) and normalises the class:
+/// lower case, trimmed, spaces and dashes to `_`, and the dataset's spellings of our categories mapped
+/// to ours (`night_stand` → `nightstand`, `garbage bin` → `garbage_bin`, `television` → `tv`, ...).
+pub fn normalise_name(raw: &str) -> (String, Option<String>) {
+    let (class, label) = match raw.split_once(':') {
+        Some((c, l)) => (c, Some(l.trim().to_string()).filter(|l| !l.is_empty())),
+        None => (raw, None),
+    };
+    let mut class: String = class
+        .trim()
+        .to_lowercase()
+        .chars()
+        .map(|c| if c == ' ' || c == '-' { '_' } else { c })
+        .collect();
+    let alias = match class.as_str() {
+        "night_stand" | "nightstands" => Some("nightstand"),
+        "garbage" | "garbagebin" | "trash_can" | "trash_bin" | "recycle_bin" => Some("garbage_bin"),
+        "television" | "tv_stand_tv" => Some("tv"),
+        "book_shelf" | "bookcase" | "shelf_bookshelf" => Some("bookshelf"),
+        "computer_monitor" => Some("monitor"),
+        "bath_tub" => Some("bathtub"),
+        _ => None,
+    };
+    if let Some(alias) = alias {
+        class = alias.to_string();
+    }
+    (class, label)
+}
+
+/// Index of a category in [`CATEGORIES`].
+pub fn category_index(name: &str) -> Option<usize> {
+    CATEGORIES.iter().position(|c| *c == name)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_split_and_normalise() {
+        assert_eq!(normalise_name("chair"), ("chair".into(), None));
+        assert_eq!(normalise_name("Night Stand:left one"), ("nightstand".into(), Some("left one".into())));
+        assert_eq!(normalise_name("garbage bin"), ("garbage_bin".into(), None));
+        assert_eq!(normalise_name("books:"), ("books".into(), None));
+        assert_eq!(category_index("lamp"), Some(18));
+        assert_eq!(category_index("books"), None);
+    }
+}

@@ -1,0 +1,158 @@
+//! `cog-gpu bench [--frame DIR] [--category bed] [--cpu|--gpu|--both] [--json]`: throughput of one
+//! category's full sliding window on one frame, for the CPU path and the GPU path side by side.
+//!
+//! The weights are a fixed-seed pseudo-random vector (the arithmetic does not depend on their values).
+//! `--cpu` is the global flag; without any of the three flags both paths run. `preprocess_s` is the shared
+//! CPU preprocessing (gradients, normals, floor, yaw grids, hypotheses); `score_s` the fused scoring of the
+//! kept hypotheses, including uploads and read-back on the GPU path.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::bail;
+use serde_json::json;
+
+use super::GlobalOptions;
+use cog_gpu::features::hypotheses::{DEFAULT_MIN_POINTS, DEFAULT_STEP};
+use cog_gpu::features::window::{category_sizes, DEFAULT_SIZE_STATS};
+use cog_gpu::features::{Backend, Layout, PreparedWindow};
+use cog_gpu::frame::{DepthSource, Frame};
+
+/// The real frame benchmarked when no `--frame` is given (until the synthetic standard frame exists).
+pub const DEFAULT_FRAME: &str = "../shared/data/sunrgbd/kv1-b3dodata-img_0063";
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// Frame directory.
+    #[arg(long, default_value = DEFAULT_FRAME)]
+    pub frame: PathBuf,
+    /// Category whose sizes make the sliding window.
+    #[arg(long, default_value = "bed")]
+    pub category: String,
+    /// Run only the GPU path.
+    #[arg(long, conflicts_with = "both")]
+    pub gpu: bool,
+    /// Run both paths (the default unless --cpu or --gpu is given).
+    #[arg(long)]
+    pub both: bool,
+    /// Score at most this many of the kept hypotheses (evenly spread), for a quick run.
+    #[arg(long)]
+    pub limit: Option<usize>,
+    #[arg(long, default_value = DEFAULT_SIZE_STATS)]
+    pub sizes: PathBuf,
+    #[arg(long, default_value_t = DEFAULT_STEP)]
+    pub step: f32,
+    #[arg(long, default_value_t = DEFAULT_MIN_POINTS)]
+    pub min_points: u32,
+    /// Print one JSON object.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Deterministic weights in [−1, 1) (a 64-bit LCG; no dependency on a random crate).
+pub fn bench_weights(dim: usize, seed: u64) -> Vec<f32> {
+    let mut state = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+    (0..dim)
+        .map(|_| {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((state >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
+        })
+        .collect()
+}
+
+pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
+    if options.force_cpu && (args.gpu || args.both) {
+        bail!("--cpu cannot be combined with --gpu or --both");
+    }
+    let (want_cpu, want_gpu) = match (options.force_cpu, args.gpu, args.both) {
+        (true, _, _) => (true, false),
+        (_, true, _) => (false, true),
+        _ => (true, true),
+    };
+    let frame = Frame::read(&args.frame, DepthSource::Raw)?;
+    let sizes = category_sizes(&args.sizes, &args.category)?;
+    let window = PreparedWindow::new(&frame, sizes, args.step, args.min_points)?;
+    let layout = Layout::default();
+    let weights = vec![bench_weights(layout.dim(), 7)];
+    let kept = &window.set.hypotheses;
+    let scored: Vec<_> = match args.limit {
+        Some(limit) if limit < kept.len() => {
+            let stride = kept.len() as f64 / limit as f64;
+            (0..limit).map(|n| kept[(n as f64 * stride) as usize]).collect()
+        }
+        _ => kept.clone(),
+    };
+    let gpu = if want_gpu { cog_gpu::gpu::acquire(false) } else { None };
+    if args.gpu && gpu.is_none() {
+        bail!("--gpu: no GPU adapter (see the warning above)");
+    }
+    let mut backends = Vec::new();
+    if let Some(ctx) = &gpu {
+        backends.push(Backend::Gpu(ctx));
+    }
+    if want_cpu {
+        backends.push(Backend::Cpu);
+    }
+    let mut paths = serde_json::Map::new();
+    for backend in backends {
+        let start = Instant::now();
+        let (_, updates) = backend.scores(&window.scene, &layout, &scored, &weights)?;
+        let score_s = start.elapsed().as_secs_f64();
+        let adapter = match backend {
+            Backend::Gpu(ctx) => ctx.adapter_summary(),
+            Backend::Cpu => format!("CPU, rayon, {} threads", rayon::current_num_threads()),
+        };
+        paths.insert(
+            backend.name().into(),
+            json!({
+                "adapter": adapter,
+                "hypotheses_generated": window.set.generated,
+                "hypotheses_kept": kept.len(),
+                "hypotheses_scored": scored.len(),
+                "preprocess_s": window.preprocess_s,
+                "score_s": score_s,
+                "hypotheses_per_s": scored.len() as f64 / score_s,
+                "point_voxel_updates": updates,
+                "point_voxel_updates_per_s": updates as f64 / score_s,
+            }),
+        );
+    }
+    let report = json!({
+        "frame": frame.name,
+        "image": [frame.width(), frame.height()],
+        "points": window.scene.pre.len(),
+        "category": args.category,
+        "layout": layout.id(),
+        "paths": paths,
+    });
+    if args.json {
+        println!("{}", serde_json::to_string(&report)?);
+        return Ok(());
+    }
+    println!(
+        "{} ({}×{}, {} points), category '{}', layout {}",
+        frame.name,
+        frame.width(),
+        frame.height(),
+        window.scene.pre.len(),
+        args.category,
+        layout.id()
+    );
+    println!(
+        "hypotheses: {} generated, {} kept, {} scored; preprocessing {:.3} s",
+        window.set.generated,
+        kept.len(),
+        scored.len(),
+        window.preprocess_s
+    );
+    for (name, p) in &paths {
+        println!(
+            "{name:>4}: score {:.3} s, {:.0} hypotheses/s, {:.3e} point·voxel updates/s  [{}]",
+            p["score_s"].as_f64().unwrap_or(0.0),
+            p["hypotheses_per_s"].as_f64().unwrap_or(0.0),
+            p["point_voxel_updates_per_s"].as_f64().unwrap_or(0.0),
+            p["adapter"].as_str().unwrap_or("?")
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,12 @@
+//! Subcommands of the `cog-gpu` binary.
+
+pub mod bench;
+pub mod info;
+pub mod score;
+pub mod synth;
+
+/// Options shared by every subcommand.
+pub struct GlobalOptions {
+    /// `--cpu`: never ask for a GPU adapter.
+    pub force_cpu: bool,
+}

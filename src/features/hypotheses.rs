@@ -1,0 +1,305 @@
+//! Sliding-window cuboid hypotheses (paper §3.5).
+//!
+//! * **Sizes**: every combination of the category's width quantiles {0.1, 0.3, 0.5, 0.7, 0.9}, depth
+//!   quantiles {0.25, 0.5, 0.75} and height quantiles {0.3, 0.5, 0.8}: 45 sizes, `size_index =
+//!   (w·3 + d)·3 + h`. From a training set's annotated cuboids ([`SizeQuantiles::from_cuboids`]) or, when
+//!   no training set is given, from the SUN RGB-D statistics in `sunrgbd-size-stats.json`
+//!   ([`SizeQuantiles::from_stats_file`], the same quantiles computed over the official test split's boxes).
+//! * **Yaws**: 16, `2πk/16`, k = 0..15 (the full circle: the front matters).
+//! * **Centres**: for each yaw, the ground-plane lattice of that yaw's bucket grid (cells of side `step`,
+//!   default 0.1 m, axis-aligned with the hypothesis): one centre at the middle of every cell that holds at
+//!   least one point — the visible part of the scene. Bottoms on the floor.
+//! * **Skipping**: a hypothesis is kept when at least `min_points` points (default
+//!   [`DEFAULT_MIN_POINTS`]) lie inside the (non-expanded) cuboid and more than `step` above the floor,
+//!   counted on the bucket grid: the points of the cells (side `step` on the ground, `step` vertically from
+//!   the floor) whose centres lie inside the cuboid, leaving out the lowest layer (the floor slab: every box
+//!   standing on a visible floor holds floor points), via a summed-volume table, so the test costs O(1) per
+//!   hypothesis. The count is within one cell layer of the exact one; it only decides what is scored.
+
+use std::f32::consts::TAU;
+use std::path::Path;
+
+use glam::{Vec2, Vec3};
+use serde::{Deserialize, Serialize};
+
+use super::scene::{FeatureScene, YawGrid};
+use crate::error::{Error, Result};
+use crate::geometry::Cuboid;
+
+/// Width, depth and height quantile levels (paper §3.5).
+pub const WIDTH_QUANTILES: [f64; 5] = [0.1, 0.3, 0.5, 0.7, 0.9];
+pub const DEPTH_QUANTILES: [f64; 3] = [0.25, 0.5, 0.75];
+pub const HEIGHT_QUANTILES: [f64; 3] = [0.3, 0.5, 0.8];
+/// Number of hypothesis orientations.
+pub const YAW_COUNT: usize = 16;
+/// Default ground-plane step of the centres (metres).
+pub const DEFAULT_STEP: f32 = 0.1;
+/// Default minimum number of points inside a kept hypothesis: a 0.3 m × 0.3 m patch of surface at 3 m
+/// from a Kinect gives about 600 points, so 50 only drops boxes around (nearly) empty space.
+pub const DEFAULT_MIN_POINTS: u32 = 50;
+
+/// Size quantiles of one category (metres).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SizeQuantiles {
+    pub widths: Vec<f32>,
+    pub depths: Vec<f32>,
+    pub heights: Vec<f32>,
+}
+
+impl SizeQuantiles {
+    /// Reads a category's quantiles from a size statistics file (`sunrgbd-size-stats.json` format:
+    /// `{category: {width_m: {q: [...], v: [...]}, depth_m: ..., height_m: ...}}`). The `q` levels must be
+    /// the paper's.
+    pub fn from_stats_file(path: &Path, category: &str) -> Result<SizeQuantiles> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let root: serde_json::Value =
+            serde_json::from_str(&text).map_err(|e| Error::invalid(path, format!("malformed JSON: {e}")))?;
+        let entry = root
+            .get(category)
+            .ok_or_else(|| Error::invalid(path, format!("no size statistics for category '{category}'")))?;
+        let field = |name: &str, levels: &[f64]| -> Result<Vec<f32>> {
+            let what = format!("{category}.{name}");
+            let get = |key: &str| -> Result<Vec<f64>> {
+                entry
+                    .get(name)
+                    .and_then(|f| f.get(key))
+                    .and_then(|v| v.as_array())
+                    .ok_or_else(|| Error::invalid(path, format!("{what}.{key} missing or not an array")))?
+                    .iter()
+                    .map(|x| x.as_f64().ok_or_else(|| Error::invalid(path, format!("{what}.{key} holds a non-number"))))
+                    .collect()
+            };
+            let (q, v) = (get("q")?, get("v")?);
+            if q.len() != levels.len() || q.iter().zip(levels).any(|(a, b)| (a - b).abs() > 1e-9) {
+                return Err(Error::invalid(path, format!("{what}.q is {q:?}, expected {levels:?}")));
+            }
+            if v.len() != q.len() || v.iter().any(|x| !(x.is_finite() && *x > 0.0)) {
+                return Err(Error::invalid(path, format!("{what}.v must hold {} positive sizes, found {v:?}", q.len())));
+            }
+            Ok(v.iter().map(|&x| x as f32).collect())
+        };
+        Ok(SizeQuantiles {
+            widths: field("width_m", &WIDTH_QUANTILES)?,
+            depths: field("depth_m", &DEPTH_QUANTILES)?,
+            heights: field("height_m", &HEIGHT_QUANTILES)?,
+        })
+    }
+
+    /// Quantiles of annotated cuboids (linear interpolation between order statistics).
+    pub fn from_cuboids(cuboids: &[Cuboid]) -> Result<SizeQuantiles> {
+        if cuboids.is_empty() {
+            return Err(Error::Input("no training cuboids to take size quantiles from".into()));
+        }
+        let pick = |axis: usize, levels: &[f64]| {
+            let mut v: Vec<f32> = cuboids.iter().map(|c| c.size[axis]).collect();
+            v.sort_by(f32::total_cmp);
+            levels.iter().map(|&q| quantile_sorted(&v, q)).collect()
+        };
+        Ok(SizeQuantiles { widths: pick(0, &WIDTH_QUANTILES), depths: pick(1, &DEPTH_QUANTILES), heights: pick(2, &HEIGHT_QUANTILES) })
+    }
+
+    /// All (width, depth, height) combinations, `index = (w·nd + d)·nh + h`.
+    pub fn sizes(&self) -> Vec<Vec3> {
+        let mut out = Vec::new();
+        for &w in &self.widths {
+            for &d in &self.depths {
+                for &h in &self.heights {
+                    out.push(Vec3::new(w, d, h));
+                }
+            }
+        }
+        out
+    }
+}
+
+fn quantile_sorted(v: &[f32], q: f64) -> f32 {
+    let pos = q * (v.len() - 1) as f64;
+    let (i, frac) = (pos.floor() as usize, pos - pos.floor());
+    let next = v[(i + 1).min(v.len() - 1)];
+    (v[i] as f64 * (1.0 - frac) + next as f64 * frac) as f32
+}
+
+/// The 16 hypothesis yaws `2πk/16`.
+pub fn default_yaws() -> Vec<f32> {
+    (0..YAW_COUNT).map(|k| TAU * k as f32 / YAW_COUNT as f32).collect()
+}
+
+/// One cuboid hypothesis, in the frame of its yaw's [`YawGrid`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hypothesis {
+    /// Index into [`FeatureScene::yaws`].
+    pub yaw_index: u16,
+    /// Index into the size list it was made from.
+    pub size_index: u16,
+    /// Centre on the ground plane in the yaw's rotated frame (s, t).
+    pub centre: Vec2,
+    /// Bottom height (upright z).
+    pub bottom: f32,
+    /// (width, depth, height).
+    pub size: Vec3,
+    /// Points inside, as counted for the skipping test.
+    pub points_inside: u32,
+}
+
+impl Hypothesis {
+    /// The hypothesis as an upright cuboid.
+    pub fn cuboid(&self, scene: &FeatureScene) -> Cuboid {
+        let grid = &scene.yaws[self.yaw_index as usize];
+        let centre = grid.to_upright(self.centre.extend(self.bottom + 0.5 * self.size.z));
+        Cuboid::new(centre, self.size, grid.yaw)
+    }
+}
+
+/// Options of the sliding window.
+#[derive(Clone, Debug)]
+pub struct WindowOptions {
+    pub sizes: Vec<Vec3>,
+    /// Minimum points inside (see the module doc).
+    pub min_points: u32,
+}
+
+/// Hypotheses of one sliding window with the counts the reports need.
+#[derive(Clone, Debug, Default)]
+pub struct HypothesisSet {
+    pub hypotheses: Vec<Hypothesis>,
+    /// Hypotheses enumerated before the skipping test.
+    pub generated: usize,
+}
+
+/// Per-yaw summed-volume table of point counts over (s cell, t cell, z cell from the floor).
+struct CountTable {
+    dims: [usize; 3],
+    /// `(dims+1)`-sized inclusive prefix sums.
+    sums: Vec<u32>,
+}
+
+impl CountTable {
+    fn build(grid: &YawGrid, floor: f32) -> CountTable {
+        let max_z = grid.records.iter().fold(floor, |m, r| m.max(r.z));
+        let nz = (((max_z - floor) * grid.inv_step).floor() as usize + 1).max(1);
+        let dims = [grid.cells[0] as usize, grid.cells[1] as usize, nz];
+        let (sx, sy) = (dims[0] + 1, dims[1] + 1);
+        let mut sums = vec![0u32; sx * sy * (nz + 1)];
+        let at = |x: usize, y: usize, z: usize| (z * sy + y) * sx + x;
+        for row in 0..grid.cells[1] {
+            for col in 0..grid.cells[0] {
+                for r in &grid.records[grid.row_span(row, (col, col))] {
+                    let z = (((r.z - floor) * grid.inv_step).floor().max(0.0) as usize).min(nz - 1);
+                    sums[at(col as usize + 1, row as usize + 1, z + 1)] += 1;
+                }
+            }
+        }
+        for z in 1..=nz {
+            for y in 1..=dims[1] {
+                for x in 1..=dims[0] {
+                    let v = sums[at(x, y, z)] + sums[at(x - 1, y, z)] + sums[at(x, y - 1, z)] + sums[at(x, y, z - 1)]
+                        - sums[at(x - 1, y - 1, z)]
+                        - sums[at(x - 1, y, z - 1)]
+                        - sums[at(x, y - 1, z - 1)]
+                        + sums[at(x - 1, y - 1, z - 1)];
+                    sums[at(x, y, z)] = v;
+                }
+            }
+        }
+        CountTable { dims, sums }
+    }
+
+    /// Points in cells `lo..=hi` (inclusive, clamped); 0 when empty.
+    fn count(&self, lo: [i64; 3], hi: [i64; 3]) -> u32 {
+        let mut a = [0usize; 3];
+        let mut b = [0usize; 3];
+        for k in 0..3 {
+            let (l, h) = (lo[k].max(0), hi[k].min(self.dims[k] as i64 - 1));
+            if h < l {
+                return 0;
+            }
+            (a[k], b[k]) = (l as usize, h as usize + 1);
+        }
+        let (sx, sy) = (self.dims[0] + 1, self.dims[1] + 1);
+        let s = |x: usize, y: usize, z: usize| self.sums[(z * sy + y) * sx + x] as i64;
+        let v = s(b[0], b[1], b[2]) - s(a[0], b[1], b[2]) - s(b[0], a[1], b[2]) - s(b[0], b[1], a[2])
+            + s(a[0], a[1], b[2])
+            + s(a[0], b[1], a[2])
+            + s(b[0], a[1], a[2])
+            - s(a[0], a[1], a[2]);
+        v as u32
+    }
+}
+
+/// Enumerates the sliding window over every yaw of `scene` (see the module doc).
+pub fn sliding_window(scene: &FeatureScene, options: &WindowOptions) -> HypothesisSet {
+    let floor = scene.pre.floor;
+    let per_yaw: Vec<(usize, Vec<Hypothesis>)> = {
+        use rayon::prelude::*;
+        scene
+            .yaws
+            .par_iter()
+            .enumerate()
+            .map(|(yaw_index, grid)| {
+                let table = CountTable::build(grid, floor);
+                let mut generated = 0;
+                let mut kept = Vec::new();
+                let step = grid.step;
+                // Cell index range whose centres origin + (c + 0.5)·step lie in [lo, hi].
+                let centred = |lo: f32, hi: f32, origin: f32| -> (i64, i64) {
+                    (((lo - origin) / step - 0.5).ceil() as i64, ((hi - origin) / step - 0.5).floor() as i64)
+                };
+                for row in 0..grid.cells[1] {
+                    for col in 0..grid.cells[0] {
+                        if grid.row_span(row, (col, col)).is_empty() {
+                            continue;
+                        }
+                        let centre = Vec2::new(
+                            grid.origin[0] + (col as f32 + 0.5) * step,
+                            grid.origin[1] + (row as f32 + 0.5) * step,
+                        );
+                        for (size_index, &size) in options.sizes.iter().enumerate() {
+                            generated += 1;
+                            let (s0, s1) = centred(centre.x - 0.5 * size.x, centre.x + 0.5 * size.x, grid.origin[0]);
+                            let (t0, t1) = centred(centre.y - 0.5 * size.y, centre.y + 0.5 * size.y, grid.origin[1]);
+                            // The floor slab (the lowest cell layer) is left out: every box on the floor
+                            // holds floor points, which say nothing about an object.
+                            let (_, z1) = centred(floor, floor + size.z, floor);
+                            let z0 = 1;
+                            let inside = table.count([s0, t0, z0], [s1, t1, z1]);
+                            if inside >= options.min_points {
+                                kept.push(Hypothesis {
+                                    yaw_index: yaw_index as u16,
+                                    size_index: size_index as u16,
+                                    centre,
+                                    bottom: floor,
+                                    size,
+                                    points_inside: inside,
+                                });
+                            }
+                        }
+                    }
+                }
+                (generated, kept)
+            })
+            .collect()
+    };
+    let mut set = HypothesisSet::default();
+    for (generated, kept) in per_yaw {
+        set.generated += generated;
+        set.hypotheses.extend(kept);
+    }
+    set
+}
+
+impl Hypothesis {
+    /// The hypothesis of an arbitrary upright cuboid (e.g. an annotation) whose yaw is that of
+    /// `scene.yaws[yaw_index]` (the cuboid's own yaw is not read). `points_inside` is left 0.
+    pub fn from_cuboid(scene: &FeatureScene, yaw_index: usize, cuboid: &Cuboid) -> Hypothesis {
+        let grid = &scene.yaws[yaw_index];
+        let c = cuboid.centre;
+        Hypothesis {
+            yaw_index: yaw_index as u16,
+            size_index: 0,
+            centre: Vec2::new(c.x * grid.cos + c.y * grid.sin, -c.x * grid.sin + c.y * grid.cos),
+            bottom: cuboid.bottom(),
+            size: cuboid.size,
+            points_inside: 0,
+        }
+    }
+}

@@ -1,0 +1,22 @@
+//! The feature engine (paper §3): per-frame preprocessing, the feature layout, sliding-window cuboid
+//! hypotheses and their features — density, normal histograms, Clouds of Oriented Gradients and view
+//! features — on the CPU (exact reference, rayon) and on the GPU (`crate::gpu::features`).
+//!
+//! Flow: [`Preprocessed::from_frame`] → [`FeatureScene::new`] (per-yaw point grids shared by every
+//! hypothesis of a yaw) → [`sliding_window`] → [`cpu::features`] / [`cpu::scores`] or the GPU twins.
+
+pub mod cpu;
+pub mod hypotheses;
+pub mod layout;
+pub mod preprocess;
+pub mod scene;
+
+pub use hypotheses::{default_yaws, sliding_window, Hypothesis, HypothesisSet, SizeQuantiles, WindowOptions};
+pub use layout::{Groups, Layout};
+pub use preprocess::{ImageGradients, Preprocessed};
+pub use scene::{FeatureScene, PointRecord, YawGrid};
+pub mod weights;
+pub mod window;
+
+pub use weights::WeightsFile;
+pub use window::{Backend, PreparedWindow};

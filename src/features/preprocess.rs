@@ -1,0 +1,280 @@
+//! Per-frame preprocessing (paper §3.1–3.2): image gradients, per-point normals, the 25-bin normal code
+//! and the floor height.
+//!
+//! Everything here is computed once per frame and shared by every hypothesis.
+
+use std::f32::consts::{FRAC_PI_4, FRAC_PI_8, PI};
+use std::num::NonZeroUsize;
+
+use glam::{DMat3, DVec3, Vec2, Vec3};
+use rayon::prelude::*;
+
+use crate::error::{Error, Result};
+use crate::frame::{Frame, PointCloud};
+use crate::geometry::Camera;
+
+/// Neighbours of the plane fit that gives a point's normal (paper §3.1.2, after Song & Xiao).
+pub const NORMAL_NEIGHBOURS: usize = 15;
+
+/// Quantile of the point heights taken as the floor (the paper's layout section, §6: floors at the 0.001
+/// quantile of the points along gravity).
+pub const FLOOR_QUANTILE: f64 = 0.001;
+
+/// Number of bins of the normal orientation code.
+pub const NORMAL_BINS: usize = 25;
+
+/// `cos 22.5°`: normals within 22.5° of straight up fall into bin 0 of the normal code.
+const UP_CONE_COS: f32 = 0.923_879_5;
+/// `sin 22.5°`: the elevation ring boundary between "tilted" and "near-horizontal" normals.
+const RING_SIN: f32 = 0.382_683_43;
+
+/// Image gradients of an RGB image with the filters `[−1, 0, 1]` and `[−1, 0, 1]ᵀ`, no smoothing.
+///
+/// Intensities are scaled to [0, 1], so `|dx|, |dy| ≤ 1` and magnitudes are at most √2. At the image
+/// border the missing neighbour is replaced by the border pixel itself (replicate padding), so the border
+/// gradient is a one-sided difference `I(1) − I(0)` (HOG's implementations use the same). For every pixel
+/// the colour channel with the largest magnitude `dx² + dy²` gives (dx, dy) (ties: the first channel, R).
+/// Image x runs along columns (right), y along rows (down).
+#[derive(Clone, Debug)]
+pub struct ImageGradients {
+    pub width: u32,
+    pub height: u32,
+    /// Row-major (dx, dy) per pixel.
+    pub gradients: Vec<Vec2>,
+}
+
+impl ImageGradients {
+    pub fn compute(rgb: &image::RgbImage) -> ImageGradients {
+        let (w, h) = rgb.dimensions();
+        let raw = rgb.as_raw();
+        let at = |col: u32, row: u32, ch: usize| raw[((row * w + col) * 3) as usize + ch] as f32 * (1.0 / 255.0);
+        let gradients = (0..h)
+            .into_par_iter()
+            .flat_map_iter(|row| {
+                (0..w).map(move |col| {
+                    let (left, right) = (col.saturating_sub(1), (col + 1).min(w - 1));
+                    let (up, down) = (row.saturating_sub(1), (row + 1).min(h - 1));
+                    let mut best = Vec2::ZERO;
+                    let mut best_sq = -1.0f32;
+                    for ch in 0..3 {
+                        let g = Vec2::new(at(right, row, ch) - at(left, row, ch), at(col, down, ch) - at(col, up, ch));
+                        let sq = g.length_squared();
+                        if sq > best_sq {
+                            best_sq = sq;
+                            best = g;
+                        }
+                    }
+                    best
+                })
+            })
+            .collect();
+        ImageGradients { width: w, height: h, gradients }
+    }
+
+    pub fn at(&self, col: u32, row: u32) -> Vec2 {
+        self.gradients[(row * self.width + col) as usize]
+    }
+}
+
+/// Gradient magnitude `√(dx² + dy²)`.
+pub fn gradient_magnitude(g: Vec2) -> f32 {
+    (g.x * g.x + g.y * g.y).sqrt()
+}
+
+/// Unsigned gradient orientation in [0, π): `atan2(dy, dx)` folded by π. A zero gradient gives 0.
+pub fn gradient_orientation(g: Vec2) -> f32 {
+    let mut angle = g.y.atan2(g.x);
+    if angle < 0.0 {
+        angle += PI;
+    }
+    if angle >= PI {
+        angle -= PI;
+    }
+    angle
+}
+
+/// The frame data every hypothesis reads: upright points with their normals and image gradients, the
+/// camera and the floor height.
+#[derive(Clone, Debug)]
+pub struct Preprocessed {
+    pub camera: Camera,
+    /// Image size (width, height) in pixels.
+    pub image_size: [u32; 2],
+    /// Upright points (metres); the camera is at the origin.
+    pub points: Vec<Vec3>,
+    /// Unit normal per point, oriented toward the camera (`n · (0 − p) ≥ 0`).
+    pub normals: Vec<Vec3>,
+    /// Image gradient (dx, dy) at each point's pixel (see [`ImageGradients`]).
+    pub gradients: Vec<Vec2>,
+    /// Floor height (upright z, metres): the [`FLOOR_QUANTILE`] quantile of the point heights.
+    pub floor: f32,
+}
+
+impl Preprocessed {
+    /// Preprocesses a frame: point cloud, gradients at the points' pixels, normals and floor.
+    /// Fails on a frame without any valid depth.
+    pub fn from_frame(frame: &Frame) -> Result<Preprocessed> {
+        let cloud = frame.point_cloud();
+        if cloud.len() < NORMAL_NEIGHBOURS {
+            return Err(Error::Input(format!(
+                "frame '{}' has {} points with depth; the feature engine needs at least {NORMAL_NEIGHBOURS}",
+                frame.name,
+                cloud.len()
+            )));
+        }
+        let camera = Camera::new(frame.intrinsics(), frame.rtilt());
+        let image = ImageGradients::compute(&frame.rgb);
+        Ok(Self::from_cloud(camera, [frame.width(), frame.height()], &cloud, &image))
+    }
+
+    /// Preprocesses a point cloud with precomputed image gradients.
+    pub fn from_cloud(camera: Camera, image_size: [u32; 2], cloud: &PointCloud, image: &ImageGradients) -> Preprocessed {
+        let gradients = cloud.pixels.iter().map(|&[col, row]| image.at(col, row)).collect();
+        let normals = estimate_normals(&cloud.points);
+        let floor = floor_height(&cloud.points);
+        Preprocessed { camera, image_size, points: cloud.points.clone(), normals, gradients, floor }
+    }
+
+    pub fn len(&self) -> usize {
+        self.points.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.points.is_empty()
+    }
+}
+
+/// The [`FLOOR_QUANTILE`] quantile of the heights (element `⌊q·(n−1)⌋` of the sorted heights); 0 for no
+/// points.
+pub fn floor_height(points: &[Vec3]) -> f32 {
+    if points.is_empty() {
+        return 0.0;
+    }
+    let mut heights: Vec<f32> = points.iter().map(|p| p.z).collect();
+    let index = (FLOOR_QUANTILE * (heights.len() - 1) as f64).floor() as usize;
+    let (_, value, _) = heights.select_nth_unstable_by(index, f32::total_cmp);
+    *value
+}
+
+/// Unit normals from a least-squares plane fit (smallest eigenvector of the neighbourhood covariance) to
+/// each point's [`NORMAL_NEIGHBOURS`] nearest 3D neighbours (the point itself included), found with a k-d
+/// tree; each normal is turned to face the camera at the origin. With fewer points than neighbours all
+/// points are used. A neighbourhood with no defined plane (all neighbours coincide) gets the unit vector
+/// toward the camera.
+pub fn estimate_normals(points: &[Vec3]) -> Vec<Vec3> {
+    if points.is_empty() {
+        return Vec::new();
+    }
+    let entries: Vec<[f32; 3]> = points.iter().map(|p| p.to_array()).collect();
+    let tree: kiddo::ImmutableKdTree<f32, 3> = match kiddo::ImmutableKdTree::new_from_slice(&entries) {
+        Ok(tree) => tree,
+        // Construction only fails on empty input, excluded above; fall back to camera-facing normals.
+        Err(_) => return points.iter().map(|&p| toward_camera(p)).collect(),
+    };
+    let k = NonZeroUsize::new(NORMAL_NEIGHBOURS.min(points.len())).unwrap_or(NonZeroUsize::MIN);
+    points
+        .par_iter()
+        .map(|&p| {
+            let neighbours = tree.query(&p.to_array()).nearest_n::<kiddo::SquaredEuclidean<f32>>(k).execute();
+            let normal = plane_normal(neighbours.iter().map(|n| points[n.item as usize])).unwrap_or_else(|| toward_camera(p));
+            if normal.dot(-p) < 0.0 {
+                -normal
+            } else {
+                normal
+            }
+        })
+        .collect()
+}
+
+fn toward_camera(p: Vec3) -> Vec3 {
+    (-p).try_normalize().unwrap_or(Vec3::Z)
+}
+
+/// Normal of the least-squares plane through `points`: the eigenvector of the smallest eigenvalue of their
+/// covariance (double precision). `None` when the points coincide.
+pub fn plane_normal(points: impl Iterator<Item = Vec3>) -> Option<Vec3> {
+    let pts: Vec<DVec3> = points.map(|p| p.as_dvec3()).collect();
+    if pts.len() < 3 {
+        return None;
+    }
+    let mean = pts.iter().copied().sum::<DVec3>() / pts.len() as f64;
+    let mut cov = DMat3::ZERO;
+    for p in &pts {
+        let d = *p - mean;
+        cov += DMat3::from_cols(d * d.x, d * d.y, d * d.z);
+    }
+    smallest_eigenvector(cov).map(|v| v.as_vec3())
+}
+
+/// Eigenvector of the smallest eigenvalue of a symmetric positive semi-definite 3×3 matrix.
+///
+/// Eigenvalues by the trigonometric closed form; the eigenvector is the longest cross product of two rows
+/// of `M − λI` (they span the plane orthogonal to it). When `M − λI` has rank < 2 (a repeated smallest
+/// eigenvalue: a line or a blob of points) any vector orthogonal to its non-zero row is an answer; one is
+/// returned. `None` for the zero matrix.
+pub fn smallest_eigenvector(m: DMat3) -> Option<DVec3> {
+    let scale = m.to_cols_array().iter().fold(0.0f64, |s, x| s.max(x.abs()));
+    if scale == 0.0 || !scale.is_finite() {
+        return None;
+    }
+    let a = m * (1.0 / scale);
+    let (a00, a11, a22) = (a.x_axis.x, a.y_axis.y, a.z_axis.z);
+    let (a01, a02, a12) = (a.y_axis.x, a.z_axis.x, a.z_axis.y);
+    let p1 = a01 * a01 + a02 * a02 + a12 * a12;
+    let q = (a00 + a11 + a22) / 3.0;
+    let lambda = if p1 < 1e-30 {
+        a00.min(a11).min(a22)
+    } else {
+        let p2 = (a00 - q).powi(2) + (a11 - q).powi(2) + (a22 - q).powi(2) + 2.0 * p1;
+        let p = (p2 / 6.0).sqrt();
+        let b = (a - DMat3::from_diagonal(DVec3::splat(q))) * (1.0 / p);
+        let r = (b.determinant() / 2.0).clamp(-1.0, 1.0);
+        let phi = r.acos() / 3.0;
+        // Eigenvalues q + 2p·cos(φ + 2πk/3); k = 1 gives the smallest.
+        q + 2.0 * p * (phi + 2.0 * std::f64::consts::PI / 3.0).cos()
+    };
+    let shifted = a - DMat3::from_diagonal(DVec3::splat(lambda));
+    // Symmetric: rows are columns.
+    let rows = [shifted.x_axis, shifted.y_axis, shifted.z_axis];
+    let candidates = [rows[0].cross(rows[1]), rows[0].cross(rows[2]), rows[1].cross(rows[2])];
+    let best = candidates.iter().copied().max_by(|u, v| u.length_squared().total_cmp(&v.length_squared()))?;
+    if best.length_squared() > 1e-24 {
+        return Some(best.normalize());
+    }
+    // Rank ≤ 1: any vector orthogonal to the largest row.
+    let row = rows.iter().copied().max_by(|u, v| u.length_squared().total_cmp(&v.length_squared()))?;
+    if row.length_squared() < 1e-24 {
+        return Some(DVec3::Z);
+    }
+    Some(row.normalize().any_orthonormal_vector())
+}
+
+/// The 25-bin normal orientation code of a normal given in a cuboid's own frame.
+///
+/// `local = (n·a, n·b, n_z)` with `a` the cuboid's width axis, `b` its depth axis (the front is −b), so the
+/// code turns with the hypothesis: for a hypothesis of yaw θ, `local` is the upright normal rotated by −θ
+/// about z. Bins:
+/// * bin 0: near-vertical upward normals, `n_z ≥ cos 22.5°` (floors, seats, table tops);
+/// * bins 1 + 8·ring + sector, 24 bins: three elevation rings — ring 0 `n_z < −sin 22.5°` (facing down,
+///   straight down included), ring 1 `|n_z| ≤ sin 22.5°` (near-horizontal normals: vertical surfaces),
+///   ring 2 `sin 22.5° < n_z < cos 22.5°` (tilted up) — times eight 45° azimuth sectors of the horizontal
+///   part measured from the cuboid's front: azimuth `α = atan2(n·a, −n·b)` (0 = out of the front, +π/2 =
+///   along +a, π = out of the back), sector `⌊(α + π/8)/(π/4)⌋ mod 8`, so sector 0 is centred on the front.
+///
+/// The GPU never evaluates this: per yaw the CPU writes each point's bin (an integer) next to the point,
+/// so both paths count exactly the same bins.
+pub fn normal_bin(local: Vec3) -> u32 {
+    if local.z >= UP_CONE_COS {
+        return 0;
+    }
+    let ring = if local.z < -RING_SIN {
+        0
+    } else if local.z <= RING_SIN {
+        1
+    } else {
+        2
+    };
+    let azimuth = local.x.atan2(-local.y);
+    let sector = (((azimuth + FRAC_PI_8) / FRAC_PI_4).floor() as i32).rem_euclid(8) as u32;
+    1 + 8 * ring + sector
+}

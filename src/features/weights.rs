@@ -1,0 +1,96 @@
+//! Weight files: one linear detector per file, the start of the model format.
+//!
+//! ```json
+//! {
+//!   "format": "cog-gpu-weights",
+//!   "version": 1,
+//!   "layout_id": "cog-v1 grid=5x5x5 expanded=1 groups=density,normals,cog,view",
+//!   "layout": {"base_grid": [5, 5, 5], "expanded": true,
+//!              "groups": {"density": true, "normals": true, "cog": true, "view": true}},
+//!   "category": "bed",
+//!   "bias": 0.0,
+//!   "weights": [ ... layout.dim() numbers in the order of `features::layout` ... ]
+//! }
+//! ```
+//! The score of a hypothesis is `weights · φ + bias`. Reading checks that `layout_id` is the id of
+//! `layout` under this build's layout definition (so a file written for another feature order is
+//! rejected), that there are exactly `layout.dim()` finite weights, and that weights of switched-off groups
+//! are zero.
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use super::layout::Layout;
+use crate::error::{Error, Result};
+
+pub const WEIGHTS_FORMAT: &str = "cog-gpu-weights";
+pub const WEIGHTS_VERSION: u32 = 1;
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WeightsFile {
+    pub format: String,
+    pub version: u32,
+    pub layout_id: String,
+    pub layout: Layout,
+    pub category: String,
+    #[serde(default)]
+    pub bias: f32,
+    pub weights: Vec<f32>,
+}
+
+impl WeightsFile {
+    pub fn new(layout: Layout, category: &str, weights: Vec<f32>, bias: f32) -> Result<WeightsFile> {
+        let file = WeightsFile {
+            format: WEIGHTS_FORMAT.into(),
+            version: WEIGHTS_VERSION,
+            layout_id: layout.id(),
+            layout,
+            category: category.into(),
+            bias,
+            weights,
+        };
+        file.check().map_err(Error::Input)?;
+        Ok(file)
+    }
+
+    fn check(&self) -> std::result::Result<(), String> {
+        if self.format != WEIGHTS_FORMAT {
+            return Err(format!("format is '{}', expected '{WEIGHTS_FORMAT}'", self.format));
+        }
+        if self.version != WEIGHTS_VERSION {
+            return Err(format!("version {} is not supported (this build reads {WEIGHTS_VERSION})", self.version));
+        }
+        self.layout.validate().map_err(|e| e.to_string())?;
+        if self.layout_id != self.layout.id() {
+            return Err(format!("layout_id '{}' does not match this build's id for the layout, '{}'", self.layout_id, self.layout.id()));
+        }
+        if self.weights.len() != self.layout.dim() {
+            return Err(format!("{} weights, the layout has {} features", self.weights.len(), self.layout.dim()));
+        }
+        if let Some(n) = self.weights.iter().position(|w| !w.is_finite()) {
+            return Err(format!("weight {n} is not finite"));
+        }
+        if !self.bias.is_finite() {
+            return Err("bias is not finite".into());
+        }
+        let mask = self.layout.mask();
+        if let Some(n) = (0..mask.len()).find(|&n| !mask[n] && self.weights[n] != 0.0) {
+            return Err(format!("weight {n} ({}) belongs to a switched-off group but is not 0", self.layout.describe(n)));
+        }
+        Ok(())
+    }
+
+    pub fn read(path: &Path) -> Result<WeightsFile> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let file: WeightsFile =
+            serde_json::from_str(&text).map_err(|e| Error::invalid(path, format!("not a weights file: {e}")))?;
+        file.check().map_err(|m| Error::invalid(path, m))?;
+        Ok(file)
+    }
+
+    pub fn write(&self, path: &Path) -> Result<()> {
+        let text = serde_json::to_string(self).map_err(|e| Error::invalid(path, e.to_string()))?;
+        std::fs::write(path, text).map_err(|e| Error::io(path, e))
+    }
+}

@@ -1,0 +1,685 @@
+//! RGB-D frames in the SUN RGB-D directory layout: reading, writing, and the gravity-aligned point cloud.
+//!
+//! # The layout of one frame directory
+//! ```text
+//! FRAME/
+//!   image/<name>.jpg|png        RGB, 8 bits per channel
+//!   depth/<name>.png            raw depth, 16-bit grey (see below)
+//!   depth_bfx/<name>.png        filled depth (optional; read with DepthSource::Filled)
+//!   intrinsics.txt              K, 3×3 row-major, whitespace separated
+//!   extrinsics/<stamp>.txt      3×4 [E | 0], row-major; the last file by name is used
+//!   scene.txt                   scene type (optional)
+//!   annotation3Dfinal/index.json   3D boxes (optional)
+//!   annotation3Dlayout/index.json  room polygon (optional)
+//! ```
+//!
+//! # Conventions (the SUN RGB-D toolbox's `read3dPoints`)
+//! * A depth PNG value `d` holds millimetres rotated left by 3 bits: `mm = ((d >> 3) | (d << 13)) & 0xffff`.
+//!   0 means missing; metres = mm / 1000, clamped at 8 m.
+//! * Pixel coordinates are 1-based: the pixel in column `col`, row `row` (0-based in memory) has
+//!   `u = col + 1`, `v = row + 1`, and the camera point is `x = (u − cx)·z/fx`, `y = (v − cy)·z/fy`, `z`.
+//! * `Rtilt = P·E·Pᵀ` with `P = [[1,0,0],[0,0,1],[0,−1,0]]`, and the upright point is `Rtilt·(x, z, −y)`:
+//!   x right, y forward, z up.
+//! * Annotation polygons are in E's frame (Y down): upright `(x, y) = (X, Z)`, and the box spans
+//!   `z ∈ [−Ymax, −Ymin]`. Names may be `class:label`; null objects are skipped, and so are the room
+//!   structure names (wall, floor, ceiling).
+//! * The layout file's object named `room` is the room polygon; floor at `−Ymax`, ceiling at `−Ymin`.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use glam::{DMat3, DVec3, Mat3, Vec2, Vec3};
+use serde_json::{json, Value};
+
+use crate::category::{normalise_name, STRUCTURE_NAMES};
+use crate::error::{Error, Result};
+use crate::geometry::Cuboid;
+
+/// Depth beyond this many metres is clamped to it (the toolbox's convention).
+pub const MAX_DEPTH_M: f32 = 8.0;
+
+/// `P` of `Rtilt = P·E·Pᵀ`: swaps the camera's (x, y down, z forward) for (x, z, −y).
+pub fn axis_swap() -> DMat3 {
+    // glam matrices are built from columns.
+    DMat3::from_cols(DVec3::new(1.0, 0.0, 0.0), DVec3::new(0.0, 0.0, -1.0), DVec3::new(0.0, 1.0, 0.0))
+}
+
+/// Decodes one stored depth PNG value into millimetres (undoes the 3-bit left rotation).
+pub fn decode_depth_value(stored: u16) -> u16 {
+    stored.rotate_right(3)
+}
+
+/// Encodes millimetres into the stored depth PNG value (rotate left by 3 bits).
+pub fn encode_depth_value(mm: u16) -> u16 {
+    mm.rotate_left(3)
+}
+
+/// Metres of a decoded millimetre value, clamped at [`MAX_DEPTH_M`]; 0 stays 0 (missing).
+pub fn depth_metres(mm: u16) -> f32 {
+    (mm as f32 / 1000.0).min(MAX_DEPTH_M)
+}
+
+/// Which depth image of a frame to read.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum DepthSource {
+    /// `depth/`: the sensor's raw depth, with holes.
+    #[default]
+    Raw,
+    /// `depth_bfx/`: the toolbox's filled depth.
+    Filled,
+}
+
+impl DepthSource {
+    pub fn dir_name(self) -> &'static str {
+        match self {
+            DepthSource::Raw => "depth",
+            DepthSource::Filled => "depth_bfx",
+        }
+    }
+}
+
+/// One annotated object: a category (normalised class name), its optional label and its cuboid.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Object {
+    pub category: String,
+    pub label: Option<String>,
+    pub cuboid: Cuboid,
+}
+
+/// The room layout: a floor polygon (upright x, y) between floor and ceiling heights.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RoomLayout {
+    pub corners: Vec<Vec2>,
+    pub floor: f32,
+    pub ceiling: f32,
+}
+
+impl RoomLayout {
+    /// Whether the ground-plane point lies inside the room polygon (even-odd rule; the polygon may be
+    /// non-convex, as real annotations are).
+    pub fn contains_xy(&self, p: Vec2) -> bool {
+        let n = self.corners.len();
+        let mut inside = false;
+        let mut j = n.wrapping_sub(1);
+        for i in 0..n {
+            let (a, b) = (self.corners[i], self.corners[j]);
+            if (a.y > p.y) != (b.y > p.y) && p.x < (b.x - a.x) * (p.y - a.y) / (b.y - a.y) + a.x {
+                inside = !inside;
+            }
+            j = i;
+        }
+        inside
+    }
+
+    /// Whether the point is inside the polygon and between floor and ceiling (inclusive).
+    pub fn contains(&self, p: Vec3) -> bool {
+        p.z >= self.floor && p.z <= self.ceiling && self.contains_xy(p.truncate())
+    }
+}
+
+/// One RGB-D frame as stored on disk.
+#[derive(Clone, Debug)]
+pub struct Frame {
+    /// Directory name of the frame (its identity in a dataset).
+    pub name: String,
+    /// RGB image.
+    pub rgb: image::RgbImage,
+    /// Decoded depth in millimetres, row-major, `width × height`, 0 = missing (not yet clamped at 8 m).
+    pub depth_mm: Vec<u16>,
+    /// K, row-major, in the 1-based pixel convention.
+    pub k: [[f64; 3]; 3],
+    /// E, the 3×3 rotation of the extrinsics file (row-major).
+    pub extrinsics: [[f64; 3]; 3],
+    pub scene: Option<String>,
+    pub objects: Vec<Object>,
+    pub layout: Option<RoomLayout>,
+}
+
+/// The gravity-aligned point cloud of a frame: one entry per pixel with valid depth, in row-major pixel
+/// order.
+#[derive(Clone, Debug, Default)]
+pub struct PointCloud {
+    /// Upright points (metres).
+    pub points: Vec<Vec3>,
+    /// (column, row) of each point's pixel, 0-based.
+    pub pixels: Vec<[u32; 2]>,
+    /// RGB colour of each point's pixel.
+    pub colours: Vec<[u8; 3]>,
+}
+
+impl PointCloud {
+    pub fn len(&self) -> usize {
+        self.points.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.points.is_empty()
+    }
+    /// The `q`-quantile of the points' heights (z), linearly interpolated between order statistics as
+    /// numpy's default does (`None` when empty). The paper's layout section estimates the floor and the
+    /// ceiling as the 0.001 and 0.999 quantiles.
+    pub fn height_quantile(&self, q: f32) -> Option<f32> {
+        let mut heights: Vec<f32> = self.points.iter().map(|p| p.z).collect();
+        quantile_of_unsorted(&mut heights, q)
+    }
+
+    /// Component-wise minimum and maximum of the points (`None` when empty).
+    pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
+        let first = *self.points.first()?;
+        Some(self.points.iter().fold((first, first), |(lo, hi), p| (lo.min(*p), hi.max(*p))))
+    }
+}
+
+/// The `q`-quantile (0 ≤ q ≤ 1) of `values` with linear interpolation between order statistics
+/// (numpy's default); reorders `values`. `None` when empty.
+pub fn quantile_of_unsorted(values: &mut [f32], q: f32) -> Option<f32> {
+    if values.is_empty() {
+        return None;
+    }
+    values.sort_unstable_by(f32::total_cmp);
+    let position = q.clamp(0.0, 1.0) as f64 * (values.len() - 1) as f64;
+    let below = position.floor() as usize;
+    let above = (below + 1).min(values.len() - 1);
+    let t = (position - below as f64) as f32;
+    Some(values[below] + (values[above] - values[below]) * t)
+}
+
+fn to_dmat3(rows: &[[f64; 3]; 3]) -> DMat3 {
+    DMat3::from_cols_array_2d(rows).transpose()
+}
+
+fn to_rows(m: DMat3) -> [[f64; 3]; 3] {
+    m.transpose().to_cols_array_2d()
+}
+
+impl Frame {
+    pub fn width(&self) -> u32 {
+        self.rgb.width()
+    }
+    pub fn height(&self) -> u32 {
+        self.rgb.height()
+    }
+
+    /// `Rtilt = P·E·Pᵀ` (double precision).
+    pub fn rtilt_f64(&self) -> DMat3 {
+        let p = axis_swap();
+        p * to_dmat3(&self.extrinsics) * p.transpose()
+    }
+
+    /// `Rtilt` in single precision, as the kernels use it.
+    pub fn rtilt(&self) -> Mat3 {
+        self.rtilt_f64().as_mat3()
+    }
+
+    /// Sets E from a wanted Rtilt (`E = Pᵀ·Rtilt·P`).
+    pub fn set_rtilt(&mut self, rtilt: DMat3) {
+        let p = axis_swap();
+        self.extrinsics = to_rows(p.transpose() * rtilt * p);
+    }
+
+    /// (fx, fy, cx, cy) in the 1-based pixel convention.
+    pub fn intrinsics(&self) -> [f32; 4] {
+        [self.k[0][0] as f32, self.k[1][1] as f32, self.k[0][2] as f32, self.k[1][2] as f32]
+    }
+
+    /// Number of pixels with depth.
+    pub fn valid_depth(&self) -> usize {
+        self.depth_mm.iter().filter(|&&d| d > 0).count()
+    }
+
+    /// The gravity-aligned point cloud (see the module doc for the conventions). Computed in double
+    /// precision and rounded once to f32, so it is the reference the f32 GPU kernel is compared with.
+    pub fn point_cloud(&self) -> PointCloud {
+        let (w, h) = (self.width(), self.height());
+        let rtilt = self.rtilt_f64();
+        let (fx, fy, cx, cy) = (self.k[0][0], self.k[1][1], self.k[0][2], self.k[1][2]);
+        let mut cloud = PointCloud::default();
+        for row in 0..h {
+            for col in 0..w {
+                let mm = self.depth_mm[(row * w + col) as usize];
+                if mm == 0 {
+                    continue;
+                }
+                let z = (mm as f64 / 1000.0).min(MAX_DEPTH_M as f64);
+                let x = ((col + 1) as f64 - cx) * z / fx;
+                let y = ((row + 1) as f64 - cy) * z / fy;
+                let p = rtilt * DVec3::new(x, z, -y);
+                cloud.points.push(p.as_vec3());
+                cloud.pixels.push([col, row]);
+                cloud.colours.push(self.rgb.get_pixel(col, row).0);
+            }
+        }
+        cloud
+    }
+
+    /// Reads a frame directory with the toolbox's conventions.
+    pub fn read(dir: impl AsRef<Path>, depth: DepthSource) -> Result<Frame> {
+        read_frame(dir.as_ref(), depth)
+    }
+
+    /// Writes the frame in the SUN RGB-D layout (RGB as PNG, depth into `depth/`).
+    pub fn write(&self, dir: impl AsRef<Path>) -> Result<()> {
+        write_frame(dir.as_ref(), self)
+    }
+}
+
+// ---------------------------------------------------------------------------------------------------------
+// Reading
+
+fn read_text(path: &Path) -> Result<String> {
+    fs::read_to_string(path).map_err(|e| Error::io(path, e))
+}
+
+/// Parses whitespace-separated finite numbers; names the file and the offending token on error.
+fn parse_numbers(path: &Path, text: &str) -> Result<Vec<f64>> {
+    text.split_whitespace()
+        .map(|tok| {
+            let v: f64 = tok
+                .parse()
+                .map_err(|_| Error::invalid(path, format!("'{tok}' is not a number")))?;
+            if v.is_finite() {
+                Ok(v)
+            } else {
+                Err(Error::invalid(path, format!("non-finite value '{tok}'")))
+            }
+        })
+        .collect()
+}
+
+fn read_intrinsics(path: &Path) -> Result<[[f64; 3]; 3]> {
+    let v = parse_numbers(path, &read_text(path)?)?;
+    if v.len() != 9 {
+        return Err(Error::invalid(path, format!("expected 9 numbers (3×3 K), found {}", v.len())));
+    }
+    let k = [[v[0], v[1], v[2]], [v[3], v[4], v[5]], [v[6], v[7], v[8]]];
+    if !(k[0][0] > 0.0 && k[1][1] > 0.0) {
+        return Err(Error::invalid(path, format!("focal lengths must be positive, got fx={} fy={}", k[0][0], k[1][1])));
+    }
+    if k[1][0] != 0.0 || k[2][0] != 0.0 || k[2][1] != 0.0 || (k[2][2] - 1.0).abs() > 1e-9 {
+        return Err(Error::invalid(path, "K must be upper triangular with K[2][2] = 1"));
+    }
+    Ok(k)
+}
+
+/// The last file by name in `extrinsics/`.
+fn extrinsics_file(dir: &Path) -> Result<PathBuf> {
+    let ext_dir = dir.join("extrinsics");
+    let entries = fs::read_dir(&ext_dir).map_err(|e| Error::io(&ext_dir, e))?;
+    let mut files: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.is_file())
+        .collect();
+    files.sort();
+    files.pop().ok_or_else(|| Error::missing(&ext_dir, "no extrinsics file"))
+}
+
+fn read_extrinsics(path: &Path) -> Result<[[f64; 3]; 3]> {
+    let v = parse_numbers(path, &read_text(path)?)?;
+    let rows: [[f64; 3]; 3] = match v.len() {
+        12 => [[v[0], v[1], v[2]], [v[4], v[5], v[6]], [v[8], v[9], v[10]]],
+        9 => [[v[0], v[1], v[2]], [v[3], v[4], v[5]], [v[6], v[7], v[8]]],
+        n => return Err(Error::invalid(path, format!("expected a 3×4 (or 3×3) matrix, found {n} numbers"))),
+    };
+    let e = to_dmat3(&rows);
+    let orthogonality = (e * e.transpose() - DMat3::IDENTITY).to_cols_array().iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    if orthogonality > 1e-3 || (e.determinant() - 1.0).abs() > 1e-3 {
+        return Err(Error::invalid(
+            path,
+            format!("the 3×3 block is not a rotation (|E·Eᵀ − I| = {orthogonality:.2e}, det = {:.4})", e.determinant()),
+        ));
+    }
+    Ok(rows)
+}
+
+/// The single image file in `dir/sub/` (jpg or png), by name order.
+fn single_image(dir: &Path, sub: &str) -> Result<PathBuf> {
+    let d = dir.join(sub);
+    let entries = fs::read_dir(&d).map_err(|e| Error::io(&d, e))?;
+    let mut files: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            matches!(
+                p.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).as_deref(),
+                Some("jpg" | "jpeg" | "png")
+            )
+        })
+        .collect();
+    files.sort();
+    match files.len() {
+        0 => Err(Error::missing(&d, "no .jpg or .png image")),
+        1 => Ok(files.remove(0)),
+        n => Err(Error::invalid(&d, format!("expected one image, found {n}"))),
+    }
+}
+
+fn open_image(path: &Path) -> Result<image::DynamicImage> {
+    let reader = image::ImageReader::open(path)
+        .map_err(|e| Error::io(path, e))?
+        .with_guessed_format()
+        .map_err(|e| Error::io(path, e))?;
+    reader.decode().map_err(|e| Error::Image { path: path.to_path_buf(), source: e })
+}
+
+/// Reads a depth PNG (16-bit grey, the toolbox's encoding) into decoded millimetres.
+pub fn read_depth_png(path: &Path) -> Result<(u32, u32, Vec<u16>)> {
+    let img = open_image(path)?;
+    let (w, h) = (img.width(), img.height());
+    match img {
+        image::DynamicImage::ImageLuma16(buf) => Ok((w, h, buf.into_raw().into_iter().map(decode_depth_value).collect())),
+        other => Err(Error::invalid(path, format!("depth must be a 16-bit grey PNG, found {:?}", other.color()))),
+    }
+}
+
+/// Writes decoded millimetres as a depth PNG with the toolbox's encoding.
+pub fn write_depth_png(path: &Path, width: u32, height: u32, depth_mm: &[u16]) -> Result<()> {
+    let stored: Vec<u16> = depth_mm.iter().map(|&d| encode_depth_value(d)).collect();
+    let buf = image::ImageBuffer::<image::Luma<u16>, _>::from_raw(width, height, stored)
+        .ok_or_else(|| Error::invalid(path, format!("depth buffer does not hold {width}×{height} values")))?;
+    buf.save_with_format(path, image::ImageFormat::Png).map_err(|e| Error::Image { path: path.to_path_buf(), source: e })
+}
+
+fn read_json(path: &Path) -> Result<Value> {
+    serde_json::from_str(&read_text(path)?).map_err(|e| Error::invalid(path, format!("malformed JSON: {e}")))
+}
+
+/// One SUN RGB-D annotation polygon: corners (X, Z) and the vertical range (Ymin, Ymax) in E's frame.
+struct Polygon {
+    xs: Vec<f64>,
+    zs: Vec<f64>,
+    y_min: f64,
+    y_max: f64,
+}
+
+fn number_array(path: &Path, v: &Value, what: &str) -> Result<Vec<f64>> {
+    let arr = v.as_array().ok_or_else(|| Error::invalid(path, format!("{what} must be an array of numbers")))?;
+    arr.iter()
+        .map(|x| {
+            x.as_f64()
+                .filter(|f| f.is_finite())
+                .ok_or_else(|| Error::invalid(path, format!("{what} holds a non-number or non-finite value: {x}")))
+        })
+        .collect()
+}
+
+fn parse_polygon(path: &Path, obj: &Value, what: &str) -> Result<Option<Polygon>> {
+    let Some(polys) = obj.get("polygon") else {
+        return Err(Error::invalid(path, format!("{what} has no 'polygon'")));
+    };
+    let polys = polys.as_array().ok_or_else(|| Error::invalid(path, format!("{what}: 'polygon' must be an array")))?;
+    let Some(poly) = polys.first() else { return Ok(None) };
+    let field = |name: &str| poly.get(name).ok_or_else(|| Error::invalid(path, format!("{what}: polygon has no '{name}'")));
+    let xs = number_array(path, field("X")?, &format!("{what}: X"))?;
+    let zs = number_array(path, field("Z")?, &format!("{what}: Z"))?;
+    if xs.len() != zs.len() {
+        return Err(Error::invalid(path, format!("{what}: X has {} values but Z has {}", xs.len(), zs.len())));
+    }
+    let scalar = |name: &str| -> Result<f64> {
+        field(name)?
+            .as_f64()
+            .filter(|f| f.is_finite())
+            .ok_or_else(|| Error::invalid(path, format!("{what}: '{name}' must be a finite number")))
+    };
+    let (y_min, y_max) = (scalar("Ymin")?, scalar("Ymax")?);
+    if y_min > y_max {
+        return Err(Error::invalid(path, format!("{what}: Ymin {y_min} > Ymax {y_max}")));
+    }
+    Ok(Some(Polygon { xs, zs, y_min, y_max }))
+}
+
+fn objects_array<'a>(path: &Path, root: &'a Value) -> Result<&'a Vec<Value>> {
+    root.get("objects")
+        .and_then(Value::as_array)
+        .ok_or_else(|| Error::invalid(path, "expected an object with an 'objects' array"))
+}
+
+/// Reads `annotation3Dfinal/index.json` into objects. Null entries, room structure and entries without a
+/// polygon are skipped; a polygon that is not a 4-corner footprint, or is degenerate, is skipped with a
+/// warning (the real dataset has a few); a file of the wrong shape is an error.
+pub fn read_objects(path: &Path) -> Result<Vec<Object>> {
+    let root = read_json(path)?;
+    let mut objects = Vec::new();
+    for (i, entry) in objects_array(path, &root)?.iter().enumerate() {
+        if entry.is_null() {
+            continue;
+        }
+        let what = format!("objects[{i}]");
+        let name = entry
+            .get("name")
+            .and_then(Value::as_str)
+            .ok_or_else(|| Error::invalid(path, format!("{what} has no string 'name'")))?;
+        let (category, label) = normalise_name(name);
+        if STRUCTURE_NAMES.contains(&category.as_str()) {
+            continue;
+        }
+        let Some(poly) = parse_polygon(path, entry, &what)? else { continue };
+        if poly.xs.len() != 4 {
+            log::warn!("{}: {what} ('{name}') has {} corners, not 4; skipped", path.display(), poly.xs.len());
+            continue;
+        }
+        let corners = [0, 1, 2, 3].map(|j| Vec2::new(poly.xs[j] as f32, poly.zs[j] as f32));
+        match Cuboid::from_polygon(corners, -poly.y_max as f32, -poly.y_min as f32) {
+            Some(cuboid) => objects.push(Object { category, label, cuboid }),
+            None => log::warn!("{}: {what} ('{name}') is a degenerate box; skipped", path.display()),
+        }
+    }
+    Ok(objects)
+}
+
+/// Reads `annotation3Dlayout/index.json`: the object named `room`.
+pub fn read_layout(path: &Path) -> Result<Option<RoomLayout>> {
+    let root = read_json(path)?;
+    for (i, entry) in objects_array(path, &root)?.iter().enumerate() {
+        if entry.is_null() || entry.get("name").and_then(Value::as_str) != Some("room") {
+            continue;
+        }
+        let Some(poly) = parse_polygon(path, entry, &format!("objects[{i}]"))? else { continue };
+        if poly.xs.len() < 3 {
+            return Err(Error::invalid(path, format!("room polygon has {} corners (needs ≥ 3)", poly.xs.len())));
+        }
+        let corners = poly.xs.iter().zip(&poly.zs).map(|(&x, &z)| Vec2::new(x as f32, z as f32)).collect();
+        return Ok(Some(RoomLayout { corners, floor: -poly.y_max as f32, ceiling: -poly.y_min as f32 }));
+    }
+    Ok(None)
+}
+
+fn read_frame(dir: &Path, depth_source: DepthSource) -> Result<Frame> {
+    if !dir.is_dir() {
+        return Err(Error::missing(dir, "frame directory"));
+    }
+    let name = dir
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| dir.display().to_string());
+    let rgb_path = single_image(dir, "image")?;
+    let rgb = open_image(&rgb_path)?.to_rgb8();
+    let depth_path = single_image(dir, depth_source.dir_name())?;
+    let (dw, dh, depth_mm) = read_depth_png(&depth_path)?;
+    if (dw, dh) != rgb.dimensions() {
+        return Err(Error::invalid(
+            &depth_path,
+            format!("depth is {dw}×{dh} but the RGB image {} is {}×{}", rgb_path.display(), rgb.width(), rgb.height()),
+        ));
+    }
+    let k = read_intrinsics(&dir.join("intrinsics.txt"))?;
+    let extrinsics = read_extrinsics(&extrinsics_file(dir)?)?;
+    let scene_path = dir.join("scene.txt");
+    let scene = if scene_path.is_file() { Some(read_text(&scene_path)?.trim().to_string()) } else { None };
+    let objects_path = dir.join("annotation3Dfinal").join("index.json");
+    let objects = if objects_path.is_file() { read_objects(&objects_path)? } else { Vec::new() };
+    let layout_path = dir.join("annotation3Dlayout").join("index.json");
+    let layout = if layout_path.is_file() { read_layout(&layout_path)? } else { None };
+    Ok(Frame { name, rgb, depth_mm, k, extrinsics, scene, objects, layout })
+}
+
+// ---------------------------------------------------------------------------------------------------------
+// Writing
+
+fn create_dir(path: &Path) -> Result<()> {
+    fs::create_dir_all(path).map_err(|e| Error::io(path, e))
+}
+
+fn write_text(path: &Path, text: &str) -> Result<()> {
+    fs::write(path, text).map_err(|e| Error::io(path, e))
+}
+
+fn matrix_text(rows: &[[f64; 3]; 3], translation: bool) -> String {
+    rows.iter()
+        .map(|r| {
+            let mut cols: Vec<String> = r.iter().map(|v| format!("{v}")).collect();
+            if translation {
+                cols.push("0".into());
+            }
+            cols.join(" ")
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
+        + "\n"
+}
+
+/// The annotation polygon of an object: footprint corners as X/Z, Ymin = −top, Ymax = −bottom.
+fn polygon_json(corners: &[Vec2], bottom: f32, top: f32, rectangle: bool) -> Value {
+    json!([{
+        "X": corners.iter().map(|c| c.x as f64).collect::<Vec<_>>(),
+        "Z": corners.iter().map(|c| c.y as f64).collect::<Vec<_>>(),
+        "Ymin": -(top as f64),
+        "Ymax": -(bottom as f64),
+        "rectangle": rectangle,
+    }])
+}
+
+fn annotation_json(frame: &Frame) -> Value {
+    let objects: Vec<Value> = frame
+        .objects
+        .iter()
+        .map(|o| {
+            let name = match &o.label {
+                Some(label) => format!("{}:{label}", o.category),
+                None => o.category.clone(),
+            };
+            json!({ "name": name, "polygon": polygon_json(&o.cuboid.footprint(), o.cuboid.bottom(), o.cuboid.top(), true) })
+        })
+        .collect();
+    json!({ "name": frame.name, "frames": [{}], "objects": objects })
+}
+
+fn layout_json(frame: &Frame, layout: &RoomLayout) -> Value {
+    json!({
+        "name": frame.name,
+        "frames": [{}],
+        "objects": [{ "name": "room", "polygon": polygon_json(&layout.corners, layout.floor, layout.ceiling, false) }],
+    })
+}
+
+fn write_json(path: &Path, value: &Value) -> Result<()> {
+    let text = serde_json::to_string_pretty(value).map_err(|e| Error::invalid(path, e.to_string()))?;
+    write_text(path, &text)
+}
+
+/// Writes `frame` into `dir` in the SUN RGB-D layout. RGB goes to `image/<name>.png` (lossless), depth to
+/// `depth/<name>.png`; the extrinsics file is `extrinsics/00000000000000.txt`. Reading the directory back
+/// gives identical RGB, depth, K, E and the objects within f32 rounding.
+fn write_frame(dir: &Path, frame: &Frame) -> Result<()> {
+    let (w, h) = (frame.width(), frame.height());
+    if frame.depth_mm.len() != (w * h) as usize {
+        return Err(Error::Input(format!(
+            "frame '{}': depth has {} values, the {w}×{h} RGB needs {}",
+            frame.name,
+            frame.depth_mm.len(),
+            w * h
+        )));
+    }
+    for sub in ["image", "depth", "extrinsics"] {
+        create_dir(&dir.join(sub))?;
+    }
+    let rgb_path = dir.join("image").join(format!("{}.png", frame.name));
+    frame
+        .rgb
+        .save_with_format(&rgb_path, image::ImageFormat::Png)
+        .map_err(|e| Error::Image { path: rgb_path.clone(), source: e })?;
+    write_depth_png(&dir.join("depth").join(format!("{}.png", frame.name)), w, h, &frame.depth_mm)?;
+    write_text(&dir.join("intrinsics.txt"), &matrix_text(&frame.k, false))?;
+    write_text(&dir.join("extrinsics").join("00000000000000.txt"), &matrix_text(&frame.extrinsics, true))?;
+    if let Some(scene) = &frame.scene {
+        write_text(&dir.join("scene.txt"), scene)?;
+    }
+    let ann_dir = dir.join("annotation3Dfinal");
+    create_dir(&ann_dir)?;
+    write_json(&ann_dir.join("index.json"), &annotation_json(frame))?;
+    if let Some(layout) = &frame.layout {
+        let layout_dir = dir.join("annotation3Dlayout");
+        create_dir(&layout_dir)?;
+        write_json(&layout_dir.join("index.json"), &layout_json(frame, layout))?;
+    }
+    Ok(())
+}
+
+// ---------------------------------------------------------------------------------------------------------
+// Datasets
+
+/// Whether a directory looks like a frame: it has `intrinsics.txt` and an `image/` directory.
+pub fn is_frame_dir(dir: &Path) -> bool {
+    dir.join("intrinsics.txt").is_file() && dir.join("image").is_dir()
+}
+
+/// A dataset: a directory tree whose frame directories are found recursively.
+#[derive(Clone, Debug)]
+pub struct Dataset {
+    pub root: PathBuf,
+    /// Frame directories, sorted by path.
+    pub frames: Vec<PathBuf>,
+}
+
+impl Dataset {
+    /// Finds every frame directory under `root` (a frame directory is not searched further).
+    pub fn open(root: impl AsRef<Path>) -> Result<Dataset> {
+        let root = root.as_ref().to_path_buf();
+        if !root.is_dir() {
+            return Err(Error::missing(&root, "dataset directory"));
+        }
+        let mut frames = Vec::new();
+        let mut stack = vec![root.clone()];
+        while let Some(dir) = stack.pop() {
+            if is_frame_dir(&dir) {
+                frames.push(dir);
+                continue;
+            }
+            let entries = fs::read_dir(&dir).map_err(|e| Error::io(&dir, e))?;
+            for entry in entries.flatten() {
+                let path = entry.path();
+                if path.is_dir() {
+                    stack.push(path);
+                }
+            }
+        }
+        frames.sort();
+        Ok(Dataset { root, frames })
+    }
+
+    /// Restricts the dataset to a split list: a text file with one frame directory per line, relative to
+    /// the dataset root (or absolute); blank lines and lines starting with `#` are ignored. A listed
+    /// directory that is not a frame is an error naming the list and the line.
+    pub fn with_split(mut self, list: impl AsRef<Path>) -> Result<Dataset> {
+        let list = list.as_ref();
+        let text = read_text(list)?;
+        let mut frames = Vec::new();
+        for (n, line) in text.lines().enumerate() {
+            let line = line.trim();
+            if line.is_empty() || line.starts_with('#') {
+                continue;
+            }
+            let path = if Path::new(line).is_absolute() { PathBuf::from(line) } else { self.root.join(line) };
+            if !is_frame_dir(&path) {
+                return Err(Error::invalid(list, format!("line {}: '{}' is not a frame directory", n + 1, path.display())));
+            }
+            frames.push(path);
+        }
+        self.frames = frames;
+        Ok(self)
+    }
+
+    pub fn len(&self) -> usize {
+        self.frames.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.frames.is_empty()
+    }
+}

@@ -1,0 +1,574 @@
+//! GPU context and compute kernels (each with a CPU twin).
+//!
+//! [`GpuContext`] owns the wgpu instance, adapter, device and queue, the limits the device was created with,
+//! and the compiled pipelines of every kernel ([`Kernels`]). [`acquire`] is the one entry point the rest of
+//! the crate uses: it returns `None` (and says why in one log line) when the CPU path must be taken.
+//!
+//! # Adapter choice
+//! Primary backends only (Vulkan, Metal, DX12): with GL allowed and no Vulkan driver, wgpu would hand back
+//! a GL llvmpipe adapter that cannot run compute shaders. The environment is honoured like wgpu's own
+//! helpers: `WGPU_BACKEND` (comma list, intersected with the primary backends), `WGPU_ADAPTER_NAME`
+//! (case-insensitive substring of the adapter name; first match in enumeration order) and
+//! `WGPU_POWER_PREF` (`low`/`high`/`none`; default high performance, we only do compute).
+//! `wgpu::util::initialize_adapter_from_env` exists in wgpu 30 but enumerates every backend and panics
+//! (`expect`) when no adapter matches the name, so the same selection is re-implemented here without the
+//! panic.
+//!
+//! # Limits
+//! The device is requested with the WebGPU defaults (`Limits::default()`), except the two buffer-size
+//! limits, which are raised to what the adapter offers (capped at [`MAX_BUFFER_BYTES`]): they only widen
+//! the jobs a kernel may send at once and every kernel chunks its work to [`GpuContext::limits`].
+//! No features are requested.
+//!
+//! # Writing a kernel
+//! A kernel is a WGSL file in `shaders/` (embedded with `include_str!`), a [`KernelSpec`] constant in its
+//! Rust module, a field in [`Kernels`] built in [`Kernels::new`], a `#[repr(C)]` bytemuck params struct
+//! mirroring the WGSL uniform (with a compile-time size assertion), a CPU twin written like the shader, and
+//! a `*_gpu` function built from the helpers below ([`GpuContext::storage_buffer`],
+//! [`GpuContext::uniform_buffer`], [`GpuContext::output_buffer`], [`GpuContext::bind_group`],
+//! [`GpuContext::dispatch_and_read`], all inside [`GpuContext::checked`]). See `depth_points` for the
+//! pattern.
+//!
+//! # 1-D dispatch convention
+//! A job of `n` invocations is dispatched as `ceil(n / workgroup_size)` workgroups, split over x and y when
+//! that exceeds `max_compute_workgroups_per_dimension` ([`GpuContext::workgroup_grid`]). The shader
+//! recovers its linear index as `gid.x + gid.y * num_workgroups.x * WORKGROUP_SIZE` and returns when the
+//! index is past the job's end (the grid may hold a few more invocations than asked for).
+
+pub mod depth_points;
+pub mod features;
+
+use std::borrow::Cow;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+
+use wgpu::util::DeviceExt;
+
+use crate::error::{Error, Result};
+
+/// Cap on the buffer-size limits requested from the adapter: some drivers report several GiB, and a
+/// kernel sized to that would allocate more memory than a shared machine should give one job.
+pub const MAX_BUFFER_BYTES: u64 = 1 << 30;
+
+/// The backends cog-gpu ever uses (never GL, see the module doc).
+pub const PRIMARY_BACKENDS: wgpu::Backends =
+    wgpu::Backends::VULKAN.union(wgpu::Backends::METAL).union(wgpu::Backends::DX12);
+
+/// How a kernel binds one buffer (binding numbers are the slice positions in [`KernelSpec::bindings`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BufferBinding {
+    /// `var<uniform>`.
+    Uniform,
+    /// `var<storage, read>`.
+    StorageRead,
+    /// `var<storage, read_write>`.
+    StorageReadWrite,
+}
+
+/// What is needed to build one compute pipeline: the WGSL source, its entry point, and its bind group 0.
+#[derive(Clone, Copy, Debug)]
+pub struct KernelSpec {
+    /// Label for wgpu objects and error messages (the kernel's name).
+    pub label: &'static str,
+    /// WGSL source (`include_str!("../../shaders/<name>.wgsl")`).
+    pub source: &'static str,
+    /// Name of the `@compute` entry point.
+    pub entry_point: &'static str,
+    /// The buffers of `@group(0)`, binding `i` at position `i`.
+    pub bindings: &'static [BufferBinding],
+}
+
+/// A compiled compute pipeline with its bind group layout and the workgroup size read from the WGSL.
+#[derive(Debug)]
+pub struct Kernel {
+    pub label: &'static str,
+    pub pipeline: wgpu::ComputePipeline,
+    pub bind_group_layout: wgpu::BindGroupLayout,
+    /// `@workgroup_size` of the entry point (x, y, z), taken from the shader itself so it cannot drift.
+    pub workgroup_size: [u32; 3],
+}
+
+impl Kernel {
+    /// Compiles `spec` on `device`. Shader or layout errors come back as [`Error::Gpu`] naming the kernel.
+    pub fn new(device: &wgpu::Device, spec: &KernelSpec) -> Result<Kernel> {
+        let workgroup_size = wgsl_workgroup_size(spec)?;
+        let scopes = ErrorScopes::push(device);
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some(spec.label),
+            source: wgpu::ShaderSource::Wgsl(Cow::Borrowed(spec.source)),
+        });
+        let entries: Vec<wgpu::BindGroupLayoutEntry> = spec
+            .bindings
+            .iter()
+            .enumerate()
+            .map(|(i, binding)| wgpu::BindGroupLayoutEntry {
+                binding: i as u32,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Buffer {
+                    ty: match binding {
+                        BufferBinding::Uniform => wgpu::BufferBindingType::Uniform,
+                        BufferBinding::StorageRead => wgpu::BufferBindingType::Storage { read_only: true },
+                        BufferBinding::StorageReadWrite => wgpu::BufferBindingType::Storage { read_only: false },
+                    },
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            })
+            .collect();
+        let bind_group_layout = device
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(spec.label), entries: &entries });
+        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some(spec.label),
+            bind_group_layouts: &[Some(&bind_group_layout)],
+            immediate_size: 0,
+        });
+        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(spec.label),
+            layout: Some(&layout),
+            module: &module,
+            entry_point: Some(spec.entry_point),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        scopes.pop(&format!("building kernel '{}'", spec.label))?;
+        Ok(Kernel { label: spec.label, pipeline, bind_group_layout, workgroup_size })
+    }
+
+    /// Invocations per workgroup.
+    pub fn invocations_per_workgroup(&self) -> u32 {
+        self.workgroup_size.iter().product()
+    }
+}
+
+/// Reads the entry point's `@workgroup_size` with naga (the same front end wgpu uses).
+fn wgsl_workgroup_size(spec: &KernelSpec) -> Result<[u32; 3]> {
+    let module = naga::front::wgsl::parse_str(spec.source).map_err(|e| {
+        Error::Gpu(format!("kernel '{}': WGSL does not parse: {}", spec.label, e.emit_to_string(spec.source)))
+    })?;
+    module
+        .entry_points
+        .iter()
+        .find(|ep| ep.name == spec.entry_point && ep.stage == naga::ShaderStage::Compute)
+        .map(|ep| ep.workgroup_size)
+        .ok_or_else(|| Error::Gpu(format!("kernel '{}': no @compute entry point '{}'", spec.label, spec.entry_point)))
+}
+
+/// The compiled pipelines of all kernels, built once when the context is created (a shader that fails to
+/// compile makes [`acquire`] fall back to the CPU instead of failing mid-run).
+///
+/// To add a kernel: add a `pub <name>: Kernel` field here and one line in [`Kernels::new`] building it from
+/// the kernel module's `KERNEL` spec.
+#[derive(Debug)]
+pub struct Kernels {
+    pub depth_points: Kernel,
+    pub features: Kernel,
+}
+
+impl Kernels {
+    pub fn new(device: &wgpu::Device) -> Result<Kernels> {
+        Ok(Kernels {
+            depth_points: Kernel::new(device, &depth_points::KERNEL)?,
+            features: Kernel::new(device, &features::KERNEL)?,
+        })
+    }
+}
+
+/// The GPU: wgpu objects, the adapter's description, the limits in force, and the compiled kernels.
+pub struct GpuContext {
+    pub instance: wgpu::Instance,
+    pub adapter: wgpu::Adapter,
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    /// The chosen adapter's name, backend, device type and driver.
+    pub info: wgpu::AdapterInfo,
+    /// The limits the device was created with (what kernels must chunk their jobs to).
+    pub limits: wgpu::Limits,
+    pub kernels: Kernels,
+}
+
+impl std::fmt::Debug for GpuContext {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("GpuContext").field("adapter", &self.adapter_summary()).finish_non_exhaustive()
+    }
+}
+
+/// Logs the force-CPU message once per process, not once per caller.
+static FORCE_CPU_LOGGED: AtomicBool = AtomicBool::new(false);
+
+/// The GPU context, or `None` when the CPU path must be used.
+///
+/// With `force_cpu` it returns `None` (logging that once, at info level). Otherwise it creates the context;
+/// when that fails (no adapter, no device, a kernel that does not compile) it logs one warning line naming
+/// the reason and returns `None`. It never panics.
+pub fn acquire(force_cpu: bool) -> Option<GpuContext> {
+    if force_cpu {
+        if !FORCE_CPU_LOGGED.swap(true, Ordering::Relaxed) {
+            log::info!("GPU disabled (--cpu): using the CPU path");
+        }
+        return None;
+    }
+    match GpuContext::new() {
+        Ok(ctx) => {
+            log::info!("GPU: {}", ctx.adapter_summary());
+            Some(ctx)
+        }
+        Err(e) => {
+            let reason = match e {
+                Error::Gpu(message) => message,
+                other => other.to_string(),
+            };
+            log::warn!(
+                "no GPU adapter (Vulkan/Metal/DX12) usable ({reason}): using the CPU path; \
+                 on Linux install mesa-vulkan-drivers for lavapipe"
+            );
+            None
+        }
+    }
+}
+
+/// The backends to try: `WGPU_BACKEND` when set, restricted to the primary backends.
+fn backends_from_env() -> Result<wgpu::Backends> {
+    match std::env::var("WGPU_BACKEND") {
+        Ok(list) => {
+            let chosen = wgpu::Backends::from_comma_list(&list) & PRIMARY_BACKENDS;
+            if chosen.is_empty() {
+                Err(Error::Gpu(format!("WGPU_BACKEND='{list}' names none of vulkan, metal, dx12")))
+            } else {
+                Ok(chosen)
+            }
+        }
+        Err(_) => Ok(PRIMARY_BACKENDS),
+    }
+}
+
+/// The first adapter (enumeration order) whose name contains `wanted`, case-insensitively, as
+/// `wgpu::util::initialize_adapter_from_env` does, but an error instead of a panic when none matches.
+async fn adapter_by_name(instance: &wgpu::Instance, backends: wgpu::Backends, wanted: &str) -> Result<wgpu::Adapter> {
+    let wanted_lower = wanted.to_lowercase();
+    let adapters = instance.enumerate_adapters(backends).await;
+    let names: Vec<String> = adapters.iter().map(|a| a.get_info().name).collect();
+    adapters
+        .into_iter()
+        .find(|a| a.get_info().name.to_lowercase().contains(&wanted_lower))
+        .ok_or_else(|| Error::Gpu(format!("WGPU_ADAPTER_NAME='{wanted}' matches none of the adapters {names:?}")))
+}
+
+/// The limits to request: WebGPU defaults, buffer sizes raised to the adapter's (see the module doc).
+fn required_limits(adapter: &wgpu::Limits) -> wgpu::Limits {
+    let defaults = wgpu::Limits::default();
+    let raise = |default: u64, offered: u64| offered.min(MAX_BUFFER_BYTES).max(default);
+    wgpu::Limits {
+        max_storage_buffer_binding_size: raise(
+            defaults.max_storage_buffer_binding_size,
+            adapter.max_storage_buffer_binding_size,
+        ),
+        max_buffer_size: raise(defaults.max_buffer_size, adapter.max_buffer_size),
+        ..defaults
+    }
+}
+
+impl GpuContext {
+    /// Creates the context (see the module doc for the adapter choice). Blocks until the device is ready.
+    pub fn new() -> Result<GpuContext> {
+        pollster::block_on(Self::new_async())
+    }
+
+    async fn new_async() -> Result<GpuContext> {
+        let backends = backends_from_env()?;
+        let descriptor =
+            wgpu::InstanceDescriptor { backends, ..wgpu::InstanceDescriptor::new_without_display_handle().with_env() };
+        let instance = wgpu::Instance::new(descriptor);
+        let adapter = match std::env::var("WGPU_ADAPTER_NAME") {
+            Ok(wanted) => adapter_by_name(&instance, backends, &wanted).await?,
+            Err(_) => instance
+                .request_adapter(&wgpu::RequestAdapterOptions {
+                    power_preference: wgpu::PowerPreference::from_env()
+                        .unwrap_or(wgpu::PowerPreference::HighPerformance),
+                    ..Default::default()
+                })
+                .await
+                .map_err(|e| Error::Gpu(format!("no adapter on {backends:?}: {e}")))?,
+        };
+        let info = adapter.get_info();
+        let limits = required_limits(&adapter.limits());
+        let (device, queue) = adapter
+            .request_device(&wgpu::DeviceDescriptor {
+                label: Some("cog-gpu"),
+                required_features: wgpu::Features::empty(),
+                required_limits: limits.clone(),
+                experimental_features: wgpu::ExperimentalFeatures::disabled(),
+                memory_hints: wgpu::MemoryHints::Performance,
+                trace: wgpu::Trace::Off,
+            })
+            .await
+            .map_err(|e| Error::Gpu(format!("adapter '{}' ({:?}) gave no device: {e}", info.name, info.backend)))?;
+        // wgpu's default handler panics; errors outside a `checked` scope are logged instead, and the
+        // scoped calls still report theirs as `Error::Gpu`.
+        device.on_uncaptured_error(Arc::new(|e: wgpu::Error| log::error!("GPU error outside a checked scope: {e}")));
+        device.set_device_lost_callback(|reason, message| log::error!("GPU device lost ({reason:?}): {message}"));
+        let kernels = Kernels::new(&device)?;
+        Ok(GpuContext { instance, adapter, device, queue, info, limits, kernels })
+    }
+
+    /// One line for logs: adapter name, backend, device type and driver.
+    pub fn adapter_summary(&self) -> String {
+        let i = &self.info;
+        let driver = [i.driver.as_str(), i.driver_info.as_str()]
+            .into_iter()
+            .filter(|s| !s.is_empty())
+            .collect::<Vec<_>>()
+            .join(" ");
+        format!(
+            "{} ({:?}, {:?}, driver: {})",
+            i.name,
+            i.backend,
+            i.device_type,
+            if driver.is_empty() { "?" } else { &driver }
+        )
+    }
+
+    /// Runs `f` with wgpu's validation, out-of-memory and internal errors captured: any error raised by
+    /// the GPU calls inside `f` (on this thread) becomes `Err(Error::Gpu)` mentioning `what`.
+    pub fn checked<R>(&self, what: &str, f: impl FnOnce() -> Result<R>) -> Result<R> {
+        let scopes = ErrorScopes::push(&self.device);
+        let result = f();
+        let scoped = scopes.pop(what);
+        let value = result?;
+        scoped?;
+        Ok(value)
+    }
+
+    /// A storage buffer (read or read-write in the shader) holding `data`; also a copy source and target.
+    /// An empty slice gives a 4-byte buffer, since zero-sized bindings are invalid.
+    pub fn storage_buffer<T: bytemuck::Pod>(&self, label: &str, data: &[T]) -> wgpu::Buffer {
+        let bytes: &[u8] = bytemuck::cast_slice(data);
+        let contents: &[u8] = if bytes.is_empty() { &[0; 4] } else { bytes };
+        self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+        })
+    }
+
+    /// A zero-filled storage buffer of `size_bytes` (rounded up to 4, at least 4) for a kernel to write.
+    pub fn output_buffer(&self, label: &str, size_bytes: u64) -> wgpu::Buffer {
+        self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: size_bytes.max(4).next_multiple_of(wgpu::COPY_BUFFER_ALIGNMENT),
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        })
+    }
+
+    /// A uniform buffer holding `value` (a `#[repr(C)]` params struct laid out like its WGSL twin).
+    pub fn uniform_buffer<T: bytemuck::Pod>(&self, label: &str, value: &T) -> wgpu::Buffer {
+        self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents: bytemuck::bytes_of(value),
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        })
+    }
+
+    /// Bind group 0 of `kernel`, binding `i` = the whole of `buffers[i]`.
+    pub fn bind_group(&self, kernel: &Kernel, buffers: &[&wgpu::Buffer]) -> wgpu::BindGroup {
+        let entries: Vec<wgpu::BindGroupEntry> = buffers
+            .iter()
+            .enumerate()
+            .map(|(i, buffer)| wgpu::BindGroupEntry { binding: i as u32, resource: buffer.as_entire_binding() })
+            .collect();
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(kernel.label),
+            layout: &kernel.bind_group_layout,
+            entries: &entries,
+        })
+    }
+
+    /// Workgroup counts (x, y, 1) covering at least `workgroups` workgroups with x and y within
+    /// `max_compute_workgroups_per_dimension`; see the module doc for the index the shader computes.
+    pub fn workgroup_grid(&self, workgroups: u32) -> Result<[u32; 3]> {
+        workgroup_grid(workgroups, self.limits.max_compute_workgroups_per_dimension)
+    }
+
+    /// Records a 1-D dispatch of `invocations` invocations of `kernel` (a 1-D kernel: workgroup y = z = 1).
+    pub fn encode_dispatch(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        kernel: &Kernel,
+        bind_group: &wgpu::BindGroup,
+        invocations: u32,
+    ) -> Result<()> {
+        if kernel.workgroup_size[1] != 1 || kernel.workgroup_size[2] != 1 {
+            return Err(Error::Gpu(format!(
+                "kernel '{}' has workgroup size {:?}; a 1-D dispatch needs y = z = 1",
+                kernel.label, kernel.workgroup_size
+            )));
+        }
+        let [x, y, z] = self.workgroup_grid(invocations.div_ceil(kernel.workgroup_size[0]))?;
+        if x == 0 {
+            return Ok(());
+        }
+        let mut pass = encoder
+            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(kernel.label), timestamp_writes: None });
+        pass.set_pipeline(&kernel.pipeline);
+        pass.set_bind_group(0, bind_group, &[]);
+        pass.dispatch_workgroups(x, y, z);
+        Ok(())
+    }
+
+    /// Dispatches `kernel` over `invocations` invocations, then reads the first `count` elements of
+    /// `output` back, all in one submission.
+    pub fn dispatch_and_read<T: bytemuck::Pod>(
+        &self,
+        kernel: &Kernel,
+        bind_group: &wgpu::BindGroup,
+        invocations: u32,
+        output: &wgpu::Buffer,
+        count: usize,
+    ) -> Result<Vec<T>> {
+        let mut encoder =
+            self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(kernel.label) });
+        self.encode_dispatch(&mut encoder, kernel, bind_group, invocations)?;
+        self.read_buffer_after(encoder, output, count)
+    }
+
+    /// Reads the first `count` elements of type `T` from `buffer` (which needs `COPY_SRC`).
+    pub fn read_buffer<T: bytemuck::Pod>(&self, buffer: &wgpu::Buffer, count: usize) -> Result<Vec<T>> {
+        let encoder = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("read back") });
+        self.read_buffer_after(encoder, buffer, count)
+    }
+
+    /// Appends a copy of `buffer`'s first `count` elements to `encoder`, submits it, waits, and returns them.
+    pub fn read_buffer_after<T: bytemuck::Pod>(
+        &self,
+        mut encoder: wgpu::CommandEncoder,
+        buffer: &wgpu::Buffer,
+        count: usize,
+    ) -> Result<Vec<T>> {
+        let bytes = (count * std::mem::size_of::<T>()) as u64;
+        if bytes > buffer.size() {
+            return Err(Error::Gpu(format!(
+                "reading {count} elements ({bytes} bytes) from a {}-byte buffer",
+                buffer.size()
+            )));
+        }
+        if bytes == 0 {
+            return Ok(Vec::new());
+        }
+        let copy_bytes = bytes.next_multiple_of(wgpu::COPY_BUFFER_ALIGNMENT).min(buffer.size());
+        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("read back staging"),
+            size: copy_bytes,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, Some(copy_bytes));
+        self.queue.submit([encoder.finish()]);
+        let mapped: Arc<Mutex<Option<std::result::Result<(), wgpu::BufferAsyncError>>>> = Arc::default();
+        let sink = Arc::clone(&mapped);
+        staging.map_async(wgpu::MapMode::Read, .., move |r| *sink.lock().unwrap_or_else(|p| p.into_inner()) = Some(r));
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| Error::Gpu(format!("waiting for the GPU: {e}")))?;
+        let status = mapped.lock().unwrap_or_else(|p| p.into_inner()).take();
+        match status {
+            Some(Ok(())) => {}
+            Some(Err(e)) => return Err(Error::Gpu(format!("mapping the read-back buffer: {e}"))),
+            None => return Err(Error::Gpu("the read-back buffer was not mapped after the GPU went idle".into())),
+        }
+        let values = {
+            let view =
+                staging.get_mapped_range(..).map_err(|e| Error::Gpu(format!("reading the mapped buffer: {e}")))?;
+            // Collecting (not casting in place) copes with any alignment of the mapping.
+            let mut values: Vec<T> = bytemuck::pod_collect_to_vec(&view[..bytes as usize]);
+            values.truncate(count);
+            values
+        };
+        staging.unmap();
+        Ok(values)
+    }
+}
+
+/// Splits `workgroups` over x and y: x ≤ `max_per_dimension`, y = ⌈workgroups / x⌉ ≤ `max_per_dimension`,
+/// x·y ≥ workgroups with fewer than y spare workgroups.
+pub fn workgroup_grid(workgroups: u32, max_per_dimension: u32) -> Result<[u32; 3]> {
+    if workgroups <= max_per_dimension {
+        return Ok([workgroups, 1, 1]);
+    }
+    let y = workgroups.div_ceil(max_per_dimension);
+    if y > max_per_dimension {
+        return Err(Error::Gpu(format!(
+            "{workgroups} workgroups exceed {max_per_dimension}² (the per-dimension limit squared); chunk the job"
+        )));
+    }
+    Ok([workgroups.div_ceil(y), y, 1])
+}
+
+/// The three error scopes (validation, out of memory, internal) pushed together and popped in reverse.
+struct ErrorScopes {
+    guards: Vec<wgpu::ErrorScopeGuard>,
+}
+
+impl ErrorScopes {
+    fn push(device: &wgpu::Device) -> ErrorScopes {
+        let guards = [wgpu::ErrorFilter::Validation, wgpu::ErrorFilter::OutOfMemory, wgpu::ErrorFilter::Internal]
+            .into_iter()
+            .map(|filter| device.push_error_scope(filter))
+            .collect();
+        ErrorScopes { guards }
+    }
+
+    /// Pops all scopes; the first captured error becomes `Error::Gpu` prefixed with `what`.
+    fn pop(mut self, what: &str) -> Result<()> {
+        let mut first_error = None;
+        while let Some(guard) = self.guards.pop() {
+            if let Some(e) = pollster::block_on(guard.pop()) {
+                first_error.get_or_insert(e);
+            }
+        }
+        match first_error {
+            Some(e) => Err(Error::Gpu(format!("{what}: {e}"))),
+            None => Ok(()),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn grid_stays_in_one_row_below_the_limit() {
+        assert_eq!(workgroup_grid(0, 65535).unwrap(), [0, 1, 1]);
+        assert_eq!(workgroup_grid(4800, 65535).unwrap(), [4800, 1, 1]);
+        assert_eq!(workgroup_grid(65535, 65535).unwrap(), [65535, 1, 1]);
+    }
+
+    #[test]
+    fn grid_splits_over_y_and_covers_the_job() {
+        // 10 workgroups with at most 4 per dimension: y = 3 rows of x = 4 (12 ≥ 10, 2 spare < y).
+        assert_eq!(workgroup_grid(10, 4).unwrap(), [4, 3, 1]);
+        for (n, max) in [(65536u32, 65535u32), (1_000_000, 65535), (16, 4), (15, 4), (5, 4)] {
+            let [x, y, z] = workgroup_grid(n, max).unwrap();
+            assert!(x <= max && y <= max && z == 1, "{n}/{max}: {x}×{y}");
+            assert!(x as u64 * y as u64 >= n as u64, "{n}/{max}: {x}×{y} does not cover");
+            assert!((x as u64 * y as u64) - (n as u64) < y as u64, "{n}/{max}: {x}×{y} wastes a whole column");
+        }
+        assert!(workgroup_grid(4 * 4 + 1, 4).is_err(), "17 > 4² must not be silently truncated");
+    }
+
+    #[test]
+    fn limits_are_webgpu_defaults_with_buffer_sizes_from_the_adapter() {
+        let adapter = wgpu::Limits {
+            max_storage_buffer_binding_size: 4 << 30,
+            max_buffer_size: 512 << 20,
+            max_compute_workgroup_storage_size: 32768,
+            ..wgpu::Limits::default()
+        };
+        let limits = required_limits(&adapter);
+        assert_eq!(limits.max_storage_buffer_binding_size, MAX_BUFFER_BYTES);
+        assert_eq!(limits.max_buffer_size, 512 << 20);
+        assert_eq!(limits.max_compute_workgroup_storage_size, 16384, "not raised: kernels stay in the defaults");
+        assert_eq!(limits.max_compute_workgroups_per_dimension, 65535);
+    }
+}

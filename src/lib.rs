@@ -1,0 +1,17 @@
+//! cog-gpu: 3D object detection in indoor RGB-D images with Clouds of Oriented Gradients
+//! (Ren & Sudderth, TPAMI), with the heavy feature work in WGSL compute shaders.
+//!
+//! Data flows one way through the modules:
+//! `frame` (SUN RGB-D frames, point clouds) → `geometry` (cuboids, IoU, projection) → `gpu` (context and
+//! kernels with their CPU twins) → later stages (features, learning, layout, cascade, evaluation).
+//! `synth` writes frames in the same layout the `frame` module reads.
+
+pub mod category;
+pub mod error;
+pub mod features;
+pub mod frame;
+pub mod geometry;
+pub mod gpu;
+pub mod synth;
+
+pub use error::{Error, Result};

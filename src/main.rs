@@ -1,0 +1,43 @@
+//! The `cog-gpu` command line. Each subcommand lives in `src/cli/<name>.rs` with its clap `Args` and `run`.
+
+mod cli;
+
+use clap::{Parser, Subcommand};
+
+#[derive(Parser)]
+#[command(name = "cog-gpu", version, about = "3D object detection in indoor RGB-D images (Clouds of Oriented Gradients, on the GPU)")]
+struct Cli {
+    /// Force the CPU path even when a GPU adapter is available.
+    #[arg(long, global = true)]
+    cpu: bool,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Describe one SUN RGB-D frame directory: sizes, calibration, point cloud, annotations.
+    Info(cli::info::Args),
+    /// Generate synthetic indoor RGB-D frames in the SUN RGB-D layout.
+    Synth(cli::synth::Args),
+    /// Score one frame's sliding-window hypotheses with a weights file and print the best.
+    Score(cli::score::Args),
+    /// Throughput of one category's sliding window on one frame, CPU and GPU paths side by side.
+    Bench(cli::bench::Args),
+}
+
+fn main() {
+    env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("info")).format_timestamp(None).init();
+    let cli = Cli::parse();
+    let options = cli::GlobalOptions { force_cpu: cli.cpu };
+    let result = match cli.command {
+        Command::Info(args) => cli::info::run(args, &options),
+        Command::Synth(args) => cli::synth::run(args, &options),
+        Command::Score(args) => cli::score::run(args, &options),
+        Command::Bench(args) => cli::bench::run(args, &options),
+    };
+    if let Err(err) = result {
+        eprintln!("error: {err:#}");
+        std::process::exit(1);
+    }
+}
