@@ -121,6 +121,35 @@ fn cell_range(origin: f32, n: u32, lo: f32, hi: f32) -> vec2<i32> {
     return vec2<i32>(i32(max(first, 0.0)), i32(min(last, nf - 1.0)));
 }
 
+// atan2(y, x) mod π in [0, π) with the CPU twin's polynomial (the driver's atan2 may be off by 4096 ulp).
+fn unsigned_angle(y: f32, x: f32) -> f32 {
+    let ax = abs(x);
+    let ay = abs(y);
+    let lo = min(ax, ay);
+    let hi = max(ax, ay);
+    if (hi == 0.0) {
+        return 0.0;
+    }
+    let t = lo / hi;
+    let t2 = t * t;
+    let poly = ((((-0.0117212 * t2 + 0.05265332) * t2 - 0.11643287) * t2 + 0.19354346) * t2 - 0.33262347) * t2
+        + 0.99997726;
+    var angle = poly * t;
+    if (ay > ax) {
+        angle = PI / 2.0 - angle;
+    }
+    if (x < 0.0) {
+        angle = PI - angle;
+    }
+    if (y < 0.0) {
+        angle = PI - angle;
+    }
+    if (angle >= PI) {
+        angle -= PI;
+    }
+    return angle;
+}
+
 fn fixed_to_f32(hi: u32, lo: u32) -> f32 {
     return f32(hi) * 4096.0 + f32(lo) * (1.0 / COG_FIXED_SCALE);
 }
@@ -172,11 +201,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let use_cog = (groups & 4u) != 0u;
     let use_view = (groups & 8u) != 0u;
     // Uniform control flow up to the barrier: out-of-range work is masked, not returned from.
-    let active = h < params.job.x && column < nx * ny;
+    let working = h < params.job.x && column < nx * ny;
     var my_inside = 0u;
     var my_partial: array<f32, 8>;
 
-    if (active) {
+    if (working) {
         let hyp = hyps[h];
         let lo = hyp.lo_view.xyz;
         let cell = hyp.cell.xyz;
@@ -229,13 +258,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                         let ey = r.gx;
                         let alpha = fr.w * ex - fr.z * ey;
                         let beta = fr.x * ey - fr.y * ex;
-                        var phi = atan2(alpha, -beta);
-                        if (phi < 0.0) {
-                            phi += PI;
-                        }
-                        if (phi >= PI) {
-                            phi -= PI;
-                        }
+                        let phi = unsigned_angle(alpha, -beta);
                         let position = phi * (f32(COG_BINS) / PI);
                         let bin0 = min(u32(floor(position)), COG_BINS - 1u);
                         let frac = position - f32(bin0);

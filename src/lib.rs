@@ -8,6 +8,7 @@
 
 pub mod category;
 pub mod error;
+pub mod eval;
 pub mod features;
 pub mod frame;
 pub mod geometry;

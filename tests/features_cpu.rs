@@ -182,8 +182,7 @@ fn fronto_parallel_wall_lands_in_the_expected_cog_bin() {
     // −y, so the image gradient is (cos 40°, −sin 40°).
     let phi = 2.0 * PI / 9.0;
     let layout = Layout::new([1, 1, 1], false, Groups::ALL).unwrap();
-    let (points, normals, gradients) =
-        wall(2.0, (-0.2, 0.2), (-0.2, 0.2), 10, Vec2::new(phi.cos(), -phi.sin()) * 0.5);
+    let (points, normals, gradients) = wall(2.0, (-0.2, 0.2), (-0.2, 0.2), 10, Vec2::new(phi.cos(), -phi.sin()) * 0.5);
     let scene = scene_of(points, normals, gradients, -0.2, &[0.0]);
     let cuboid = Cuboid::new(Vec3::new(0.0, 2.1, 0.0), Vec3::splat(0.4), 0.0);
     let mut f = vec![0.0; layout.dim()];
@@ -240,7 +239,8 @@ fn turning_cuboid_and_scene_together_keeps_cog_while_hog_changes() {
         let mut gradients = Vec::new();
         for i in 0..12 {
             for k in 0..12 {
-                let local = Vec3::new(-0.075 + 0.15 * (i as f32 + 0.5) / 12.0, -0.074, -0.075 + 0.15 * (k as f32 + 0.5) / 12.0);
+                let local =
+                    Vec3::new(-0.075 + 0.15 * (i as f32 + 0.5) / 12.0, -0.074, -0.075 + 0.15 * (k as f32 + 0.5) / 12.0);
                 let p = cuboid.from_local(local);
                 points.push(p);
                 gradients.push(gradient_of_edge(&level_camera(), p, edge, 0.5));
@@ -284,16 +284,22 @@ fn real_frame_counts_match_a_brute_force_pass() {
     let frame = Frame::read(FRAME, DepthSource::Raw).unwrap();
     let pre = Preprocessed::from_frame(&frame).unwrap();
     assert!(pre.floor < -0.8 && pre.floor > -2.0, "floor {}", pre.floor);
-    let sizes = SizeQuantiles::from_stats_file(Path::new(STATS), "chair").unwrap().sizes();
+    let sizes = set_sizes();
     let yaws = cog_gpu::features::default_yaws();
     let scene = FeatureScene::new(pre, &yaws, 0.1);
     let set = sliding_window(&scene, &WindowOptions { sizes, min_points: 50 });
-    assert!(
-        set.generated > set.hypotheses.len() && !set.hypotheses.is_empty(),
-        "generated {} kept {}",
-        set.generated,
-        set.hypotheses.len()
-    );
+    // This close-up frame (2 m × 1 m of desk and wall) is dense everywhere: every chair box holds points.
+    assert_eq!(set.generated, 45 * scene.yaws.iter().map(occupied_cells).sum::<usize>());
+    assert!(!set.hypotheses.is_empty() && set.hypotheses.len() <= set.generated);
+    // The skipping count agrees with a brute-force count above the floor slab to within the cell layer.
+    let hyp = set.hypotheses[set.hypotheses.len() / 2];
+    let cuboid = hyp.cuboid(&scene);
+    let brute = scene.pre.points.iter().filter(|p| cuboid.contains(**p) && p.z > scene.pre.floor + 0.1).count() as f32;
+    assert!((hyp.points_inside as f32 - brute).abs() < 0.25 * brute, "{} vs brute force {brute}", hyp.points_inside);
+    // A higher threshold drops hypotheses.
+    let strict = sliding_window(&scene, &WindowOptions { sizes: set_sizes(), min_points: hyp.points_inside });
+    assert!(strict.hypotheses.len() < set.hypotheses.len() && strict.generated == set.generated);
+    assert!(strict.hypotheses.iter().all(|h| h.points_inside >= hyp.points_inside));
     let layout = Layout::default();
     // A few kept hypotheses spread over the set: counts from the features vs a brute-force pass with
     // Cuboid::to_local over every point.
@@ -308,4 +314,31 @@ fn real_frame_counts_match_a_brute_force_pass() {
         assert!((inside as i64 - brute).abs() <= 1 + brute / 1000, "inside {inside} vs brute force {brute}");
         assert!(f.iter().all(|v| v.is_finite()));
     }
+}
+
+fn set_sizes() -> Vec<Vec3> {
+    SizeQuantiles::from_stats_file(Path::new(STATS), "chair").unwrap().sizes()
+}
+
+fn occupied_cells(grid: &cog_gpu::features::YawGrid) -> usize {
+    (0..grid.cells[1])
+        .flat_map(|row| (0..grid.cells[0]).map(move |col| (row, col)))
+        .filter(|&(row, col)| !grid.row_span(row, (col, col)).is_empty())
+        .count()
+}
+
+#[test]
+fn polynomial_angle_matches_atan2_mod_pi() {
+    for n in 0..3600 {
+        let theta = n as f32 * (std::f32::consts::TAU / 3600.0);
+        for r in [1e-3f32, 1.0, 250.0] {
+            let (y, x) = (r * theta.sin(), r * theta.cos());
+            let expected = y.atan2(x).rem_euclid(PI);
+            let got = cpu::unsigned_angle(y, x);
+            assert!((0.0..PI).contains(&got), "{got} out of [0, π) at θ = {theta}");
+            let diff = (got - expected).abs();
+            assert!(diff.min(PI - diff) < 2e-5, "θ = {theta}: {got} vs {expected}");
+        }
+    }
+    assert_eq!(cpu::unsigned_angle(0.0, 0.0), 0.0);
 }

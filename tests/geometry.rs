@@ -499,23 +499,3 @@ fn contains_corners_and_rejects_outside_points() {
         assert!(!t.contains(t.centre + (corner - t.centre) * 1.001));
     }
 }
-
-#[test]
-#[ignore]
-fn tmp_throughput() {
-    let mut rng = Lcg(1);
-    let pairs: Vec<(Cuboid, Cuboid)> = (0..100_000).map(|_| (rng.cuboid(), rng.cuboid())).collect();
-    let near: Vec<(Cuboid, Cuboid)> = pairs.iter().map(|(a, b)| (*a, Cuboid { centre: a.centre + 0.1 * (b.centre - a.centre), ..*b })).collect();
-    for (name, set) in [("random", &pairs), ("near", &near)] {
-        let t = std::time::Instant::now();
-        let mut s = 0.0;
-        for _ in 0..10 { for (a, b) in set.iter() { s += iou_3d(a, b); } }
-        let dt = t.elapsed().as_secs_f64();
-        println!("{name}: {:.1} ns/iou (sum {s})", dt / 1e6 * 1e9);
-    }
-    let cam = level_camera(500.0);
-    let t = std::time::Instant::now();
-    let mut s = 0.0;
-    for (a, _) in pairs.iter() { let mut c = *a; c.centre.y += 1.0; for v in 0..8 { s += projected_hull_area(&cam, &voxel_corners(&c, [2,2,2], [v & 1, (v >> 1) & 1, v >> 2])).unwrap_or(0.0); } }
-    println!("voxel hull: {:.1} ns (sum {s})", t.elapsed().as_secs_f64() / 8e5 * 1e9);
-}

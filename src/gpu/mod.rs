@@ -144,7 +144,9 @@ impl Kernel {
 /// Reads the entry point's `@workgroup_size` with naga (the same front end wgpu uses).
 fn wgsl_workgroup_size(spec: &KernelSpec) -> Result<[u32; 3]> {
     let module = naga::front::wgsl::parse_str(spec.source).map_err(|e| {
-        Error::Gpu(format!("kernel '{}': WGSL does not parse: {}", spec.label, e.emit_to_string(spec.source)))
+        // One line (it ends up in acquire's warning); tests/shaders.rs prints the full diagnostic.
+        let at = e.location(spec.source).map(|l| format!(" at line {}:{}", l.line_number, l.line_position));
+        Error::Gpu(format!("kernel '{}': WGSL does not parse{}: {e}", spec.label, at.unwrap_or_default()))
     })?;
     module
         .entry_points
@@ -218,6 +220,8 @@ pub fn acquire(force_cpu: bool) -> Option<GpuContext> {
                 Error::Gpu(message) => message,
                 other => other.to_string(),
             };
+            // wgpu's validation messages span lines; the warning must stay one line.
+            let reason = reason.split('\n').map(str::trim).filter(|l| !l.is_empty()).collect::<Vec<_>>().join(" | ");
             log::warn!(
                 "no GPU adapter (Vulkan/Metal/DX12) usable ({reason}): using the CPU path; \
                  on Linux install mesa-vulkan-drivers for lavapipe"

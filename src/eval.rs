@@ -1,0 +1,167 @@
+//! Evaluation with the SUN RGB-D 3D detection benchmark's rules: average precision at a 3D IoU threshold.
+//!
+//! For one category:
+//! 1. the detections of all images are sorted by score, highest first (ties keep their input order:
+//!    image order, then the order within the image's detection file);
+//! 2. each detection takes the ground-truth cuboid of its image with the highest 3D IoU
+//!    ([`crate::geometry::iou_3d`]); it is a true positive when that IoU ≥ the threshold and that ground
+//!    truth was not already taken by a higher-scoring detection, else a false positive (a duplicate of a
+//!    taken box is a false positive even when a second, less-overlapping box is free — the benchmark's rule);
+//! 3. precision and recall are accumulated along that order, recall over the number of ground-truth boxes
+//!    of the category in all images;
+//! 4. AP is the all-point interpolated area under the precision–recall curve (PASCAL VOC 2010 and later):
+//!    precision is made non-increasing from the right, then summed over the recall steps. Not 11-point.
+//!
+//! A category with no ground truth in the evaluated images has no AP (`None`) and is left out of the mAP.
+
+use std::path::Path;
+
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+use crate::geometry::{iou_3d, Cuboid};
+
+/// One detected object, as written in a frame's detections JSON (upright frame; yaw as in
+/// [`crate::geometry`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Detection {
+    pub category: String,
+    pub centre: [f32; 3],
+    /// (width, depth, height) in metres.
+    pub size: [f32; 3],
+    /// Radians, the width axis' angle from +x, counter-clockwise seen from above.
+    pub yaw: f32,
+    pub score: f32,
+}
+
+impl Detection {
+    pub fn cuboid(&self) -> Cuboid {
+        Cuboid::new(Vec3::from(self.centre), Vec3::from(self.size), self.yaw)
+    }
+
+    pub fn new(category: impl Into<String>, cuboid: &Cuboid, score: f32) -> Self {
+        Detection {
+            category: category.into(),
+            centre: cuboid.centre.to_array(),
+            size: cuboid.size.to_array(),
+            yaw: cuboid.yaw,
+            score,
+        }
+    }
+}
+
+/// The detections of one frame: `{"frame": NAME, "detections": [...]}`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FrameDetections {
+    pub frame: String,
+    pub detections: Vec<Detection>,
+}
+
+impl FrameDetections {
+    /// Reads and checks a detections file: finite numbers, positive sizes.
+    pub fn read(path: &Path) -> Result<FrameDetections> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let parsed: FrameDetections =
+            serde_json::from_str(&text).map_err(|e| Error::invalid(path, format!("not a detections file: {e}")))?;
+        for (i, d) in parsed.detections.iter().enumerate() {
+            let finite = d.centre.iter().chain(&d.size).chain([&d.yaw, &d.score]).all(|v| v.is_finite());
+            if !finite {
+                return Err(Error::invalid(path, format!("detections[{i}] has a non-finite number")));
+            }
+            if d.size.iter().any(|s| *s <= 0.0) {
+                return Err(Error::invalid(path, format!("detections[{i}] has a non-positive size {:?}", d.size)));
+            }
+        }
+        Ok(parsed)
+    }
+
+    pub fn write(&self, path: &Path) -> Result<()> {
+        let text = serde_json::to_string_pretty(self).map_err(|e| Error::invalid(path, e.to_string()))?;
+        std::fs::write(path, text).map_err(|e| Error::io(path, e))
+    }
+}
+
+/// A scored cuboid of one image, the input of [`average_precision`].
+#[derive(Clone, Copy, Debug)]
+pub struct ScoredBox {
+    pub image: usize,
+    pub score: f32,
+    pub cuboid: Cuboid,
+}
+
+/// The precision–recall curve and AP of one category.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PrecisionRecall {
+    /// Precision after each detection, in score order.
+    pub precision: Vec<f32>,
+    /// Recall after each detection, in score order.
+    pub recall: Vec<f32>,
+    /// Whether each detection, in score order, is a true positive.
+    pub true_positive: Vec<bool>,
+    /// Number of ground-truth boxes.
+    pub positives: usize,
+    /// All-point interpolated AP; `None` without ground truth.
+    pub ap: Option<f32>,
+}
+
+/// Evaluates one category: `detections` over all images, `ground_truth[image]` the category's boxes in
+/// each image (see the module doc for the rules).
+pub fn average_precision(detections: &[ScoredBox], ground_truth: &[Vec<Cuboid>], iou_threshold: f32) -> PrecisionRecall {
+    let positives: usize = ground_truth.iter().map(Vec::len).sum();
+    let mut order: Vec<usize> = (0..detections.len()).collect();
+    // A stable sort keeps the input order among equal scores.
+    order.sort_by(|&a, &b| detections[b].score.total_cmp(&detections[a].score));
+    let mut taken: Vec<Vec<bool>> = ground_truth.iter().map(|g| vec![false; g.len()]).collect();
+    let mut true_positive = Vec::with_capacity(order.len());
+    for &d in &order {
+        let det = &detections[d];
+        let truths = ground_truth.get(det.image).map(Vec::as_slice).unwrap_or(&[]);
+        let best = truths
+            .iter()
+            .enumerate()
+            .map(|(g, truth)| (g, iou_3d(&det.cuboid, truth)))
+            .fold(None, |best: Option<(usize, f32)>, (g, iou)| match best {
+                Some((_, b)) if b >= iou => best,
+                _ => Some((g, iou)),
+            });
+        let hit = match best {
+            Some((g, iou)) if iou >= iou_threshold && !taken[det.image][g] => {
+                taken[det.image][g] = true;
+                true
+            }
+            _ => false,
+        };
+        true_positive.push(hit);
+    }
+    let (mut tp, mut precision, mut recall) = (0usize, Vec::new(), Vec::new());
+    for (k, &hit) in true_positive.iter().enumerate() {
+        tp += hit as usize;
+        precision.push(tp as f32 / (k + 1) as f32);
+        recall.push(if positives > 0 { tp as f32 / positives as f32 } else { 0.0 });
+    }
+    let ap = (positives > 0).then(|| interpolated_ap(&precision, &recall));
+    PrecisionRecall { precision, recall, true_positive, positives, ap }
+}
+
+/// All-point interpolated area under a precision–recall curve given in detection order (VOC 2010+):
+/// `Σ (r_k − r_{k−1}) · max_{j ≥ k} p_j`, with r_0 = 0.
+pub fn interpolated_ap(precision: &[f32], recall: &[f32]) -> f32 {
+    let mut envelope = precision.to_vec();
+    for k in (0..envelope.len().saturating_sub(1)).rev() {
+        envelope[k] = envelope[k].max(envelope[k + 1]);
+    }
+    let mut ap = 0.0f64;
+    let mut previous_recall = 0.0f32;
+    for (k, &r) in recall.iter().enumerate() {
+        ap += (r - previous_recall) as f64 * envelope[k] as f64;
+        previous_recall = r;
+    }
+    ap as f32
+}
+
+/// Mean of the defined APs (`None` when none is defined).
+pub fn mean_ap<'a>(aps: impl IntoIterator<Item = &'a Option<f32>>) -> Option<f32> {
+    let defined: Vec<f32> = aps.into_iter().flatten().copied().collect();
+    (!defined.is_empty()).then(|| defined.iter().sum::<f32>() / defined.len() as f32)
+}
