@@ -24,19 +24,8 @@ pub const CATEGORIES: [&str; 19] = [
     "lamp",
 ];
 
-/// The ten large categories of the SUN RGB-D 3D detection benchmark.
-pub const LARGE_CATEGORIES: [&str; 10] = [
-    "bed",
-    "chair",
-    "sofa",
-    "table",
-    "desk",
-    "toilet",
-    "bathtub",
-    "dresser",
-    "nightstand",
-    "bookshelf",
-];
+/// The ten large categories of the SUN RGB-D 3D detection benchmark: the first ten of [`CATEGORIES`].
+pub const LARGE_CATEGORIES: &[&str] = CATEGORIES.split_at(10).0;
 
 /// Annotation names that are room structure, not objects; the frame reader skips them.
 pub const STRUCTURE_NAMES: [&str; 4] = ["wall", "floor", "ceiling", "room"];
@@ -87,5 +76,7 @@ mod tests {
         assert_eq!(normalise_name("books:"), ("books".into(), None));
         assert_eq!(category_index("lamp"), Some(18));
         assert_eq!(category_index("books"), None);
+        assert_eq!(LARGE_CATEGORIES.len(), 10);
+        assert_eq!(LARGE_CATEGORIES[9], "bookshelf");
     }
 }

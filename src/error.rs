@@ -27,6 +27,9 @@ pub enum Error {
     Input(String),
     #[error("GPU: {0}")]
     Gpu(String),
+    /// The learning solver failed (QP not solved, corrupt checkpoint content).
+    #[error("solver: {0}")]
+    Solver(String),
 }
 
 impl Error {

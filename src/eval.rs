@@ -165,3 +165,111 @@ pub fn mean_ap<'a>(aps: impl IntoIterator<Item = &'a Option<f32>>) -> Option<f32
     let defined: Vec<f32> = aps.into_iter().flatten().copied().collect();
     (!defined.is_empty()).then(|| defined.iter().sum::<f32>() / defined.len() as f32)
 }
+
+// ---------------------------------------------------------------------------------------------------------
+// Many categories over a set of images
+
+/// The evaluation of one category over a set of images.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CategoryEvaluation {
+    pub category: String,
+    /// Number of ground-truth boxes of the category.
+    pub ground_truth: usize,
+    /// Number of detections of the category.
+    pub detections: usize,
+    pub pr: PrecisionRecall,
+}
+
+/// Evaluates each of `categories` over the same images: `truth[i]` holds the annotated objects of image
+/// `i` and `detections[i]` its detections (both of any category; the others are ignored). A missing
+/// `detections[i]` (shorter slice) counts as no detections.
+pub fn evaluate_categories(
+    truth: &[Vec<crate::frame::Object>],
+    detections: &[Vec<Detection>],
+    categories: &[String],
+    iou_threshold: f32,
+) -> Vec<CategoryEvaluation> {
+    categories
+        .iter()
+        .map(|category| {
+            let ground_truth: Vec<Vec<Cuboid>> = truth
+                .iter()
+                .map(|objects| objects.iter().filter(|o| &o.category == category).map(|o| o.cuboid).collect())
+                .collect();
+            let scored: Vec<ScoredBox> = detections
+                .iter()
+                .enumerate()
+                .flat_map(|(image, dets)| {
+                    dets.iter().filter(|d| &d.category == category).map(move |d| ScoredBox {
+                        image,
+                        score: d.score,
+                        cuboid: d.cuboid(),
+                    })
+                })
+                .collect();
+            let pr = average_precision(&scored, &ground_truth, iou_threshold);
+            CategoryEvaluation { category: category.clone(), ground_truth: pr.positives, detections: scored.len(), pr }
+        })
+        .collect()
+}
+
+// ---------------------------------------------------------------------------------------------------------
+// Precision–recall plot
+
+/// Width and height of [`precision_recall_plot`]'s image.
+pub const PLOT_SIZE: (u32, u32) = (480, 400);
+
+/// A precision–recall plot: recall on x and precision on y, both 0..1 with a grid every 0.1 and labels
+/// every 0.2; the raw curve (precision after each detection) in grey dots; the interpolated precision
+/// envelope whose area is the AP as a step line in `colour`; `title` on top (e.g. `"bed AP=75.0"`).
+pub fn precision_recall_plot(pr: &PrecisionRecall, title: &str, colour: crate::draw::Colour) -> image::RgbImage {
+    use crate::draw::{draw_line, draw_text, fill_rect, text_size, BLACK};
+    use glam::Vec2;
+    let (width, height) = PLOT_SIZE;
+    let mut img = image::RgbImage::from_pixel(width, height, image::Rgb([255, 255, 255]));
+    let (left, right, top, bottom) = (56.0f32, width as f32 - 24.0, 40.0f32, height as f32 - 48.0);
+    let at = |recall: f32, precision: f32| {
+        Vec2::new(left + recall.clamp(0.0, 1.0) * (right - left), bottom - precision.clamp(0.0, 1.0) * (bottom - top))
+    };
+    let grid = [225, 225, 225];
+    for step in 0..=10 {
+        let v = step as f32 / 10.0;
+        draw_line(&mut img, at(v, 0.0), at(v, 1.0), grid, 1);
+        draw_line(&mut img, at(0.0, v), at(1.0, v), grid, 1);
+        if step % 2 == 0 {
+            let label = format!("{v:.1}");
+            let (tw, th) = text_size(&label, 1);
+            let x_tick = at(v, 0.0);
+            draw_text(&mut img, x_tick.x as i64 - tw as i64 / 2, x_tick.y as i64 + 6, &label, BLACK, 1);
+            let y_tick = at(0.0, v);
+            draw_text(&mut img, y_tick.x as i64 - tw as i64 - 6, y_tick.y as i64 - th as i64 / 2, &label, BLACK, 1);
+        }
+    }
+    draw_line(&mut img, at(0.0, 0.0), at(1.0, 0.0), BLACK, 1);
+    draw_line(&mut img, at(0.0, 0.0), at(0.0, 1.0), BLACK, 1);
+    let (lw, _) = text_size("recall", 1);
+    draw_text(&mut img, ((left + right) / 2.0) as i64 - lw as i64 / 2, bottom as i64 + 24, "recall", BLACK, 1);
+    draw_text(&mut img, 8, top as i64 - 14, "precision", BLACK, 1);
+    let (tw, _) = text_size(title, 2);
+    draw_text(&mut img, (width as i64 - tw as i64) / 2, 8, title, BLACK, 2);
+
+    for (&p, &r) in pr.precision.iter().zip(&pr.recall) {
+        let dot = at(r, p);
+        fill_rect(&mut img, dot.x.round() as i64 - 1, dot.y.round() as i64 - 1, 3, 3, [150, 150, 150]);
+    }
+    // The envelope as a step function: precision env[k] over (r[k-1], r[k]], so the area under the line is
+    // exactly the AP of `interpolated_ap`.
+    let mut envelope = pr.precision.clone();
+    for k in (0..envelope.len().saturating_sub(1)).rev() {
+        envelope[k] = envelope[k].max(envelope[k + 1]);
+    }
+    let mut previous_recall = 0.0f32;
+    for (k, (&env, &r)) in envelope.iter().zip(&pr.recall).enumerate() {
+        draw_line(&mut img, at(previous_recall, env), at(r, env), colour, 2);
+        if let Some(&next) = envelope.get(k + 1) {
+            draw_line(&mut img, at(r, env), at(r, next), colour, 2);
+        }
+        previous_recall = r;
+    }
+    img
+}

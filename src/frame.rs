@@ -481,6 +481,20 @@ pub fn read_layout(path: &Path) -> Result<Option<RoomLayout>> {
     Ok(None)
 }
 
+/// Reads a frame directory's annotations (objects of `annotation3Dfinal/index.json` and the room of
+/// `annotation3Dlayout/index.json`, each optional) without decoding its images, for evaluating many frames.
+/// Gives the same objects and layout as [`Frame::read`].
+pub fn read_annotations(dir: &Path) -> Result<(Vec<Object>, Option<RoomLayout>)> {
+    if !dir.is_dir() {
+        return Err(Error::missing(dir, "frame directory"));
+    }
+    let objects_path = dir.join("annotation3Dfinal").join("index.json");
+    let objects = if objects_path.is_file() { read_objects(&objects_path)? } else { Vec::new() };
+    let layout_path = dir.join("annotation3Dlayout").join("index.json");
+    let layout = if layout_path.is_file() { read_layout(&layout_path)? } else { None };
+    Ok((objects, layout))
+}
+
 fn read_frame(dir: &Path, depth_source: DepthSource) -> Result<Frame> {
     if !dir.is_dir() {
         return Err(Error::missing(dir, "frame directory"));

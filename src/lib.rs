@@ -7,12 +7,15 @@
 //! `synth` writes frames in the same layout the `frame` module reads.
 
 pub mod category;
+pub mod draw;
 pub mod error;
 pub mod eval;
 pub mod features;
 pub mod frame;
 pub mod geometry;
 pub mod gpu;
+pub mod learn;
+pub mod nms;
 pub mod synth;
 
 pub use error::{Error, Result};

@@ -24,6 +24,8 @@ enum Command {
     Score(cli::score::Args),
     /// Throughput of one category's sliding window on one frame, CPU and GPU paths side by side.
     Bench(cli::bench::Args),
+    /// Average precision of detection files against a dataset's ground truth (SUN RGB-D rules).
+    Eval(cli::eval::Args),
 }
 
 fn main() {
@@ -35,6 +37,7 @@ fn main() {
         Command::Synth(args) => cli::synth::run(args, &options),
         Command::Score(args) => cli::score::run(args, &options),
         Command::Bench(args) => cli::bench::run(args, &options),
+        Command::Eval(args) => cli::eval::run(args, &options),
     };
     if let Err(err) = result {
         eprintln!("error: {err:#}");

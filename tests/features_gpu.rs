@@ -6,7 +6,9 @@
 use std::path::Path;
 
 use cog_gpu::features::layout::{Groups, Layout, COG, PER_VOXEL};
-use cog_gpu::features::{cpu, default_yaws, sliding_window, FeatureScene, Hypothesis, Preprocessed, SizeQuantiles, WindowOptions};
+use cog_gpu::features::{
+    cpu, default_yaws, sliding_window, FeatureScene, Hypothesis, Preprocessed, SizeQuantiles, WindowOptions,
+};
 use cog_gpu::frame::{DepthSource, Frame};
 use cog_gpu::gpu::features::{features_gpu, scores_gpu};
 use cog_gpu::gpu::GpuContext;
@@ -48,12 +50,13 @@ fn assert_rows_match(layout: &Layout, gpu: &[f32], cpu: &[f32], what: &str) {
     for (n, (&g, &c)) in gpu.iter().zip(cpu).enumerate() {
         let slot = n % layout.dim();
         let tolerance = 1e-5 * c.abs().max(g.abs()).max(1.0);
-        assert!(
-            (g - c).abs() <= tolerance,
-            "{what}: entry {n} ({}): GPU {g} vs CPU {c}",
+        assert!((g - c).abs() <= tolerance, "{what}: entry {n} ({}): GPU {g} vs CPU {c}", layout.describe(slot));
+        assert_eq!(
+            g == 0.0,
+            c == 0.0,
+            "{what}: entry {n} ({}) zero on one side only: GPU {g} CPU {c}",
             layout.describe(slot)
         );
-        assert_eq!(g == 0.0, c == 0.0, "{what}: entry {n} ({}) zero on one side only: GPU {g} CPU {c}", layout.describe(slot));
     }
 }
 
@@ -100,9 +103,8 @@ fn fused_scores_equal_dot_products_of_cpu_features() {
     let layout = Layout::default();
     let (cpu_rows, _) = cpu::features(&scene, &layout, &hyps);
     // Ten weight vectors: two passes of the kernel (at most 8 per pass).
-    let weights: Vec<Vec<f32>> = (0..10)
-        .map(|w| (0..layout.dim()).map(|n| (((n * 31 + w * 17) % 23) as f32 - 11.0) / 11.0).collect())
-        .collect();
+    let weights: Vec<Vec<f32>> =
+        (0..10).map(|w| (0..layout.dim()).map(|n| (((n * 31 + w * 17) % 23) as f32 - 11.0) / 11.0).collect()).collect();
     let (scores, updates) = scores_gpu(&ctx, &scene, &layout, &hyps, &weights).unwrap();
     assert_eq!(scores.len(), hyps.len() * weights.len());
     let (_, cpu_inside) = cpu::features(&scene, &layout, &hyps);
@@ -113,7 +115,10 @@ fn fused_scores_equal_dot_products_of_cpu_features() {
             let expected: f64 = row.iter().zip(weight).map(|(a, b)| *a as f64 * *b as f64).sum();
             let scale: f64 = row.iter().zip(weight).map(|(a, b)| (*a as f64 * *b as f64).abs()).sum();
             let got = scores[h * weights.len() + w] as f64;
-            assert!((got - expected).abs() <= 1e-5 * scale.max(1.0), "hypothesis {h} weights {w}: GPU {got} vs {expected}");
+            assert!(
+                (got - expected).abs() <= 1e-5 * scale.max(1.0),
+                "hypothesis {h} weights {w}: GPU {got} vs {expected}"
+            );
         }
     }
 }

@@ -68,8 +68,10 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     let options = options(&args)?;
     let bar = ProgressBar::new(args.frames);
     bar.set_style(
-        ProgressStyle::with_template("{spinner} [{elapsed_precise}] {bar:40} {pos}/{len} frames ({per_sec}, eta {eta})")
-            .context("progress bar template")?,
+        ProgressStyle::with_template(
+            "{spinner} [{elapsed_precise}] {bar:40} {pos}/{len} frames ({per_sec}, eta {eta})",
+        )
+        .context("progress bar template")?,
     );
     let start = Instant::now();
     let summary = synth::generate_dataset(&args.out, args.seed, args.frames, &options, args.preview, &|| bar.inc(1))
@@ -89,7 +91,9 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     for cat in cog_gpu::category::CATEGORIES {
         println!("  {:<12} {}", cat, summary.objects.get(cat).copied().unwrap_or(0));
     }
-    let list = |m: &std::collections::BTreeMap<String, usize>| m.iter().map(|(k, v)| format!("{k} {v}")).collect::<Vec<_>>().join(", ");
+    let list = |m: &std::collections::BTreeMap<String, usize>| {
+        m.iter().map(|(k, v)| format!("{k} {v}")).collect::<Vec<_>>().join(", ")
+    };
     println!("sensors: {}", list(&summary.sensors));
     println!("rooms: {}", list(&summary.rooms));
     Ok(())

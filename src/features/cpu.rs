@@ -128,7 +128,9 @@ pub fn cog_frame(grid: &YawGrid, intrinsics: [f32; 4], centre: Vec3) -> Option<C
     let dz = image_direction(m.z_axis);
     let cross = da.x * dz.y - da.y * dz.x;
     let scale = da.length() * dz.length();
-    if !(cross.abs() >= EDGE_ON_SIN * scale) || scale == 0.0 {
+    // Written so that a NaN (degenerate input) also counts as edge-on.
+    let well_conditioned = cross.abs() >= EDGE_ON_SIN * scale;
+    if !well_conditioned || scale == 0.0 {
         return None;
     }
     Some(CogFrame { da, dz })
@@ -147,7 +149,8 @@ pub fn unsigned_angle(y: f32, x: f32) -> f32 {
     }
     let t = lo / hi;
     let t2 = t * t;
-    let poly = ((((-0.011_721_2 * t2 + 0.052_653_32) * t2 - 0.116_432_87) * t2 + 0.193_543_46) * t2 - 0.332_623_47) * t2
+    let poly = ((((-0.011_721_2 * t2 + 0.052_653_32) * t2 - 0.116_432_87) * t2 + 0.193_543_46) * t2 - 0.332_623_47)
+        * t2
         + 0.999_977_26;
     let mut angle = poly * t;
     if ay > ax {
@@ -266,21 +269,21 @@ pub fn finalise_voxel(layout: &Layout, acc: &ColumnAccumulator, k: usize, area: 
             out[DENSITY] = acc.count[k] as f32 * inv_area;
         }
         if groups.normals {
-            for b in 0..NORMAL_BINS {
-                out[NORMALS + b] = acc.normals[k][b] as f32 * inv_area;
+            for (slot, &n) in out[NORMALS..NORMALS + NORMAL_BINS].iter_mut().zip(&acc.normals[k]) {
+                *slot = n as f32 * inv_area;
             }
         }
     }
     if groups.cog {
         let mut values = [0.0f32; COG_BINS];
         let mut norm_sq = 0.0f32;
-        for b in 0..COG_BINS {
-            values[b] = fixed_to_f32(acc.cog[k][b]);
-            norm_sq += values[b] * values[b];
+        for (value, &sum) in values.iter_mut().zip(&acc.cog[k]) {
+            *value = fixed_to_f32(sum);
+            norm_sq += *value * *value;
         }
         let scale = 1.0 / (norm_sq + COG_EPSILON).sqrt();
-        for b in 0..COG_BINS {
-            out[COG + b] = values[b] * scale;
+        for (slot, value) in out[COG..COG + COG_BINS].iter_mut().zip(values) {
+            *slot = value * scale;
         }
     }
 }
@@ -346,7 +349,12 @@ pub fn features(scene: &FeatureScene, layout: &Layout, hypotheses: &[Hypothesis]
 /// Fused scoring on the CPU: `scores[h·W + w] = weights[w] · φ(h)` for every hypothesis and weight vector
 /// (each of length `layout.dim()`), without keeping the features. Returns the scores and the total number
 /// of points inside the expanded boxes.
-pub fn scores(scene: &FeatureScene, layout: &Layout, hypotheses: &[Hypothesis], weights: &[Vec<f32>]) -> (Vec<f32>, u64) {
+pub fn scores(
+    scene: &FeatureScene,
+    layout: &Layout,
+    hypotheses: &[Hypothesis],
+    weights: &[Vec<f32>],
+) -> (Vec<f32>, u64) {
     let dim = layout.dim();
     let per: Vec<(Vec<f32>, u32)> = hypotheses
         .par_iter()

@@ -74,7 +74,10 @@ impl SizeQuantiles {
                 return Err(Error::invalid(path, format!("{what}.q is {q:?}, expected {levels:?}")));
             }
             if v.len() != q.len() || v.iter().any(|x| !(x.is_finite() && *x > 0.0)) {
-                return Err(Error::invalid(path, format!("{what}.v must hold {} positive sizes, found {v:?}", q.len())));
+                return Err(Error::invalid(
+                    path,
+                    format!("{what}.v must hold {} positive sizes, found {v:?}", q.len()),
+                ));
             }
             Ok(v.iter().map(|&x| x as f32).collect())
         };
@@ -95,7 +98,11 @@ impl SizeQuantiles {
             v.sort_by(f32::total_cmp);
             levels.iter().map(|&q| quantile_sorted(&v, q)).collect()
         };
-        Ok(SizeQuantiles { widths: pick(0, &WIDTH_QUANTILES), depths: pick(1, &DEPTH_QUANTILES), heights: pick(2, &HEIGHT_QUANTILES) })
+        Ok(SizeQuantiles {
+            widths: pick(0, &WIDTH_QUANTILES),
+            depths: pick(1, &DEPTH_QUANTILES),
+            heights: pick(2, &HEIGHT_QUANTILES),
+        })
     }
 
     /// All (width, depth, height) combinations, `index = (w·nd + d)·nh + h`.

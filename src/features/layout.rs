@@ -65,7 +65,8 @@ impl Groups {
 
     fn names(&self) -> Vec<&'static str> {
         let mut names = Vec::new();
-        for (on, name) in [(self.density, "density"), (self.normals, "normals"), (self.cog, "cog"), (self.view, "view")] {
+        for (on, name) in [(self.density, "density"), (self.normals, "normals"), (self.cog, "cog"), (self.view, "view")]
+        {
             if on {
                 names.push(name);
             }

@@ -128,7 +128,12 @@ impl Preprocessed {
     }
 
     /// Preprocesses a point cloud with precomputed image gradients.
-    pub fn from_cloud(camera: Camera, image_size: [u32; 2], cloud: &PointCloud, image: &ImageGradients) -> Preprocessed {
+    pub fn from_cloud(
+        camera: Camera,
+        image_size: [u32; 2],
+        cloud: &PointCloud,
+        image: &ImageGradients,
+    ) -> Preprocessed {
         let gradients = cloud.pixels.iter().map(|&[col, row]| image.at(col, row)).collect();
         let normals = estimate_normals(&cloud.points);
         let floor = floor_height(&cloud.points);
@@ -176,7 +181,8 @@ pub fn estimate_normals(points: &[Vec3]) -> Vec<Vec3> {
         .par_iter()
         .map(|&p| {
             let neighbours = tree.query(&p.to_array()).nearest_n::<kiddo::SquaredEuclidean<f32>>(k).execute();
-            let normal = plane_normal(neighbours.iter().map(|n| points[n.item as usize])).unwrap_or_else(|| toward_camera(p));
+            let normal =
+                plane_normal(neighbours.iter().map(|n| points[n.item as usize])).unwrap_or_else(|| toward_camera(p));
             if normal.dot(-p) < 0.0 {
                 -normal
             } else {

@@ -63,7 +63,11 @@ impl WeightsFile {
         }
         self.layout.validate().map_err(|e| e.to_string())?;
         if self.layout_id != self.layout.id() {
-            return Err(format!("layout_id '{}' does not match this build's id for the layout, '{}'", self.layout_id, self.layout.id()));
+            return Err(format!(
+                "layout_id '{}' does not match this build's id for the layout, '{}'",
+                self.layout_id,
+                self.layout.id()
+            ));
         }
         if self.weights.len() != self.layout.dim() {
             return Err(format!("{} weights, the layout has {} features", self.weights.len(), self.layout.dim()));
@@ -76,7 +80,10 @@ impl WeightsFile {
         }
         let mask = self.layout.mask();
         if let Some(n) = (0..mask.len()).find(|&n| !mask[n] && self.weights[n] != 0.0) {
-            return Err(format!("weight {n} ({}) belongs to a switched-off group but is not 0", self.layout.describe(n)));
+            return Err(format!(
+                "weight {n} ({}) belongs to a switched-off group but is not 0",
+                self.layout.describe(n)
+            ));
         }
         Ok(())
     }

@@ -34,7 +34,13 @@ impl Backend<'_> {
     }
 
     /// Fused scores (`hypotheses.len() × weights.len()`) and the point·voxel updates.
-    pub fn scores(&self, scene: &FeatureScene, layout: &Layout, hypotheses: &[Hypothesis], weights: &[Vec<f32>]) -> Result<(Vec<f32>, u64)> {
+    pub fn scores(
+        &self,
+        scene: &FeatureScene,
+        layout: &Layout,
+        hypotheses: &[Hypothesis],
+        weights: &[Vec<f32>],
+    ) -> Result<(Vec<f32>, u64)> {
         match self {
             Backend::Cpu => Ok(cpu::scores(scene, layout, hypotheses, weights)),
             Backend::Gpu(ctx) => crate::gpu::features::scores_gpu(ctx, scene, layout, hypotheses, weights),

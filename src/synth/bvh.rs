@@ -66,7 +66,8 @@ impl Bvh {
                 }
             } else {
                 // Visit the near child first: push it last.
-                let (near, far) = if neg[node.axis as usize] { (node.right, node.first) } else { (node.first, node.right) };
+                let (near, far) =
+                    if neg[node.axis as usize] { (node.right, node.first) } else { (node.first, node.right) };
                 if sp + 2 <= stack.len() {
                     stack[sp] = far;
                     stack[sp + 1] = near;
@@ -179,7 +180,10 @@ mod tests {
         for _ in 0..2000 {
             let o = Vec3::new(rng.range(-6.0, 6.0), rng.range(-6.0, 6.0), rng.range(-6.0, 6.0));
             let d = Vec3::new(rng.normal(), rng.normal(), rng.normal());
-            let brute = prims.iter().filter_map(|p| p.intersect(o, d, 1e9).map(|h| (h.t, p.instance))).min_by(|a, b| a.0.total_cmp(&b.0));
+            let brute = prims
+                .iter()
+                .filter_map(|p| p.intersect(o, d, 1e9).map(|h| (h.t, p.instance)))
+                .min_by(|a, b| a.0.total_cmp(&b.0));
             let fast = bvh.intersect(o, d, 1e9).map(|(h, i)| (h.t, bvh.prims[i].instance));
             match (brute, fast) {
                 (None, None) => {}

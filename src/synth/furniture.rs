@@ -265,11 +265,19 @@ fn bed(rng: &mut Rng, variant: &'static str) -> Model {
     b.cube(mattress, v(-hw + inset, t_bed0 + inset, frame_top), v(hw - inset, t_bed1 - 0.01, mattress_top));
     let cover_to = t_bed0 + (t_bed1 - t_bed0) * rng.range(0.6, 0.76);
     let drape = rng.range(0.08, 0.25).min(mattress_thick + 0.05);
-    b.cube(duvet, v(-hw + 0.002, t_bed0 + 0.002, mattress_top - drape), v(hw - 0.002, cover_to, mattress_top + duvet_thick));
+    b.cube(
+        duvet,
+        v(-hw + 0.002, t_bed0 + 0.002, mattress_top - drape),
+        v(hw - 0.002, cover_to, mattress_top + duvet_thick),
+    );
     if headboard && rng.chance(0.5) {
         // The sheet folded back over the duvet's top edge.
         let fold = rng.range(0.1, 0.25);
-        b.cube(sheet, v(-hw + 0.004, cover_to - fold, mattress_top), v(hw - 0.004, cover_to + 0.01, mattress_top + duvet_thick + 0.015));
+        b.cube(
+            sheet,
+            v(-hw + 0.004, cover_to - fold, mattress_top),
+            v(hw - 0.004, cover_to + 0.01, mattress_top + duvet_thick + 0.015),
+        );
     }
     if headboard {
         let t0 = t_back - hb_t;
@@ -486,7 +494,13 @@ fn sofa(rng: &mut Rng, variant: &'static str) -> Model {
     // Back frame spans the full width behind the arms.
     b.cube(cover, v(-hw, hd - back_th, leg_h), v(hw, hd, h));
     b.cube(cover, v(s0, -hd + 0.02, leg_h), v(s1, hd - back_th, seat_base));
-    let n = if armchair { 1 } else if w < 1.5 { 2 } else { 3 };
+    let n = if armchair {
+        1
+    } else if w < 1.5 {
+        2
+    } else {
+        3
+    };
     let gap = 0.008;
     let seat_t1 = hd - back_th - bc_th;
     for i in 0..n {
@@ -504,7 +518,9 @@ fn sofa(rng: &mut Rng, variant: &'static str) -> Model {
     }
     if leg_h > 0.0 {
         let r = rng.range(0.02, 0.035);
-        for (s, t) in [(-hw + 0.05, -hd + 0.06), (hw - 0.05, -hd + 0.06), (-hw + 0.05, hd - 0.06), (hw - 0.05, hd - 0.06)] {
+        for (s, t) in
+            [(-hw + 0.05, -hd + 0.06), (hw - 0.05, -hd + 0.06), (-hw + 0.05, hd - 0.06), (hw - 0.05, hd - 0.06)]
+        {
             b.cylinder(leg_mat, v(s, t, 0.0), Vec2::splat(r), leg_h, 0.7, 1.0);
         }
     } else {
@@ -547,7 +563,13 @@ fn table(rng: &mut Rng, variant: &'static str) -> Model {
     } else {
         b.cube(top_mat, v(-hw, -hd, under), v(hw, hd, h));
     }
-    let style = if round && rng.chance(0.6) { 1 } else if !round && rng.chance(0.15) { 2 } else { 0 };
+    let style = if round && rng.chance(0.6) {
+        1
+    } else if !round && rng.chance(0.15) {
+        2
+    } else {
+        0
+    };
     let leg = rng.range(0.035, 0.08);
     match style {
         1 => {
@@ -602,7 +624,21 @@ fn table(rng: &mut Rng, variant: &'static str) -> Model {
 /// A block of drawers: fronts from u0 to u1 between s0 and s1, their faces at `t_face` (towards −t),
 /// handles protruding to `t_handle`.
 #[allow(clippy::too_many_arguments)]
-fn drawers(b: &mut Builder, front: u16, handle: u16, s0: f32, s1: f32, u0: f32, u1: f32, rows: usize, cols: usize, t_face: f32, t_handle: f32, t_back: f32, knobs: bool) {
+fn drawers(
+    b: &mut Builder,
+    front: u16,
+    handle: u16,
+    s0: f32,
+    s1: f32,
+    u0: f32,
+    u1: f32,
+    rows: usize,
+    cols: usize,
+    t_face: f32,
+    t_handle: f32,
+    t_back: f32,
+    knobs: bool,
+) {
     let gap = 0.004;
     for r in 0..rows {
         let (z0, z1) = (u0 + (u1 - u0) * r as f32 / rows as f32, u0 + (u1 - u0) * (r + 1) as f32 / rows as f32);
@@ -638,7 +674,12 @@ fn desk(rng: &mut Rng, variant: &'static str) -> Model {
         0 => {
             let leg = rng.range(0.035, 0.07);
             let inset = rng.range(0.01, 0.06);
-            for (s, t) in [(-hw + inset, -hd + inset), (hw - inset - leg, -hd + inset), (-hw + inset, hd - inset - leg), (hw - inset - leg, hd - inset - leg)] {
+            for (s, t) in [
+                (-hw + inset, -hd + inset),
+                (hw - inset - leg, -hd + inset),
+                (-hw + inset, hd - inset - leg),
+                (hw - inset - leg, hd - inset - leg),
+            ] {
                 b.cube(body, v(s, t, 0.0), v(s + leg, t + leg, under));
             }
         }
@@ -648,8 +689,23 @@ fn desk(rng: &mut Rng, variant: &'static str) -> Model {
             let (p0, p1) = if side < 0.0 { (-hw + 0.005, -hw + ped_w) } else { (hw - ped_w, hw - 0.005) };
             let t_face = -hd + 0.025;
             b.cube(body, v(p0, t_face + 0.018, 0.0), v(p1, hd - 0.01, under));
-            drawers(&mut b, body, handle, p0, p1, 0.05, under - 0.01, rng.int(2, 4), 1, t_face, -hd + 0.005, t_face + 0.02, rng.chance(0.3));
-            let (q0, q1) = if side < 0.0 { (hw - 0.005 - panel, hw - 0.005) } else { (-hw + 0.005, -hw + 0.005 + panel) };
+            drawers(
+                &mut b,
+                body,
+                handle,
+                p0,
+                p1,
+                0.05,
+                under - 0.01,
+                rng.int(2, 4),
+                1,
+                t_face,
+                -hd + 0.005,
+                t_face + 0.02,
+                rng.chance(0.3),
+            );
+            let (q0, q1) =
+                if side < 0.0 { (hw - 0.005 - panel, hw - 0.005) } else { (-hw + 0.005, -hw + 0.005 + panel) };
             b.cube(body, v(q0, -hd + 0.03, 0.0), v(q1, hd - 0.01, under));
             b.cube(body, v(p0.min(q0), hd - 0.03, rng.range(0.25, 0.45)), v(p1.max(q1), hd - 0.012, under));
         }
@@ -657,7 +713,11 @@ fn desk(rng: &mut Rng, variant: &'static str) -> Model {
             for s in [-hw + 0.005, hw - 0.005 - panel] {
                 b.cube(body, v(s, -hd + 0.02, 0.0), v(s + panel, hd - 0.01, under));
             }
-            b.cube(body, v(-hw + 0.005 + panel, hd - 0.03, rng.range(0.2, 0.45)), v(hw - 0.005 - panel, hd - 0.012, under));
+            b.cube(
+                body,
+                v(-hw + 0.005 + panel, hd - 0.03, rng.range(0.2, 0.45)),
+                v(hw - 0.005 - panel, hd - 0.012, under),
+            );
             if rng.chance(0.5) {
                 // A drawer under the top.
                 let dw = rng.range(0.35, 0.55).min(0.6 * w);
@@ -691,7 +751,8 @@ fn toilet(rng: &mut Rng) -> Model {
     let (hw, hd) = (0.5 * w, 0.5 * d);
     let mut b = Builder::default();
     let body = b.mat(mat::ceramic(rng));
-    let seat_mat = if rng.chance(0.8) { body } else { b.mat(if rng.chance(0.5) { mat::wood(rng) } else { mat::plastic(rng) }) };
+    let seat_mat =
+        if rng.chance(0.8) { body } else { b.mat(if rng.chance(0.5) { mat::wood(rng) } else { mat::plastic(rng) }) };
     let tank_d = rng.range(0.14, 0.22);
     let seat_top = rng.range(0.38, 0.44);
     let tank_h = rng.range(0.3, 0.42).min(h - seat_top + 0.02);
@@ -702,7 +763,14 @@ fn toilet(rng: &mut Rng) -> Model {
     let bd = d - tank_d + rng.range(0.03, 0.06);
     let tc = -hd + 0.5 * bd;
     let bowl_lo = 0.12;
-    b.cylinder(body, v(0.0, tc, bowl_lo), Vec2::new(0.5 * bw, 0.5 * bd), seat_top - 0.025 - bowl_lo, rng.range(0.65, 0.8), 1.0);
+    b.cylinder(
+        body,
+        v(0.0, tc, bowl_lo),
+        Vec2::new(0.5 * bw, 0.5 * bd),
+        seat_top - 0.025 - bowl_lo,
+        rng.range(0.65, 0.8),
+        1.0,
+    );
     b.cylinder(body, v(0.0, tc + 0.08 * bd, 0.0), Vec2::new(0.3 * bw, 0.33 * bd), 0.14, 1.0, 0.85);
     b.cylinder(seat_mat, v(0.0, tc, seat_top - 0.025), Vec2::new(0.5 * bw, 0.5 * bd), 0.025, 1.0, 1.0);
     if seat_top + 0.04 + bd < h && rng.chance(0.6) {
@@ -802,7 +870,12 @@ fn chest(rng: &mut Rng, category: &'static str) -> Model {
     let base_top = if legs { rng.range(0.08, if nightstand { 0.18 } else { 0.2 }) } else { rng.range(0.04, 0.1) };
     if legs {
         let leg = rng.range(0.03, 0.05);
-        for (s, t) in [(-hw + 0.02, t_carcass), (hw - 0.02 - leg, t_carcass), (-hw + 0.02, hd - 0.02 - leg), (hw - 0.02 - leg, hd - 0.02 - leg)] {
+        for (s, t) in [
+            (-hw + 0.02, t_carcass),
+            (hw - 0.02 - leg, t_carcass),
+            (-hw + 0.02, hd - 0.02 - leg),
+            (hw - 0.02 - leg, hd - 0.02 - leg),
+        ] {
             b.cylinder(handle, v(s + 0.5 * leg, t + 0.5 * leg, 0.0), Vec2::splat(0.5 * leg), base_top, 0.6, 1.0);
         }
     } else {
@@ -824,7 +897,21 @@ fn chest(rng: &mut Rng, category: &'static str) -> Model {
     }
     let rows = if nightstand { rng.int(1, if niche { 2 } else { 3 }) } else { rng.int(3, 6) };
     let cols = if nightstand || w < 0.8 { 1 } else { rng.int(1, 2) };
-    drawers(&mut b, front, handle, -hw + side_inset, hw - side_inset, base_top, drawer_top, rows, cols, t_face, -hd, t_carcass + 0.002, rng.chance(0.4));
+    drawers(
+        &mut b,
+        front,
+        handle,
+        -hw + side_inset,
+        hw - side_inset,
+        base_top,
+        drawer_top,
+        rows,
+        cols,
+        t_face,
+        -hd,
+        t_carcass + 0.002,
+        rng.chance(0.4),
+    );
     b.supports.insert(0, Support { rect: [-hw + 0.02, hw - 0.02, t_face + 0.02, hd - 0.02], z: h, clearance: 3.0 });
     b.finish(category)
 }
@@ -954,8 +1041,12 @@ fn door(rng: &mut Rng) -> Model {
         let margin = 0.1;
         for r in 0..rows {
             for c in 0..cols {
-                let (x0, x1) = (l0 + margin + (l1 - l0 - 2.0 * margin) * c as f32 / cols as f32, l0 + margin + (l1 - l0 - 2.0 * margin) * (c + 1) as f32 / cols as f32);
-                let (z0, z1) = (0.12 + (top - 0.24) * r as f32 / rows as f32, 0.12 + (top - 0.24) * (r + 1) as f32 / rows as f32);
+                let (x0, x1) = (
+                    l0 + margin + (l1 - l0 - 2.0 * margin) * c as f32 / cols as f32,
+                    l0 + margin + (l1 - l0 - 2.0 * margin) * (c + 1) as f32 / cols as f32,
+                );
+                let (z0, z1) =
+                    (0.12 + (top - 0.24) * r as f32 / rows as f32, 0.12 + (top - 0.24) * (r + 1) as f32 / rows as f32);
                 b.cube(leaf_mat, v(x0 + 0.03, recess - 0.006, z0 + 0.03), v(x1 - 0.03, recess, z1 - 0.03));
             }
         }
@@ -966,7 +1057,11 @@ fn door(rng: &mut Rng) -> Model {
     b.cube(metal, v(hs - 0.025, recess - 0.01, hz - 0.04), v(hs + 0.025, recess, hz + 0.04));
     b.cube(metal, v(hs - 0.01, recess - handle_p + 0.015, hz - 0.01), v(hs + 0.01, recess - 0.01, hz + 0.01));
     let lever = -side * 0.12;
-    b.cube(metal, v(hs.min(hs + lever), recess - handle_p, hz - 0.01), v(hs.max(hs + lever), recess - handle_p + 0.015, hz + 0.01));
+    b.cube(
+        metal,
+        v(hs.min(hs + lever), recess - handle_p, hz - 0.01),
+        v(hs.max(hs + lever), recess - handle_p + 0.015, hz + 0.01),
+    );
     b.wall_plane_t = 0.0;
     b.opening = Some((opening_w, opening_h));
     b.finish("door")
@@ -995,11 +1090,26 @@ fn counter(rng: &mut Rng, variant: &'static str) -> Model {
     let drawer_row = rng.chance(0.5);
     let door_top = if drawer_row { under - rng.range(0.14, 0.2) } else { under - 0.005 };
     if drawer_row {
-        drawers(&mut b, fronts, handle, -hw + 0.005, hw - 0.005, door_top, under - 0.005, 1, n, t_doors, t_doors - handle_p, t_carcass + 0.002, false);
+        drawers(
+            &mut b,
+            fronts,
+            handle,
+            -hw + 0.005,
+            hw - 0.005,
+            door_top,
+            under - 0.005,
+            1,
+            n,
+            t_doors,
+            t_doors - handle_p,
+            t_carcass + 0.002,
+            false,
+        );
     }
     let gap = 0.004;
     for i in 0..n {
-        let (x0, x1) = (-hw + 0.005 + (w - 0.01) * i as f32 / n as f32, -hw + 0.005 + (w - 0.01) * (i + 1) as f32 / n as f32);
+        let (x0, x1) =
+            (-hw + 0.005 + (w - 0.01) * i as f32 / n as f32, -hw + 0.005 + (w - 0.01) * (i + 1) as f32 / n as f32);
         b.cube(fronts, v(x0 + gap, t_doors, plinth + gap), v(x1 - gap, t_carcass + 0.002, door_top - gap));
         let hx = if i % 2 == 0 { x1 - 0.05 } else { x0 + 0.05 };
         b.cube(handle, v(hx - 0.008, t_doors - handle_p, door_top - 0.2), v(hx + 0.008, t_doors, door_top - 0.06));
@@ -1084,7 +1194,11 @@ fn screen_panel(b: &mut Builder, rng: &mut Rng, w: f32, u0: f32, u1: f32, t_scre
     let hw = 0.5 * w;
     let bezel = rng.range(0.008, 0.03);
     b.cube(bezel_mat, v(-hw, t_screen + 0.002, u0), v(hw, t_screen + panel_th, u1));
-    b.cube(display, v(-hw + bezel, t_screen, u0 + bezel * rng.range(1.0, 2.0)), v(hw - bezel, t_screen + 0.002, u1 - bezel));
+    b.cube(
+        display,
+        v(-hw + bezel, t_screen, u0 + bezel * rng.range(1.0, 2.0)),
+        v(hw - bezel, t_screen + 0.002, u1 - bezel),
+    );
 }
 
 fn monitor(rng: &mut Rng) -> Model {
@@ -1105,7 +1219,11 @@ fn monitor(rng: &mut Rng) -> Model {
     screen_panel(&mut b, rng, w, stand_h, h, t_screen, panel_th, on);
     let housing_d = rng.range(0.01, 0.05).min(hd - (t_screen + panel_th) - 0.03);
     if housing_d > 0.005 {
-        b.cube(stand_mat, v(-0.3 * w, t_screen + panel_th, stand_h + 0.2 * screen_h), v(0.3 * w, t_screen + panel_th + housing_d, h - 0.2 * screen_h));
+        b.cube(
+            stand_mat,
+            v(-0.3 * w, t_screen + panel_th, stand_h + 0.2 * screen_h),
+            v(0.3 * w, t_screen + panel_th + housing_d, h - 0.2 * screen_h),
+        );
     }
     let neck_t = t_screen + panel_th;
     b.cube(stand_mat, v(-0.03, neck_t, 0.01), v(0.03, neck_t + 0.025, stand_h + 0.4 * screen_h));
@@ -1140,7 +1258,11 @@ fn tv(rng: &mut Rng, mounted: bool) -> Model {
     let t_screen = -0.5 * panel_th;
     screen_panel(&mut b, rng, w, stand_h, h, t_screen, panel_th, on);
     if rng.chance(0.5) {
-        b.cube(stand_mat, v(-0.04, t_screen + panel_th, 0.01), v(0.04, t_screen + panel_th + 0.03, stand_h + 0.2 * screen_h));
+        b.cube(
+            stand_mat,
+            v(-0.04, t_screen + panel_th, 0.01),
+            v(0.04, t_screen + panel_th + 0.03, stand_h + 0.2 * screen_h),
+        );
         let base = rng.range(0.15, 0.3).min(0.4 * w);
         b.cube(stand_mat, v(-base, -hd, 0.0), v(base, hd, 0.02));
     } else {
@@ -1174,7 +1296,8 @@ fn lamp(rng: &mut Rng, variant: &'static str) -> Model {
         ((0.35 * h).min(rng.range(0.14, 0.32)), Shape::Frustum { bottom: 1.0, top: shade_top })
     };
     b.part(shade_shape, shade, v(0.0, 0.0, h - 0.5 * shade_h), v(hw, hw, 0.5 * shade_h), 0.0, 0.0);
-    let foot = if variant == "floor" { rng.range(0.1, 0.17).min(hw) } else { (hw * rng.range(0.45, 0.8)).max(0.06).min(hw) };
+    let foot =
+        if variant == "floor" { rng.range(0.1, 0.17).min(hw) } else { (hw * rng.range(0.45, 0.8)).max(0.06).min(hw) };
     b.cylinder(body, v(0.0, 0.0, 0.0), Vec2::splat(foot), 0.025, 1.0, 0.85);
     if variant == "floor" {
         b.cylinder(body, v(0.0, 0.0, 0.02), Vec2::splat(rng.range(0.01, 0.018)), h - 0.5 * shade_h - 0.02, 1.0, 1.0);
@@ -1189,7 +1312,10 @@ fn lamp(rng: &mut Rng, variant: &'static str) -> Model {
         b.cylinder(body, v(0.0, 0.0, 0.02 + body_h), Vec2::splat(0.01), h - shade_h - body_h + 0.02, 1.0, 1.0);
     }
     if lit {
-        b.light = Some(ModelLight { position: v(0.0, 0.0, h - 0.6 * shade_h), intensity: Vec3::new(1.0, 0.85, 0.6) * rng.range(0.15, 0.4) });
+        b.light = Some(ModelLight {
+            position: v(0.0, 0.0, h - 0.6 * shade_h),
+            intensity: Vec3::new(1.0, 0.85, 0.6) * rng.range(0.15, 0.4),
+        });
     }
     b.finish(variant)
 }
@@ -1242,7 +1368,14 @@ pub fn clutter(name: &str, rng: &mut Rng) -> Model {
         "bag" => {
             let m = b.mat(mat::any_soft(rng));
             let (w, d, h) = (rng.range(0.25, 0.45), rng.range(0.1, 0.22), rng.range(0.2, 0.45));
-            b.part(Shape::Frustum { bottom: 1.0, top: 0.85 }, m, v(0.0, 0.0, 0.5 * h), v(0.5 * w, 0.5 * d, 0.5 * h), 0.0, 0.0);
+            b.part(
+                Shape::Frustum { bottom: 1.0, top: 0.85 },
+                m,
+                v(0.0, 0.0, 0.5 * h),
+                v(0.5 * w, 0.5 * d, 0.5 * h),
+                0.0,
+                0.0,
+            );
             b.cube(m, v(-0.1, -0.01, h), v(0.1, 0.01, h + 0.12));
         }
         "books" => {
@@ -1265,13 +1398,24 @@ pub fn clutter(name: &str, rng: &mut Rng) -> Model {
             for _ in 0..n {
                 let m = b.mat(mat::fabric(rng));
                 let (w, d, th) = (rng.range(0.15, 0.3), rng.range(0.12, 0.22), rng.range(0.015, 0.05));
-                b.part(Shape::Box, m, v(0.0, 0.0, z + 0.5 * th), v(0.5 * w, 0.5 * d, 0.5 * th), rng.range(-0.2, 0.2), 0.0);
+                b.part(
+                    Shape::Box,
+                    m,
+                    v(0.0, 0.0, z + 0.5 * th),
+                    v(0.5 * w, 0.5 * d, 0.5 * th),
+                    rng.range(-0.2, 0.2),
+                    0.0,
+                );
                 z += th;
             }
         }
         "cup" | "vase" => {
             let m = b.mat(if rng.chance(0.6) { mat::ceramic(rng) } else { mat::plastic(rng) });
-            let (r, h) = if name == "cup" { (rng.range(0.03, 0.045), rng.range(0.07, 0.12)) } else { (rng.range(0.05, 0.1), rng.range(0.15, 0.4)) };
+            let (r, h) = if name == "cup" {
+                (rng.range(0.03, 0.045), rng.range(0.07, 0.12))
+            } else {
+                (rng.range(0.05, 0.1), rng.range(0.15, 0.4))
+            };
             b.cylinder(m, v(0.0, 0.0, 0.0), Vec2::splat(r), h, rng.range(0.7, 1.0), 1.0);
         }
         "bottle" => {
@@ -1298,7 +1442,14 @@ pub fn clutter(name: &str, rng: &mut Rng) -> Model {
             let tilt = rng.range(0.15, 0.45);
             let centre = v(0.0, 0.5 * d + 0.5 * d * tilt.sin(), 0.02 + 0.5 * d * tilt.cos());
             b.part(Shape::Box, shell, centre, v(0.5 * w, 0.5 * d, 0.006), 0.0, std::f32::consts::FRAC_PI_2 - tilt);
-            b.part(Shape::Box, display, centre - v(0.0, 0.007 * tilt.cos(), -0.007 * tilt.sin()), v(0.47 * w, 0.45 * d, 0.001), 0.0, std::f32::consts::FRAC_PI_2 - tilt);
+            b.part(
+                Shape::Box,
+                display,
+                centre - v(0.0, 0.007 * tilt.cos(), -0.007 * tilt.sin()),
+                v(0.47 * w, 0.45 * d, 0.001),
+                0.0,
+                std::f32::consts::FRAC_PI_2 - tilt,
+            );
         }
         "papers" => {
             let m = b.mat(mat::paper(rng));
@@ -1326,7 +1477,15 @@ pub fn clutter(name: &str, rng: &mut Rng) -> Model {
             let n = if name == "fridge" { 1 } else { ((w / 0.5).round() as usize).max(1) };
             let rows = if name == "fridge" && rng.chance(0.7) { 2 } else { 1 };
             for r in 0..rows {
-                let (z0, z1) = if rows == 2 { if r == 0 { (0.02, 0.6 * h) } else { (0.6 * h + 0.01, h - 0.01) } } else { (0.02, h - 0.01) };
+                let (z0, z1) = if rows == 2 {
+                    if r == 0 {
+                        (0.02, 0.6 * h)
+                    } else {
+                        (0.6 * h + 0.01, h - 0.01)
+                    }
+                } else {
+                    (0.02, h - 0.01)
+                };
                 for i in 0..n {
                     let (x0, x1) = (-hw + w * i as f32 / n as f32, -hw + w * (i + 1) as f32 / n as f32);
                     b.cube(body, v(x0 + 0.003, -hd + 0.02, z0), v(x1 - 0.003, -hd + 0.041, z1));
@@ -1386,7 +1545,7 @@ pub fn clutter(name: &str, rng: &mut Rng) -> Model {
             }
         }
         "rug" => {
-            let m = b.mat(mat::carpet(rng));
+            let m = b.mat(if rng.chance(0.5) { mat::carpet(rng) } else { mat::fabric(rng) });
             let (w, d) = (rng.range(1.2, 2.5), rng.range(0.8, 1.8));
             b.cube(m, v(-0.5 * w, -0.5 * d, 0.0), v(0.5 * w, 0.5 * d, 0.004));
         }
@@ -1423,7 +1582,10 @@ mod tests {
                 }
                 assert!((lo.z).abs() < 1e-5 && (lo.x + hi.x).abs() < 1e-4 && (lo.y + hi.y).abs() < 1e-4, "{cat}");
                 for s in &m.supports {
-                    assert!(s.rect[0] >= lo.x - 1e-4 && s.rect[1] <= hi.x + 1e-4 && s.z <= m.size.z + 1e-4, "{cat} support");
+                    assert!(
+                        s.rect[0] >= lo.x - 1e-4 && s.rect[1] <= hi.x + 1e-4 && s.z <= m.size.z + 1e-4,
+                        "{cat} support"
+                    );
                 }
             }
         }

@@ -121,7 +121,8 @@ impl Material {
                     dark * 0.6
                 } else {
                     let plank_tone = 0.8 + 0.4 * cell_unit(seed, row as i32, col as i32, 1);
-                    let grain = 0.5 + 0.5 * ((b * 90.0 + 2.0 * value_noise3(seed, Vec3::new(a * 2.0, b * 40.0, 0.0))) * 3.0).sin();
+                    let grain = 0.5
+                        + 0.5 * ((b * 90.0 + 2.0 * value_noise3(seed, Vec3::new(a * 2.0, b * 40.0, 0.0))) * 3.0).sin();
                     self.colour.lerp(dark, 0.35 * grain) * plank_tone
                 }
             }
@@ -204,7 +205,11 @@ fn spine_colour(hue: f32, value: f32) -> Vec3 {
 /// Jitters a palette colour per instance (brightness and a little hue).
 fn jitter(rng: &mut Rng, c: Vec3, amount: f32) -> Vec3 {
     let k = 1.0 + amount * (2.0 * rng.f32() - 1.0);
-    let tint = Vec3::new(1.0 + 0.3 * amount * rng.normal(), 1.0 + 0.3 * amount * rng.normal(), 1.0 + 0.3 * amount * rng.normal());
+    let tint = Vec3::new(
+        1.0 + 0.3 * amount * rng.normal(),
+        1.0 + 0.3 * amount * rng.normal(),
+        1.0 + 0.3 * amount * rng.normal(),
+    );
     (c * k * tint).clamp(Vec3::splat(0.003), Vec3::splat(0.95))
 }
 
@@ -275,14 +280,17 @@ const PLASTICS: [(u8, u8, u8); 10] = [
 
 const METALS: [(u8, u8, u8); 5] = [(170, 170, 175), (120, 120, 125), (60, 60, 62), (200, 195, 185), (40, 40, 42)];
 
-const CERAMICS: [(u8, u8, u8); 5] = [(240, 240, 238), (235, 232, 222), (225, 228, 232), (245, 245, 245), (210, 205, 195)];
+const CERAMICS: [(u8, u8, u8); 5] =
+    [(240, 240, 238), (235, 232, 222), (225, 228, 232), (245, 245, 245), (210, 205, 195)];
 
-const STONES: [(u8, u8, u8); 6] = [(200, 195, 185), (60, 60, 62), (150, 145, 140), (230, 225, 215), (110, 100, 90), (180, 170, 150)];
+const STONES: [(u8, u8, u8); 6] =
+    [(200, 195, 185), (60, 60, 62), (150, 145, 140), (230, 225, 215), (110, 100, 90), (180, 170, 150)];
 
 /// Natural or stained wood.
 pub fn wood(rng: &mut Rng) -> Material {
     let colour = pick_colour(rng, &WOODS, 0.15);
-    let mut m = Material::base(colour, Pattern::Wood { freq: rng.range(12.0, 40.0), dark: colour * rng.range(0.55, 0.8) });
+    let mut m =
+        Material::base(colour, Pattern::Wood { freq: rng.range(12.0, 40.0), dark: colour * rng.range(0.55, 0.8) });
     m.tone_noise = 0.08;
     m.specular = rng.range(0.0, 0.15);
     m
@@ -397,7 +405,8 @@ pub fn screen(rng: &mut Rng, on: bool) -> Material {
 
 /// Window glass showing a bright outside.
 pub fn window_glass(rng: &mut Rng) -> Material {
-    let mut m = Material::base(Vec3::splat(0.1), Pattern::Blotches { scale: rng.range(0.3, 1.0), second: Vec3::splat(0.6) });
+    let mut m =
+        Material::base(Vec3::splat(0.1), Pattern::Blotches { scale: rng.range(0.3, 1.0), second: Vec3::splat(0.6) });
     let sky = Vec3::new(rng.range(0.8, 1.0), rng.range(0.85, 1.0), rng.range(0.9, 1.1));
     m.emission = sky * rng.range(1.2, 2.2);
     m.infrared = 0.05;
@@ -407,7 +416,8 @@ pub fn window_glass(rng: &mut Rng) -> Material {
 
 /// Mirror: reflects a smear of the room; glossy for the sensor.
 pub fn mirror(rng: &mut Rng) -> Material {
-    let mut m = Material::base(Vec3::splat(rng.range(0.3, 0.5)), Pattern::Blotches { scale: 0.3, second: Vec3::splat(0.7) });
+    let mut m =
+        Material::base(Vec3::splat(rng.range(0.3, 0.5)), Pattern::Blotches { scale: 0.3, second: Vec3::splat(0.7) });
     m.specular = 0.8;
     m.shininess = 200.0;
     m.infrared = 0.3;
@@ -426,8 +436,9 @@ pub fn cardboard(rng: &mut Rng) -> Material {
 /// Carpet or rug.
 pub fn carpet(rng: &mut Rng) -> Material {
     let colour = pick_colour(rng, &FABRICS, 0.2);
-    let pattern = if rng.chance(0.4) {
-        Pattern::Blotches { scale: rng.range(0.1, 0.4), second: pick_colour(rng, &FABRICS, 0.2) }
+    let pattern = if rng.chance(0.3) {
+        // Worn or mottled: a darker shade of the same colour.
+        Pattern::Blotches { scale: rng.range(0.1, 0.4), second: colour * rng.range(0.7, 0.9) }
     } else {
         Pattern::Speckle { amount: rng.range(0.15, 0.35) }
     };
@@ -451,7 +462,11 @@ pub fn planks(rng: &mut Rng) -> Material {
     let colour = pick_colour(rng, &WOODS, 0.15);
     let mut m = Material::base(
         colour,
-        Pattern::Planks { width: rng.range(0.08, 0.2), length: rng.range(0.6, 1.8), dark: colour * rng.range(0.5, 0.75) },
+        Pattern::Planks {
+            width: rng.range(0.08, 0.2),
+            length: rng.range(0.6, 1.8),
+            dark: colour * rng.range(0.5, 0.75),
+        },
     );
     m.specular = rng.range(0.05, 0.25);
     m

@@ -6,7 +6,8 @@
 //!    ([`furniture`]).
 //! 2. **Camera** ([`camera`]): a sensor, its image size and intrinsics, and a pose at 1.0–1.7 m pitched down
 //!    0–35° with a small roll; among up to eight candidate poses the first that sees at least two labelled
-//!    objects in a 80×60 probe render is kept (else the best).
+//!    objects in a 80×60 probe render, with less than a fifth of it closer than 0.6 m, is kept (else the
+//!    best).
 //! 3. **Rendering** ([`render`]): ray casting with rayon, ideal depth and per-pixel instance ids.
 //! 4. **Depth sensor** ([`sensor`]): noise, quantisation, holes.
 //! 5. **Annotation**: every labelled object with at least `max(12, 0.0004·W·H)` visible pixels gets its
@@ -159,7 +160,10 @@ pub enum Support {
     Floor,
     Wall,
     /// On instance `parent`'s support surface `surface`.
-    On { parent: usize, surface: usize },
+    On {
+        parent: usize,
+        surface: usize,
+    },
 }
 
 /// One thing in a generated frame, in the frame's upright (camera-centred) coordinates.
@@ -224,14 +228,31 @@ pub fn generate_frame(seed: u64, index: u64, options: &SynthOptions) -> Result<S
     let (width, height) = options.size.unwrap_or((nw, nh));
     let intrinsics = camera::scale_intrinsics(k, (nw, nh), (width, height));
     let render_scene = render::build(&scene, &mut Rng::derive(&[seed, index, STREAM_RENDER]));
-    let view = choose_view(&scene, &render_scene, sensor, width, height, intrinsics, &mut Rng::derive(&[seed, index, STREAM_CAMERA]));
+    let view = choose_view(
+        &scene,
+        &render_scene,
+        sensor,
+        width,
+        height,
+        intrinsics,
+        &mut Rng::derive(&[seed, index, STREAM_CAMERA]),
+    );
     let kind = scene.room.kind;
     Ok(render_frame(scene, &render_scene, view, kind, seed, index))
 }
 
 /// Picks the camera pose: the first of up to eight candidates whose 80×60 probe shows at least two
-/// labelled objects (≥ 4 probe pixels each), else the candidate showing the most.
-fn choose_view(scene: &Scene, rs: &render::RenderScene, sensor: Sensor, width: u32, height: u32, intrinsics: [f32; 4], rng: &mut Rng) -> View {
+/// labelled objects (≥ 4 probe pixels each) and is not blocked (a fifth of it closer than 0.6 m), else the
+/// candidate showing the most.
+fn choose_view(
+    scene: &Scene,
+    rs: &render::RenderScene,
+    sensor: Sensor,
+    width: u32,
+    height: u32,
+    intrinsics: [f32; 4],
+    rng: &mut Rng,
+) -> View {
     let mut best: Option<(usize, View)> = None;
     for _ in 0..8 {
         let (position, heading, pitch, roll) = camera::sample_pose(scene, rng).unwrap_or_else(|| {
@@ -239,15 +260,24 @@ fn choose_view(scene: &Scene, rs: &render::RenderScene, sensor: Sensor, width: u
             (c.extend(1.3), 0.0, 0.2, 0.01)
         });
         let view = View { sensor, width, height, intrinsics, position, heading, pitch, roll };
-        let probe = View { width: 80, height: 60, intrinsics: camera::scale_intrinsics(intrinsics, (width, height), (80, 60)), ..view };
-        let ids = render::render_ids(rs, &probe);
+        let probe = View {
+            width: 80,
+            height: 60,
+            intrinsics: camera::scale_intrinsics(intrinsics, (width, height), (80, 60)),
+            ..view
+        };
+        let probe = render::render_probe(rs, &probe);
         let mut counts = vec![0usize; scene.items.len() + 1];
-        for id in ids {
+        for &(id, _) in &probe {
             if (id as usize) < counts.len() {
                 counts[id as usize] += 1;
             }
         }
-        let seen = (0..scene.items.len()).filter(|&i| scene.items[i].category().is_some() && counts[i + 1] >= 4).count();
+        let seen =
+            (0..scene.items.len()).filter(|&i| scene.items[i].category().is_some() && counts[i + 1] >= 4).count();
+        // A view blocked by something right in front of the lens is kept only as a last resort.
+        let blocked = probe.iter().filter(|p| p.1 < 0.6).count() * 5 > probe.len();
+        let seen = if blocked { 0 } else { seen };
         if seen >= 2 {
             return view;
         }
@@ -259,7 +289,14 @@ fn choose_view(scene: &Scene, rs: &render::RenderScene, sensor: Sensor, width: u
 }
 
 /// Renders a scene from a view and annotates it (the lower-level entry point: custom scenes and views).
-pub fn render_frame(scene: Scene, render_scene: &render::RenderScene, view: View, room_type: RoomType, seed: u64, index: u64) -> SynthFrame {
+pub fn render_frame(
+    scene: Scene,
+    render_scene: &render::RenderScene,
+    view: View,
+    room_type: RoomType,
+    seed: u64,
+    index: u64,
+) -> SynthFrame {
     let buffers = render::render(render_scene, &view, hash_u64(&[seed, index, STREAM_NOISE]));
     let model = DepthModel::for_sensor(view.sensor);
     let input = sensor::SensorInput {
@@ -313,7 +350,11 @@ pub fn render_frame(scene: Scene, render_scene: &render::RenderScene, view: View
             .map(|s| {
                 let [s0, s1, t0, t1] = s.rect;
                 let corner = |a: f32, b: f32| view.to_upright(item.to_world(Vec3::new(a, b, s.z))).truncate();
-                SupportSurface { z: view.to_upright(item.to_world(Vec3::new(0.0, 0.0, s.z))).z, clearance: s.clearance, corners: [corner(s0, t0), corner(s1, t0), corner(s1, t1), corner(s0, t1)] }
+                SupportSurface {
+                    z: view.to_upright(item.to_world(Vec3::new(0.0, 0.0, s.z))).z,
+                    clearance: s.clearance,
+                    corners: [corner(s0, t0), corner(s1, t0), corner(s1, t1), corner(s0, t1)],
+                }
             })
             .collect();
         instances.push(Instance {
@@ -333,7 +374,9 @@ pub fn render_frame(scene: Scene, render_scene: &render::RenderScene, view: View
         floor: -view.position.z,
         ceiling: scene.room.height - view.position.z,
     };
-    let rgb = image::RgbImage::from_fn(view.width, view.height, |x, y| image::Rgb(buffers.rgb[(y * view.width + x) as usize]));
+    let rgb = image::RgbImage::from_fn(view.width, view.height, |x, y| {
+        image::Rgb(buffers.rgb[(y * view.width + x) as usize])
+    });
     let mut frame = Frame {
         name: frame_name(index),
         rgb,
@@ -426,9 +469,15 @@ impl SynthFrame {
         self.frame.write(dir)?;
         let bfx = dir.join("depth_bfx");
         std::fs::create_dir_all(&bfx).map_err(|e| Error::io(&bfx, e))?;
-        write_depth_png(&bfx.join(format!("{}.png", self.frame.name)), self.frame.width(), self.frame.height(), &self.depth_filled_mm)?;
+        write_depth_png(
+            &bfx.join(format!("{}.png", self.frame.name)),
+            self.frame.width(),
+            self.frame.height(),
+            &self.depth_filled_mm,
+        )?;
         let support_path = dir.join(SUPPORT_FILE);
-        let text = serde_json::to_string_pretty(&self.support_json()).map_err(|e| Error::invalid(&support_path, e.to_string()))?;
+        let text = serde_json::to_string_pretty(&self.support_json())
+            .map_err(|e| Error::invalid(&support_path, e.to_string()))?;
         std::fs::write(&support_path, text).map_err(|e| Error::io(&support_path, e))?;
         if let Some(path) = preview_path {
             if let Some(parent) = path.parent() {
@@ -473,7 +522,14 @@ pub fn manifest(seed: u64, frames: u64, options: &SynthOptions, preview: bool) -
 
 /// Generates `frames` frames into `out` in parallel (frame `i` into `out/synth-<i>`), then the manifest;
 /// calls `progress` after each frame. With `preview`, writes `out/preview/synth-<i>.png` too.
-pub fn generate_dataset(out: &Path, seed: u64, frames: u64, options: &SynthOptions, preview: bool, progress: &(dyn Fn() + Sync)) -> Result<Summary> {
+pub fn generate_dataset(
+    out: &Path,
+    seed: u64,
+    frames: u64,
+    options: &SynthOptions,
+    preview: bool,
+    progress: &(dyn Fn() + Sync),
+) -> Result<Summary> {
     options.validate()?;
     if frames == 0 {
         return Err(Error::Input("the number of frames must be at least 1".into()));
@@ -501,7 +557,8 @@ pub fn generate_dataset(out: &Path, seed: u64, frames: u64, options: &SynthOptio
         *summary.rooms.entry(room.to_string()).or_default() += 1;
     }
     let path = out.join("manifest.json");
-    let text = serde_json::to_string_pretty(&manifest(seed, frames, options, preview)).map_err(|e| Error::invalid(&path, e.to_string()))?;
+    let text = serde_json::to_string_pretty(&manifest(seed, frames, options, preview))
+        .map_err(|e| Error::invalid(&path, e.to_string()))?;
     std::fs::write(&path, text).map_err(|e| Error::io(&path, e))?;
     Ok(summary)
 }

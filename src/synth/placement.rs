@@ -11,8 +11,8 @@
 use glam::{Vec2, Vec3};
 
 use super::furniture::{self, Model};
-use super::room::{Opening, Room, RoomType, Wall};
 use super::rng::Rng;
+use super::room::{Opening, Room, RoomType, Wall};
 use crate::geometry::Cuboid;
 
 /// What an item is.
@@ -37,9 +37,14 @@ impl ItemKind {
 pub enum Rest {
     Floor,
     /// On support surface `surface` of item `parent`.
-    On { parent: usize, surface: usize },
+    On {
+        parent: usize,
+        surface: usize,
+    },
     /// Hung on (or set into) wall `wall`.
-    Wall { wall: usize },
+    Wall {
+        wall: usize,
+    },
 }
 
 /// A placed model.
@@ -259,7 +264,8 @@ impl<'a> Planner<'a> {
     }
 
     fn random_wall(&mut self, min_length: f32) -> Option<usize> {
-        let weights: Vec<f32> = self.walls.iter().map(|w| if w.length >= min_length { w.length } else { 0.0 }).collect();
+        let weights: Vec<f32> =
+            self.walls.iter().map(|w| if w.length >= min_length { w.length } else { 0.0 }).collect();
         if weights.iter().all(|&w| w == 0.0) {
             return None;
         }
@@ -267,7 +273,13 @@ impl<'a> Planner<'a> {
     }
 
     /// Places a model with its back against a wall (front into the room).
-    fn against_wall(&mut self, (kind, model): (ItemKind, Model), wall: Option<usize>, along: Option<f32>, tries: usize) -> Option<usize> {
+    fn against_wall(
+        &mut self,
+        (kind, model): (ItemKind, Model),
+        wall: Option<usize>,
+        along: Option<f32>,
+        tries: usize,
+    ) -> Option<usize> {
         let (w, d) = (model.size.x, model.size.y);
         for _ in 0..tries {
             let Some(wi) = wall.or_else(|| self.random_wall(w + 0.1)) else { return None };
@@ -278,7 +290,14 @@ impl<'a> Planner<'a> {
             let s = along.unwrap_or_else(|| self.rng.range(0.5 * w + 0.02, wall_.length - 0.5 * w - 0.02));
             let gap = self.rng.range(FLOOR_GAP + 0.005, 0.06);
             let c = wall_.point(s, gap + 0.5 * d);
-            let item = Item { kind, model: model.clone(), position: c.extend(0.0), yaw: wall_.facing_yaw(), rest: Rest::Floor, collides: true };
+            let item = Item {
+                kind,
+                model: model.clone(),
+                position: c.extend(0.0),
+                yaw: wall_.facing_yaw(),
+                rest: Rest::Floor,
+                collides: true,
+            };
             if let Some(i) = self.push_if_fits(item, FLOOR_GAP) {
                 return Some(i);
             }
@@ -326,7 +345,15 @@ impl<'a> Planner<'a> {
     }
 
     /// Places a model on one side of `anchor`, facing it (chairs at desks and tables).
-    fn facing(&mut self, anchor: usize, entry: (ItemKind, Model), side: Side, offset: f32, gap: (f32, f32), jitter: f32) -> Option<usize> {
+    fn facing(
+        &mut self,
+        anchor: usize,
+        entry: (ItemKind, Model),
+        side: Side,
+        offset: f32,
+        gap: (f32, f32),
+        jitter: f32,
+    ) -> Option<usize> {
         let a = self.items[anchor].cuboid();
         let (wa, da) = (a.width_axis(), a.depth_axis());
         let (n, extent, along) = match side {
@@ -340,7 +367,8 @@ impl<'a> Planner<'a> {
             let g = self.rng.range(gap.0, gap.1);
             let c = a.centre.truncate() + n * (extent + g + 0.5 * model.size.y) + along * offset;
             let yaw = (-n.x).atan2(n.y) + jitter * self.rng.range(-1.0, 1.0);
-            let item = Item { kind, model: model.clone(), position: c.extend(0.0), yaw, rest: Rest::Floor, collides: true };
+            let item =
+                Item { kind, model: model.clone(), position: c.extend(0.0), yaw, rest: Rest::Floor, collides: true };
             if let Some(i) = self.push_if_fits(item, FLOOR_GAP) {
                 return Some(i);
             }
@@ -350,7 +378,13 @@ impl<'a> Planner<'a> {
 
     /// Places a model anywhere on the floor, axis-aligned with the room (± `jitter`), optionally near a
     /// point.
-    fn free(&mut self, (kind, model): (ItemKind, Model), near: Option<(Vec2, f32)>, jitter: f32, tries: usize) -> Option<usize> {
+    fn free(
+        &mut self,
+        (kind, model): (ItemKind, Model),
+        near: Option<(Vec2, f32)>,
+        jitter: f32,
+        tries: usize,
+    ) -> Option<usize> {
         let (lo, hi) = self.room.bounds();
         for _ in 0..tries {
             let c = match near {
@@ -369,7 +403,15 @@ impl<'a> Planner<'a> {
 
     /// Places a small model on a support surface of `parent` (the first surface that fits when `surface`
     /// is `None`, trying them in random order). `turn` is the yaw relative to the parent.
-    fn on(&mut self, parent: usize, (kind, model): (ItemKind, Model), surface: Option<usize>, spot: Spot, turn: f32, tries: usize) -> Option<usize> {
+    fn on(
+        &mut self,
+        parent: usize,
+        (kind, model): (ItemKind, Model),
+        surface: Option<usize>,
+        spot: Spot,
+        turn: f32,
+        tries: usize,
+    ) -> Option<usize> {
         let supports = self.items[parent].model.supports.clone();
         let mut order: Vec<usize> = match surface {
             Some(s) if s < supports.len() => vec![s],
@@ -417,20 +459,35 @@ impl<'a> Planner<'a> {
 
     /// Hangs a model on a wall with its bottom at height `z` (pictures, whiteboards, mirrors, wall TVs,
     /// upper cabinets).
-    fn on_wall(&mut self, (kind, model): (ItemKind, Model), wall: Option<usize>, along: Option<f32>, z: (f32, f32), tries: usize) -> Option<usize> {
+    fn on_wall(
+        &mut self,
+        (kind, model): (ItemKind, Model),
+        wall: Option<usize>,
+        along: Option<f32>,
+        z: (f32, f32),
+        tries: usize,
+    ) -> Option<usize> {
         for _ in 0..tries {
             let Some(wi) = wall.or_else(|| self.random_wall(model.size.x + 0.2)) else { return None };
             let w = self.walls[wi];
             if w.length < model.size.x + 0.1 {
                 continue;
             }
-            let s = along.unwrap_or_else(|| self.rng.range(0.5 * model.size.x + 0.05, w.length - 0.5 * model.size.x - 0.05));
+            let s = along
+                .unwrap_or_else(|| self.rng.range(0.5 * model.size.x + 0.05, w.length - 0.5 * model.size.x - 0.05));
             if !self.room.wall_free(wi, s - 0.5 * model.size.x, s + 0.5 * model.size.x, 0.05) {
                 continue;
             }
             let bottom = self.rng.range(z.0, z.1);
             let c = w.point(s, 0.5 * model.size.y + 0.002);
-            let item = Item { kind, model: model.clone(), position: c.extend(bottom), yaw: w.facing_yaw(), rest: Rest::Wall { wall: wi }, collides: true };
+            let item = Item {
+                kind,
+                model: model.clone(),
+                position: c.extend(bottom),
+                yaw: w.facing_yaw(),
+                rest: Rest::Wall { wall: wi },
+                collides: true,
+            };
             let inside = self.inside_room(&item.obb(), 0.0);
             if inside {
                 if let Some(i) = self.push_if_fits(item, 0.01) {
@@ -456,7 +513,14 @@ impl<'a> Planner<'a> {
                 continue;
             }
             let c = w.point(s, model.wall_plane_t);
-            let item = Item { kind, model: model.clone(), position: c.extend(0.0), yaw: w.facing_yaw(), rest: Rest::Wall { wall: wi }, collides: true };
+            let item = Item {
+                kind,
+                model: model.clone(),
+                position: c.extend(0.0),
+                yaw: w.facing_yaw(),
+                rest: Rest::Wall { wall: wi },
+                collides: true,
+            };
             if !self.fits(&item, 0.01) {
                 continue;
             }
@@ -465,7 +529,14 @@ impl<'a> Planner<'a> {
                 continue;
             }
             self.zones.push(Zone { obb: swing, z0: 0.0, z1: 2.1 });
-            self.room.openings.push(Opening { wall: wi, s0: s - 0.5 * ow, s1: s + 0.5 * ow, z0: 0.0, z1: oh, window: false });
+            self.room.openings.push(Opening {
+                wall: wi,
+                s0: s - 0.5 * ow,
+                s1: s + 0.5 * ow,
+                z0: 0.0,
+                z1: oh,
+                window: false,
+            });
             self.items.push(item);
             return Some(self.items.len() - 1);
         }
@@ -484,7 +555,11 @@ impl<'a> Planner<'a> {
             }
             let z0 = self.rng.range(sill.0, sill.1);
             let z1 = (self.room.height - self.rng.range(0.15, 0.5)).min(2.4).max(z0 + 0.5);
-            let zone = Zone { obb: Obb::new(w.point(s, 0.04), Vec2::new(0.5 * width + 0.08, 0.04), w.facing_yaw()), z0: z0 - 0.06, z1 };
+            let zone = Zone {
+                obb: Obb::new(w.point(s, 0.04), Vec2::new(0.5 * width + 0.08, 0.04), w.facing_yaw()),
+                z0: z0 - 0.06,
+                z1,
+            };
             let (zz0, zz1) = (zone.z0, zone.z1);
             if self.items.iter().any(|it| {
                 let (a, b) = it.z_range();
@@ -493,7 +568,14 @@ impl<'a> Planner<'a> {
                 continue;
             }
             self.zones.push(zone);
-            self.room.openings.push(Opening { wall: wi, s0: s - 0.5 * width, s1: s + 0.5 * width, z0, z1, window: true });
+            self.room.openings.push(Opening {
+                wall: wi,
+                s0: s - 0.5 * width,
+                s1: s + 0.5 * width,
+                z0,
+                z1,
+                window: true,
+            });
             return Some((wi, s, width, z0));
         }
         None
@@ -629,7 +711,13 @@ impl<'a> Planner<'a> {
     }
 
     /// Doors (`doors` drawn uniformly in the range, each kept with probability `door_p`) and windows.
-    fn openings(&mut self, door_p: f32, doors: (usize, usize), windows: (usize, usize), sill: (f32, f32)) -> Vec<(usize, f32, f32, f32)> {
+    fn openings(
+        &mut self,
+        door_p: f32,
+        doors: (usize, usize),
+        windows: (usize, usize),
+        sill: (f32, f32),
+    ) -> Vec<(usize, f32, f32, f32)> {
         let n_doors = self.rng.int(doors.0, doors.1);
         for _ in 0..n_doors {
             if self.rng.chance(door_p) {
@@ -1010,7 +1098,8 @@ impl<'a> Planner<'a> {
     fn classroom(&mut self) {
         let windows = self.openings(1.0, (1, 2), (2, 4), (0.8, 1.0));
         // The front wall: the longest one with the whiteboard.
-        let front = (0..self.walls.len()).max_by(|&a, &b| self.walls[a].length.total_cmp(&self.walls[b].length)).unwrap_or(0);
+        let front =
+            (0..self.walls.len()).max_by(|&a, &b| self.walls[a].length.total_cmp(&self.walls[b].length)).unwrap_or(0);
         let board = self.clutter("whiteboard");
         let along = 0.5 * self.walls[front].length;
         self.on_wall(board, Some(front), Some(along), (0.8, 1.0), 1);
@@ -1018,7 +1107,14 @@ impl<'a> Planner<'a> {
         let yaw = wall.facing_yaw();
         let teacher = self.object("desk", Some("office"));
         let teacher_pos = wall.point(along + self.rng.range(-1.0, 1.0), 1.2);
-        let t_item = Item { kind: teacher.0, model: teacher.1, position: teacher_pos.extend(0.0), yaw: yaw + std::f32::consts::PI, rest: Rest::Floor, collides: true };
+        let t_item = Item {
+            kind: teacher.0,
+            model: teacher.1,
+            position: teacher_pos.extend(0.0),
+            yaw: yaw + std::f32::consts::PI,
+            rest: Rest::Floor,
+            collides: true,
+        };
         if let Some(t) = self.push_if_fits(t_item, FLOOR_GAP) {
             self.workplace(t, Some("office"), 0.5);
         }
@@ -1036,7 +1132,14 @@ impl<'a> Planner<'a> {
                     // A different desk model now and then.
                     model = self.object("desk", Some("student")).1;
                 }
-                let item = Item { kind: student.0, model, position: p.extend(0.0), yaw: yaw + self.rng.range(-0.05, 0.05), rest: Rest::Floor, collides: true };
+                let item = Item {
+                    kind: student.0,
+                    model,
+                    position: p.extend(0.0),
+                    yaw: yaw + self.rng.range(-0.05, 0.05),
+                    rest: Rest::Floor,
+                    collides: true,
+                };
                 if let Some(d) = self.push_if_fits(item, FLOOR_GAP) {
                     if self.maybe(0.9) {
                         let variant = if self.rng.chance(0.8) { "dining" } else { "stool" };

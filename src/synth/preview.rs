@@ -88,7 +88,8 @@ pub fn preview(frame: &Frame) -> RgbImage {
     for obj in &frame.objects {
         let colour = category_colour(category_index(&obj.category));
         let c = obj.cuboid.corners();
-        const EDGES: [(usize, usize); 12] = [(0, 1), (1, 2), (2, 3), (3, 0), (4, 5), (5, 6), (6, 7), (7, 4), (0, 4), (1, 5), (2, 6), (3, 7)];
+        const EDGES: [(usize, usize); 12] =
+            [(0, 1), (1, 2), (2, 3), (3, 0), (4, 5), (5, 6), (6, 7), (7, 4), (0, 4), (1, 5), (2, 6), (3, 7)];
         for (i, j) in EDGES {
             // The front face is p1 p2 (bottom) and their tops: drawn thick.
             let front = matches!((i, j), (0, 1) | (4, 5) | (0, 4) | (1, 5));

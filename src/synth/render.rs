@@ -78,7 +78,11 @@ pub fn build(scene: &Scene, rng: &mut Rng) -> RenderScene {
     let main = rng.range(2.0, 4.0);
     for (k, p) in scene.room.ceiling_lights.iter().enumerate() {
         let warm = Vec3::new(1.0, rng.range(0.88, 0.97), rng.range(0.72, 0.9));
-        lights.push(Light { position: *p - Vec3::Z * 0.05, intensity: warm * main * if k == 0 { 1.0 } else { 0.7 }, shadows: k == 0 });
+        lights.push(Light {
+            position: *p - Vec3::Z * 0.05,
+            intensity: warm * main * if k == 0 { 1.0 } else { 0.7 },
+            shadows: k == 0,
+        });
     }
     let walls = scene.room.walls();
     for o in scene.room.openings.iter().filter(|o| o.window) {
@@ -132,7 +136,14 @@ fn ray_direction(view: &View, to_world: &Mat3, col: u32, row: u32) -> Vec3 {
 
 fn trace(rs: &RenderScene, origin: Vec3, dir: Vec3, shade: bool) -> Sample {
     let Some((hit, pi)) = rs.bvh.intersect(origin, dir, 1e4) else {
-        return Sample { radiance: Vec3::ZERO, depth: 0.0, instance: NO_INSTANCE, infrared: 0.0, gloss: 0.0, incidence: 0.0 };
+        return Sample {
+            radiance: Vec3::ZERO,
+            depth: 0.0,
+            instance: NO_INSTANCE,
+            infrared: 0.0,
+            gloss: 0.0,
+            incidence: 0.0,
+        };
     };
     let prim = &rs.bvh.prims[pi];
     let material = &rs.materials[prim.material as usize];
@@ -190,18 +201,28 @@ fn trace(rs: &RenderScene, origin: Vec3, dir: Vec3, shade: bool) -> Sample {
         }
         radiance += material.emission;
     }
-    Sample { radiance, depth: hit.t, instance: prim.instance, infrared: material.infrared, gloss: material.gloss, incidence }
+    Sample {
+        radiance,
+        depth: hit.t,
+        instance: prim.instance,
+        infrared: material.infrared,
+        gloss: material.gloss,
+        incidence,
+    }
 }
 
-/// Renders only the instance ids (a quick visibility probe at any resolution).
-pub fn render_ids(rs: &RenderScene, view: &View) -> Vec<u32> {
+/// Renders only (instance id, ideal depth) per pixel: a quick visibility probe at any resolution.
+pub fn render_probe(rs: &RenderScene, view: &View) -> Vec<(u32, f32)> {
     let to_world = view.camera_to_world();
     let w = view.width;
     (0..view.height)
         .into_par_iter()
         .flat_map_iter(|row| {
             let to_world = &to_world;
-            (0..w).map(move |col| trace(rs, view.position, ray_direction(view, to_world, col, row), false).instance)
+            (0..w).map(move |col| {
+                let s = trace(rs, view.position, ray_direction(view, to_world, col, row), false);
+                (s.instance, s.depth)
+            })
         })
         .collect()
 }
@@ -245,7 +266,8 @@ fn srgb_encode(x: f32) -> f32 {
 fn develop(rs: &RenderScene, samples: &[Sample], w: u32, h: u32, seed: u64) -> Vec<[u8; 3]> {
     let (wu, hu) = (w as usize, h as usize);
     // Row sums in parallel, then a sequential total: deterministic for any thread count.
-    let row_sums: Vec<f64> = samples.par_chunks(wu).map(|r| r.iter().map(|s| luminance(s.radiance) as f64).sum()).collect();
+    let row_sums: Vec<f64> =
+        samples.par_chunks(wu).map(|r| r.iter().map(|s| luminance(s.radiance) as f64).sum()).collect();
     let mean = (row_sums.iter().sum::<f64>() / samples.len().max(1) as f64) as f32;
     let exposure = rs.exposure_target / mean.max(1e-4);
     let white = 2.5f32;

@@ -253,7 +253,9 @@ impl Room {
     }
 
     pub fn bounds(&self) -> (Vec2, Vec2) {
-        self.polygon.iter().fold((Vec2::splat(f32::INFINITY), Vec2::splat(f32::NEG_INFINITY)), |(lo, hi), p| (lo.min(*p), hi.max(*p)))
+        self.polygon
+            .iter()
+            .fold((Vec2::splat(f32::INFINITY), Vec2::splat(f32::NEG_INFINITY)), |(lo, hi), p| (lo.min(*p), hi.max(*p)))
     }
 
     pub fn centroid(&self) -> Vec2 {
@@ -332,9 +334,16 @@ impl Room {
         let th = self.wall_thickness;
         let (lo, hi) = self.bounds();
         let mut seed = || rng.next_u64() as u32;
-        let aabb = |lo: Vec3, hi: Vec3, m: u32, s: u32| Prim::new(Shape::Box, 0.5 * (lo + hi), Mat3::IDENTITY, 0.5 * (hi - lo), m, 0, s);
+        let aabb = |lo: Vec3, hi: Vec3, m: u32, s: u32| {
+            Prim::new(Shape::Box, 0.5 * (lo + hi), Mat3::IDENTITY, 0.5 * (hi - lo), m, 0, s)
+        };
         prims.push(aabb((lo - Vec2::splat(th)).extend(-0.1), (hi + Vec2::splat(th)).extend(0.0), floor, seed()));
-        prims.push(aabb((lo - Vec2::splat(th)).extend(self.height), (hi + Vec2::splat(th)).extend(self.height + 0.1), ceiling, seed()));
+        prims.push(aabb(
+            (lo - Vec2::splat(th)).extend(self.height),
+            (hi + Vec2::splat(th)).extend(self.height + 0.1),
+            ceiling,
+            seed(),
+        ));
         let n = self.polygon.len();
         for (i, w) in self.walls().iter().enumerate() {
             let rot = Mat3::from_cols(w.dir.extend(0.0), w.normal.extend(0.0), Vec3::Z);
@@ -344,7 +353,15 @@ impl Room {
                     return;
                 }
                 let c = w.point(0.5 * (s0 + s1), 0.5 * (n0 + n1)).extend(0.5 * (z0 + z1));
-                prims.push(Prim::new(Shape::Box, c, rot, Vec3::new(0.5 * (s1 - s0), 0.5 * (n1 - n0), 0.5 * (z1 - z0)), m, 0, s));
+                prims.push(Prim::new(
+                    Shape::Box,
+                    c,
+                    rot,
+                    Vec3::new(0.5 * (s1 - s0), 0.5 * (n1 - n0), 0.5 * (z1 - z0)),
+                    m,
+                    0,
+                    s,
+                ));
             };
             let start = if self.convex_at(i) { -th } else { 0.0 };
             let end = if self.convex_at((i + 1) % n) { w.length + th } else { w.length };

@@ -1,8 +1,8 @@
 //! The depth sensor model: what the ideal depth becomes in a Kinect-like camera's raw depth image.
 //!
 //! For every pixel, in this order (each random draw a pure function of (seed, pixel)):
-//! 1. **Range**: nothing closer than `min_range`; beyond `fade_start` the return drops out with probability
-//!    rising linearly to 1 at `max_range`.
+//! 1. **Range**: nothing closer than `min_range`; beyond `fade_start` the return drops out in patches with
+//!    probability rising linearly to 1 at `max_range`.
 //! 2. **Projector shadow** (structured light: Kinect v1, Xtion, RealSense): the IR projector sits
 //!    `baseline` to the right of the camera, so background just left of a foreground edge receives no
 //!    pattern. A pixel is shadowed when a pixel to its right maps to a projector column left of its own
@@ -168,7 +168,9 @@ pub fn simulate(model: &DepthModel, input: &SensorInput, seed: u64) -> Vec<u16> 
     let n = w * h;
     let mut valid: Vec<bool> = z.iter().map(|&d| d > 0.0).collect();
     let mut value: Vec<f32> = z.to_vec();
-    // 1. Range.
+    // 1. Range: the far returns fade out in patches (a smooth field mixed with a little per-pixel
+    // randomness), as the pattern's contrast does.
+    let range_field = (seed >> 16) as u32 ^ 0x5eed_f00d;
     for i in 0..n {
         let d = z[i];
         if !valid[i] {
@@ -178,7 +180,9 @@ pub fn simulate(model: &DepthModel, input: &SensorInput, seed: u64) -> Vec<u16> 
             valid[i] = false;
         } else if d > model.fade_start {
             let p = (d - model.fade_start) / (model.max_range - model.fade_start);
-            if unit_from_hash(draw(seed, K_RANGE, i)) < p {
+            let (col, row) = ((i % w) as f32, (i / w) as f32);
+            let patch = 0.5 + 0.5 * value_noise2(range_field, col / 6.0, row / 6.0);
+            if 0.75 * patch + 0.25 * unit_from_hash(draw(seed, K_RANGE, i)) < p {
                 valid[i] = false;
             }
         }
@@ -293,7 +297,8 @@ mod tests {
         let m = DepthModel::for_sensor(Sensor::Kv1);
         let fx = 520.0;
         // Around 3 m the representable depths are spaced z²/(8·fx·b) ≈ 28.8 mm apart.
-        let mut levels: Vec<i64> = (0..2000).map(|k| (m.quantise(2.9 + k as f32 * 1e-4, fx) * 1e5).round() as i64).collect();
+        let mut levels: Vec<i64> =
+            (0..2000).map(|k| (m.quantise(2.9 + k as f32 * 1e-4, fx) * 1e5).round() as i64).collect();
         levels.dedup();
         let gaps: Vec<f32> = levels.windows(2).map(|w| (w[1] - w[0]) as f32 * 1e-5).collect();
         let mean_gap = gaps.iter().sum::<f32>() / gaps.len() as f32;
@@ -311,7 +316,15 @@ mod tests {
         let mut model = DepthModel::for_sensor(Sensor::Kv1);
         model.edge_dropout = 0.0;
         model.speckle_dropout = 0.0;
-        let input = SensorInput { width: w, height: h, fx: 520.0, depth: &depth, infrared: &ones, gloss: &zeros, incidence: &ones };
+        let input = SensorInput {
+            width: w,
+            height: h,
+            fx: 520.0,
+            depth: &depth,
+            infrared: &ones,
+            gloss: &zeros,
+            incidence: &ones,
+        };
         let out = simulate(&model, &input, 9);
         // Shadow width fx·b·(1/z_fg − 1/z_bg) = 39·(1 − 1/3) = 26 px left of column 50, none on the right.
         let missing: Vec<usize> = (0..w as usize).filter(|&c| out[c] == 0).collect();

@@ -93,7 +93,15 @@ pub struct Hit {
 pub const T_EPSILON: f32 = 1e-4;
 
 impl Prim {
-    pub fn new(shape: Shape, centre: Vec3, rotation: Mat3, half: Vec3, material: u32, instance: u32, texture_seed: u32) -> Self {
+    pub fn new(
+        shape: Shape,
+        centre: Vec3,
+        rotation: Mat3,
+        half: Vec3,
+        material: u32,
+        instance: u32,
+        texture_seed: u32,
+    ) -> Self {
         let half = half.max(Vec3::splat(1e-4));
         let to_canonical = Mat3::from_diagonal(half.recip()) * rotation.transpose();
         let grain = if half.x >= half.y && half.x >= half.z {

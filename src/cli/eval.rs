@@ -1,0 +1,262 @@
+//! `cog-gpu eval --data DIR --detections DIR [--iou 0.25] [--categories a,b,...] [--split LIST] [--json]
+//! [--plots DIR]`: average precision of detection files against a dataset's ground truth with the SUN
+//! RGB-D benchmark's rules (see [`cog_gpu::eval`]).
+//!
+//! Choices:
+//! * Categories: without `--categories`, the ten large categories of the SUN RGB-D benchmark
+//!   ([`LARGE_CATEGORIES`]), so that the mAP means the same thing on every dataset and matches the
+//!   benchmark's (and the paper's) 10-class mAP; `--categories all` takes all 19. A requested category
+//!   without ground truth in the evaluated frames has no AP: it shows as `-` in the table, as `null` in
+//!   the JSON, and is left out of the mAP. Detections of other categories are ignored.
+//! * Detection files: `DIR/<frame directory name>.json`. A frame without one counts as a frame without
+//!   detections (the count is reported); a `.json` file naming no evaluated frame is reported as a
+//!   warning and ignored. Two evaluated frames with the same directory name are an error (their
+//!   detection files would be the same file).
+//! * Plots are written only when `--plots DIR` is given (one `<category>.png` per category with ground
+//!   truth); nothing is written next to the inputs unasked.
+//! * APs in the JSON are fractions in [0, 1]; the table prints percentages.
+
+use std::collections::{BTreeMap, HashMap, HashSet};
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context};
+use cog_gpu::category::{CATEGORIES, LARGE_CATEGORIES};
+use cog_gpu::draw::category_colour;
+use cog_gpu::eval::{evaluate_categories, mean_ap, CategoryEvaluation, Detection, FrameDetections};
+use cog_gpu::frame::{read_annotations, Dataset, Object};
+use indicatif::{ProgressBar, ProgressStyle};
+use rayon::prelude::*;
+use serde::Serialize;
+
+use super::GlobalOptions;
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// Dataset directory: every frame directory below it is evaluated (ground truth from
+    /// annotation3Dfinal/index.json).
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Directory of detection files, one `<frame name>.json` per frame.
+    #[arg(long)]
+    pub detections: PathBuf,
+    /// 3D IoU a detection needs with a ground-truth box to count as correct.
+    #[arg(long, default_value_t = 0.25)]
+    pub iou: f32,
+    /// Comma-separated categories to evaluate, or `all` for the 19 [default: the 10 large ones].
+    #[arg(long, value_delimiter = ',')]
+    pub categories: Option<Vec<String>>,
+    /// Evaluate only the frames listed in this file (one frame directory per line, relative to --data).
+    #[arg(long)]
+    pub split: Option<PathBuf>,
+    /// Print one JSON object `{"iou", "ap": {category: AP or null}, "map", ...}` instead of the table.
+    #[arg(long)]
+    pub json: bool,
+    /// Write a precision-recall PNG per category into this directory.
+    #[arg(long)]
+    pub plots: Option<PathBuf>,
+}
+
+/// The `--json` document.
+#[derive(Serialize)]
+struct Report {
+    iou: f32,
+    /// AP per requested category, `null` without ground truth.
+    ap: BTreeMap<String, Option<f32>>,
+    /// Mean of the non-null APs; `null` when none is defined.
+    map: Option<f32>,
+    frames: usize,
+    /// Frames without a detections file (counted as no detections).
+    missing_detection_files: usize,
+    ground_truth: BTreeMap<String, usize>,
+    detections: BTreeMap<String, usize>,
+}
+
+/// The requested categories, checked against the 19 known ones.
+fn categories(requested: &Option<Vec<String>>) -> anyhow::Result<Vec<String>> {
+    let Some(list) = requested else {
+        return Ok(LARGE_CATEGORIES.iter().map(|c| c.to_string()).collect());
+    };
+    let names: Vec<&str> = list.iter().map(|c| c.trim()).filter(|c| !c.is_empty()).collect();
+    if names == ["all"] {
+        return Ok(CATEGORIES.iter().map(|c| c.to_string()).collect());
+    }
+    if names.is_empty() {
+        bail!("--categories is empty");
+    }
+    let mut out: Vec<String> = Vec::new();
+    for name in names {
+        if !CATEGORIES.contains(&name) {
+            bail!("unknown category '{name}' in --categories (known: {}, or 'all')", CATEGORIES.join(", "));
+        }
+        if !out.iter().any(|c| c == name) {
+            out.push(name.to_string());
+        }
+    }
+    Ok(out)
+}
+
+fn progress(len: usize, what: &str) -> anyhow::Result<ProgressBar> {
+    let bar = ProgressBar::new(len as u64);
+    bar.set_style(
+        ProgressStyle::with_template(&format!("{{spinner}} [{{elapsed_precise}}] {{bar:40}} {{pos}}/{{len}} {what}"))
+            .context("progress bar template")?,
+    );
+    Ok(bar)
+}
+
+/// The frame directory's name, its identity in the detections directory.
+fn frame_name(dir: &Path) -> String {
+    dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| dir.display().to_string())
+}
+
+/// `.json` files of the detections directory by file stem.
+fn detection_files(dir: &Path) -> anyhow::Result<HashMap<String, PathBuf>> {
+    if !dir.is_dir() {
+        bail!("{}: detections directory not found", dir.display());
+    }
+    let entries = std::fs::read_dir(dir).with_context(|| format!("{}: cannot list", dir.display()))?;
+    let mut files = HashMap::new();
+    for entry in entries {
+        let path = entry.with_context(|| format!("{}: cannot list", dir.display()))?.path();
+        if path.is_file() && path.extension().is_some_and(|e| e == "json") {
+            if let Some(stem) = path.file_stem() {
+                files.insert(stem.to_string_lossy().into_owned(), path);
+            }
+        }
+    }
+    Ok(files)
+}
+
+pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
+    if !(args.iou > 0.0 && args.iou <= 1.0) {
+        bail!("--iou must be in (0, 1], got {}", args.iou);
+    }
+    let categories = categories(&args.categories)?;
+    let mut dataset = Dataset::open(&args.data)?;
+    if let Some(split) = &args.split {
+        dataset = dataset.with_split(split)?;
+    }
+    if dataset.is_empty() {
+        bail!("{}: no frame directories to evaluate", args.data.display());
+    }
+    let names: Vec<String> = dataset.frames.iter().map(|d| frame_name(d)).collect();
+    let mut first_dir: HashMap<&str, &Path> = HashMap::new();
+    for (name, dir) in names.iter().zip(&dataset.frames) {
+        if let Some(other) = first_dir.insert(name, dir) {
+            bail!(
+                "frames {} and {} have the same name '{name}', so they would share the detections file {name}.json",
+                other.display(),
+                dir.display()
+            );
+        }
+    }
+
+    let files = detection_files(&args.detections)?;
+    let known: HashSet<&str> = names.iter().map(String::as_str).collect();
+    let mut unknown: Vec<&String> = files.keys().filter(|stem| !known.contains(stem.as_str())).collect();
+    unknown.sort();
+    for stem in &unknown {
+        log::warn!("{}: names no evaluated frame; ignored", files[*stem].display());
+    }
+
+    let bar = progress(dataset.len(), "frames")?;
+    let per_frame: Vec<(Vec<Object>, Option<Vec<Detection>>)> = dataset
+        .frames
+        .par_iter()
+        .zip(&names)
+        .map(|(dir, name)| -> anyhow::Result<_> {
+            let (objects, _layout) = read_annotations(dir)?;
+            let detections = match files.get(name) {
+                Some(path) => {
+                    let file = FrameDetections::read(path)?;
+                    if file.frame != *name {
+                        log::warn!(
+                            "{}: its \"frame\" is '{}', not '{name}'; used for {name}",
+                            path.display(),
+                            file.frame
+                        );
+                    }
+                    Some(file.detections)
+                }
+                None => None,
+            };
+            bar.inc(1);
+            Ok((objects, detections))
+        })
+        .collect::<anyhow::Result<_>>()?;
+    bar.finish_and_clear();
+
+    let missing = per_frame.iter().filter(|(_, d)| d.is_none()).count();
+    let (truth, detections): (Vec<Vec<Object>>, Vec<Vec<Detection>>) =
+        per_frame.into_iter().map(|(t, d)| (t, d.unwrap_or_default())).unzip();
+    let results = evaluate_categories(&truth, &detections, &categories, args.iou);
+    let map = mean_ap(results.iter().map(|r| &r.pr.ap));
+
+    if let Some(dir) = &args.plots {
+        write_plots(dir, &results)?;
+    }
+    if missing > 0 {
+        log::warn!(
+            "{missing} of {} frames have no detections file in {}; counted as no detections",
+            names.len(),
+            args.detections.display()
+        );
+    }
+    if args.json {
+        let report = Report {
+            iou: args.iou,
+            ap: results.iter().map(|r| (r.category.clone(), r.pr.ap)).collect(),
+            map,
+            frames: names.len(),
+            missing_detection_files: missing,
+            ground_truth: results.iter().map(|r| (r.category.clone(), r.ground_truth)).collect(),
+            detections: results.iter().map(|r| (r.category.clone(), r.detections)).collect(),
+        };
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print_table(&args, &results, map, names.len(), missing);
+    }
+    Ok(())
+}
+
+fn percent(ap: Option<f32>) -> String {
+    ap.map(|a| format!("{:.1}", 100.0 * a)).unwrap_or_else(|| "-".into())
+}
+
+fn print_table(args: &Args, results: &[CategoryEvaluation], map: Option<f32>, frames: usize, missing: usize) {
+    println!(
+        "{frames} frames from {}, detections from {} ({missing} frames without a file), 3D IoU ≥ {}",
+        args.data.display(),
+        args.detections.display(),
+        args.iou
+    );
+    println!("{:<12} {:>7} {:>11} {:>7}", "category", "#GT", "#detections", "AP");
+    for r in results {
+        println!("{:<12} {:>7} {:>11} {:>7}", r.category, r.ground_truth, r.detections, percent(r.pr.ap));
+    }
+    let defined = results.iter().filter(|r| r.pr.ap.is_some()).count();
+    println!("{:<12} {:>27}", format!("mAP ({defined})"), percent(map));
+}
+
+fn write_plots(dir: &Path, results: &[CategoryEvaluation]) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create the plots directory", dir.display()))?;
+    for r in results.iter().filter(|r| r.pr.ap.is_some()) {
+        let title = format!("{} AP={}", r.category, percent(r.pr.ap));
+        let img = cog_gpu::eval::precision_recall_plot(&r.pr, &title, plot_colour(&r.category));
+        let path = dir.join(format!("{}.png", r.category));
+        img.save_with_format(&path, image::ImageFormat::Png)
+            .with_context(|| format!("{}: cannot write", path.display()))?;
+    }
+    Ok(())
+}
+
+/// The category's palette colour, darkened when it is too pale to read on the plot's white background.
+fn plot_colour(category: &str) -> cog_gpu::draw::Colour {
+    let c = category_colour(category);
+    let luma = 0.299 * c[0] as f32 + 0.587 * c[1] as f32 + 0.114 * c[2] as f32;
+    if luma > 170.0 {
+        c.map(|v| (v as f32 * 0.6) as u8)
+    } else {
+        c
+    }
+}

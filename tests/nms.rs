@@ -1,0 +1,125 @@
+//! 3D non-maximum suppression against hand cases and a brute-force reference.
+
+use cog_gpu::eval::Detection;
+use cog_gpu::geometry::{iou_3d, Cuboid};
+use cog_gpu::nms::{nms_detections, suppress, NmsOptions, DEFAULT_NMS_IOU};
+use glam::Vec3;
+
+fn unit_box(x: f32, y: f32) -> Cuboid {
+    Cuboid::new(Vec3::new(x, y, 0.5), Vec3::ONE, 0.0)
+}
+
+fn options(iou: f32) -> NmsOptions {
+    NmsOptions { iou_threshold: iou, max_detections: None, top_k: None }
+}
+
+#[test]
+fn two_overlapping_and_one_far() {
+    // B is A shifted by 0.2: IoU = 0.8 / 1.2 = 2/3. C is far away.
+    let boxes = [unit_box(0.2, 0.0), unit_box(5.0, 0.0), unit_box(0.0, 0.0)];
+    let scores = [0.8, 0.7, 0.9];
+    assert_eq!(suppress(&boxes, &scores, &options(DEFAULT_NMS_IOU)), [2, 1]);
+    // Nothing overlaps by more than 2/3.
+    assert_eq!(suppress(&boxes, &scores, &options(0.7)), [2, 0, 1]);
+}
+
+#[test]
+fn chain_a_suppresses_b_but_not_c() {
+    // Shifts of 0.5: IoU(A, B) = IoU(B, C) = 0.5 / 1.5 = 1/3, IoU(A, C) = 0 (they touch).
+    // B goes, and a suppressed box suppresses nothing, so C stays.
+    let boxes = [unit_box(0.0, 0.0), unit_box(0.5, 0.0), unit_box(1.0, 0.0)];
+    let scores = [0.9, 0.8, 0.7];
+    assert_eq!(suppress(&boxes, &scores, &options(0.25)), [0, 2]);
+    // Above the threshold 1/3 nothing is suppressed; the comparison is strict (`>`).
+    assert_eq!(suppress(&boxes, &scores, &options(0.4)), [0, 1, 2]);
+    // With C scoring highest, C then A are kept (IoU 0) and B, overlapping both, goes.
+    assert_eq!(suppress(&boxes, &[0.8, 0.7, 0.9], &options(0.25)), [2, 0]);
+}
+
+#[test]
+fn ties_keep_input_order() {
+    let boxes = [unit_box(0.0, 0.0), unit_box(0.0, 0.0), unit_box(3.0, 0.0), unit_box(3.1, 0.0)];
+    let scores = [0.5, 0.5, 0.5, 0.5];
+    assert_eq!(suppress(&boxes, &scores, &options(0.25)), [0, 2]);
+    // The same with a top-K prefilter, which selects among equal scores by position too.
+    let top3 = NmsOptions { top_k: Some(3), ..options(0.25) };
+    assert_eq!(suppress(&boxes, &scores, &top3), [0, 2]);
+}
+
+#[test]
+fn nested_and_thin_boxes() {
+    // A unit box inside a 2 m cube: IoU = 1/8, kept at 0.25. A box 0.9 m high in the unit box: IoU 0.9.
+    let boxes = [
+        Cuboid::new(Vec3::new(0.0, 0.0, 0.5), Vec3::splat(2.0), 0.0),
+        unit_box(0.0, 0.0),
+        Cuboid::new(Vec3::new(0.0, 0.0, 0.45), Vec3::new(1.0, 1.0, 0.9), std::f32::consts::FRAC_PI_2),
+    ];
+    assert_eq!(suppress(&boxes, &[0.9, 0.8, 0.7], &options(0.25)), [0, 1]);
+    // Stacked boxes (disjoint heights) never suppress each other, whatever the footprints.
+    let stacked = [unit_box(0.0, 0.0), Cuboid::new(Vec3::new(0.0, 0.0, 1.5), Vec3::ONE, 0.0)];
+    assert_eq!(suppress(&stacked, &[0.9, 0.8], &options(0.0)), [0, 1]);
+}
+
+#[test]
+fn limits_and_non_finite_scores() {
+    let boxes: Vec<Cuboid> = (0..5).map(|i| unit_box(3.0 * i as f32, 0.0)).collect();
+    let scores = [0.1, 0.5, f32::NAN, 0.9, 0.3];
+    assert_eq!(suppress(&boxes, &scores, &options(0.25)), [3, 1, 4, 0]);
+    let at_most_two = NmsOptions { max_detections: Some(2), ..options(0.25) };
+    assert_eq!(suppress(&boxes, &scores, &at_most_two), [3, 1]);
+    let top_one = NmsOptions { top_k: Some(1), ..options(0.25) };
+    assert_eq!(suppress(&boxes, &scores, &top_one), [3]);
+    assert!(NmsOptions::with_iou(1.5).is_err());
+    assert!(NmsOptions::with_iou(f32::NAN).is_err());
+}
+
+#[test]
+fn categories_do_not_suppress_each_other() {
+    let b = unit_box(0.0, 0.0);
+    let dets = vec![
+        Detection::new("chair", &b, 0.6),
+        Detection::new("bed", &b, 0.9),
+        Detection::new("bed", &unit_box(0.1, 0.0), 0.8),
+        Detection::new("chair", &unit_box(0.1, 0.0), 0.95),
+    ];
+    let kept = nms_detections(&dets, &NmsOptions::default());
+    let summary: Vec<(&str, f32)> = kept.iter().map(|d| (d.category.as_str(), d.score)).collect();
+    assert_eq!(summary, [("chair", 0.95), ("bed", 0.9)]);
+}
+
+/// Plain greedy NMS without any shortcut: the reference for the cheap rejections.
+fn reference(boxes: &[Cuboid], scores: &[f32], threshold: f32) -> Vec<usize> {
+    let mut order: Vec<usize> = (0..boxes.len()).collect();
+    order.sort_by(|&a, &b| scores[b].partial_cmp(&scores[a]).unwrap());
+    let mut kept: Vec<usize> = Vec::new();
+    for i in order {
+        if kept.iter().all(|&k| iou_3d(&boxes[i], &boxes[k]) <= threshold) {
+            kept.push(i);
+        }
+    }
+    kept
+}
+
+#[test]
+fn matches_brute_force_on_random_boxes() {
+    // A small linear congruential generator keeps the test deterministic without a dependency.
+    let mut state = 0x2545_f491_4f6c_dd1du64;
+    let mut next = move || {
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (state >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let mut boxes = Vec::new();
+    let mut scores = Vec::new();
+    for i in 0..400 {
+        let centre = Vec3::new(4.0 * next(), 4.0 * next(), 0.3 + 0.6 * next());
+        let size = Vec3::new(0.3 + 1.5 * next(), 0.3 + 1.5 * next(), 0.3 + 1.0 * next());
+        boxes.push(Cuboid::new(centre, size, 6.28 * next()));
+        // Distinct scores so that the reference's unstable tie handling does not matter.
+        scores.push(next() + i as f32 * 1e-3);
+    }
+    for threshold in [0.05, 0.25, 0.5] {
+        let kept = suppress(&boxes, &scores, &options(threshold));
+        assert_eq!(kept, reference(&boxes, &scores, threshold), "threshold {threshold}");
+        assert!(kept.len() > 5 && kept.len() < 400);
+    }
+}
