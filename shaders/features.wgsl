@@ -27,9 +27,9 @@ const BUCKET_MARGIN: f32 = 1e-4;
 const VIEW_SIGMA: f32 = 0.5;
 
 struct PointRecord {
-    s: f32,
-    t: f32,
-    z: f32,
+    s: i32,   // fixed point, 2^16 per metre
+    t: i32,
+    z: i32,
     normal_bin: u32,
     gx: f32,
     gy: f32,
@@ -40,7 +40,8 @@ struct PointRecord {
 struct Hypothesis {
     lo_view: vec4<f32>,   // lo (s, t, z), view cosine
     cell: vec4<f32>,      // voxel size (s, t, z), unused
-    inv_cell: vec4<f32>,  // grid / extent (s, t, z), unused
+    lo_fixed: vec4<i32>,  // lo in fixed point (s, t, z), unused
+    extent_fixed: vec4<i32>, // extent of the expanded box in fixed point, unused
 }
 
 struct Params {
@@ -63,6 +64,70 @@ struct Params {
 @group(0) @binding(6) var<storage, read_write> inside: array<u32>;
 
 var<workgroup> partial: array<f32, 512>; // MAX_COLUMNS × MAX_WEIGHTS
+
+// Per-invocation accumulators of the column (stage 3), zero at the start of every invocation.
+var<private> count: array<u32, 9>;
+var<private> normals: array<u32, 225>;
+var<private> cog_lo: array<u32, 81>;
+var<private> cog_hi: array<u32, 81>;
+var<private> frames: array<vec4<f32>, 9>;
+var<private> frame_valid: array<bool, 9>;
+var<private> my_inside: u32;
+
+// Job constants of the current hypothesis and column, set before the point loop.
+var<private> cur_lo_fixed: vec3<i32>;
+var<private> cur_extent_fixed: vec3<i32>;
+var<private> cur_column: vec2<i32>;
+var<private> cur_use_cog: bool;
+
+// Stage 3 for one point record.
+fn accumulate_point(n: u32) {
+    let r = points[n];
+    let k = axis_index(r.z, cur_lo_fixed.z, cur_extent_fixed.z, params.grid.z);
+    if (k < 0) {
+        return;
+    }
+    if (axis_index(r.s, cur_lo_fixed.x, cur_extent_fixed.x, params.grid.x) != cur_column.x
+        || axis_index(r.t, cur_lo_fixed.y, cur_extent_fixed.y, params.grid.y) != cur_column.y) {
+        return;
+    }
+    let ku = u32(k);
+    my_inside += 1u;
+    count[ku] += 1u;
+    normals[ku * NORMAL_BINS + r.normal_bin] += 1u;
+    if (cur_use_cog && r.magnitude > 0.0 && frame_valid[ku]) {
+        let fr = frames[ku];
+        let ex = -r.gy;
+        let ey = r.gx;
+        let alpha = fr.w * ex - fr.z * ey;
+        let beta = fr.x * ey - fr.y * ex;
+        let phi = unsigned_angle(alpha, -beta);
+        let position = phi * (f32(COG_BINS) / PI);
+        let bin0 = min(u32(floor(position)), COG_BINS - 1u);
+        let frac = position - f32(bin0);
+        let bin1 = (bin0 + 1u) % COG_BINS;
+        let scaled = r.magnitude * COG_FIXED_SCALE;
+        let share1 = u32(frac * scaled + 0.5);
+        let share0 = u32((1.0 - frac) * scaled + 0.5);
+        let i0 = ku * COG_BINS + bin0;
+        let old0 = cog_lo[i0];
+        cog_lo[i0] = old0 + share0;
+        if (cog_lo[i0] < old0) {
+            cog_hi[i0] += 1u;
+        }
+        let i1 = ku * COG_BINS + bin1;
+        let old1 = cog_lo[i1];
+        cog_lo[i1] = old1 + share1;
+        if (cog_lo[i1] < old1) {
+            cog_hi[i1] += 1u;
+        }
+    }
+}
+
+// Points per iteration of the point loop. Lavapipe (gallivm) caps the total iterations of all loops of
+// one shader invocation at 65535 and silently leaves the loop after that; handling 16 points per
+// iteration keeps a column of up to ~10⁶ points under the cap.
+const POINTS_PER_ITERATION: u32 = 16u;
 var<workgroup> column_inside: array<u32, 64>;
 
 fn camera_point(q: vec3<f32>) -> vec3<f32> {
@@ -100,11 +165,11 @@ fn cog_frame(centre: vec3<f32>) -> CogFrame {
     return frame;
 }
 
-// Voxel index along one axis, or -1 when outside [0, n).
-fn axis_index(p: f32, lo: f32, inv_cell: f32, n: u32) -> i32 {
-    let f = (p - lo) * inv_cell;
-    if (f >= 0.0 && f < f32(n)) {
-        return i32(min(u32(f), n - 1u));
+// Voxel index along one axis, or -1 when outside the box (integer arithmetic: exact on every device).
+fn axis_index(p: i32, lo: i32, extent: i32, n: u32) -> i32 {
+    let d = p - lo;
+    if (d >= 0 && d < extent) {
+        return d * i32(n) / extent;
     }
     return -1;
 }
@@ -202,20 +267,16 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let use_view = (groups & 8u) != 0u;
     // Uniform control flow up to the barrier: out-of-range work is masked, not returned from.
     let working = h < params.job.x && column < nx * ny;
-    var my_inside = 0u;
     var my_partial: array<f32, 8>;
 
     if (working) {
         let hyp = hyps[h];
         let lo = hyp.lo_view.xyz;
         let cell = hyp.cell.xyz;
-        let inv_cell = hyp.inv_cell.xyz;
         let i = column % nx;
         let j = column / nx;
 
         // Stage 2: COG bases of the column's voxels.
-        var frames: array<vec4<f32>, 9>;
-        var frame_valid: array<bool, 9>;
         if (use_cog) {
             for (var k = 0u; k < nz; k++) {
                 let centre = lo + (vec3<f32>(f32(i), f32(j), f32(k)) + 0.5) * cell;
@@ -226,10 +287,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         }
 
         // Stage 3: accumulate.
-        var count: array<u32, 9>;
-        var normals: array<u32, 225>;
-        var cog_lo: array<u32, 81>;
-        var cog_hi: array<u32, 81>;
+        cur_lo_fixed = hyp.lo_fixed.xyz;
+        cur_extent_fixed = hyp.extent_fixed.xyz;
+        cur_column = vec2<i32>(i32(i), i32(j));
+        cur_use_cog = use_cog;
         let s_lo = lo.x + f32(i) * cell.x;
         let t_lo = lo.y + f32(j) * cell.y;
         let s_cells = cell_range(params.bucket_geom.x, params.buckets.x, s_lo, s_lo + cell.x);
@@ -239,46 +300,23 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 let base = row * params.buckets.x;
                 let first = cell_start[base + u32(s_cells.x)];
                 let end = cell_start[base + u32(s_cells.y) + 1u];
-                for (var n = first; n < end; n++) {
-                    let r = points[n];
-                    let k = axis_index(r.z, lo.z, inv_cell.z, nz);
-                    if (k < 0) {
-                        continue;
-                    }
-                    if (axis_index(r.s, lo.x, inv_cell.x, nx) != i32(i) || axis_index(r.t, lo.y, inv_cell.y, ny) != i32(j)) {
-                        continue;
-                    }
-                    let ku = u32(k);
-                    my_inside += 1u;
-                    count[ku] += 1u;
-                    normals[ku * NORMAL_BINS + r.normal_bin] += 1u;
-                    if (use_cog && r.magnitude > 0.0 && frame_valid[ku]) {
-                        let fr = frames[ku];
-                        let ex = -r.gy;
-                        let ey = r.gx;
-                        let alpha = fr.w * ex - fr.z * ey;
-                        let beta = fr.x * ey - fr.y * ex;
-                        let phi = unsigned_angle(alpha, -beta);
-                        let position = phi * (f32(COG_BINS) / PI);
-                        let bin0 = min(u32(floor(position)), COG_BINS - 1u);
-                        let frac = position - f32(bin0);
-                        let bin1 = (bin0 + 1u) % COG_BINS;
-                        let scaled = r.magnitude * COG_FIXED_SCALE;
-                        let share1 = u32(frac * scaled + 0.5);
-                        let share0 = u32((1.0 - frac) * scaled + 0.5);
-                        let i0 = ku * COG_BINS + bin0;
-                        let old0 = cog_lo[i0];
-                        cog_lo[i0] = old0 + share0;
-                        if (cog_lo[i0] < old0) {
-                            cog_hi[i0] += 1u;
-                        }
-                        let i1 = ku * COG_BINS + bin1;
-                        let old1 = cog_lo[i1];
-                        cog_lo[i1] = old1 + share1;
-                        if (cog_lo[i1] < old1) {
-                            cog_hi[i1] += 1u;
-                        }
-                    }
+                for (var n = first; n < end; n += POINTS_PER_ITERATION) {
+                    accumulate_point(n);
+                    if (n + 1u < end) { accumulate_point(n + 1u); }
+                    if (n + 2u < end) { accumulate_point(n + 2u); }
+                    if (n + 3u < end) { accumulate_point(n + 3u); }
+                    if (n + 4u < end) { accumulate_point(n + 4u); }
+                    if (n + 5u < end) { accumulate_point(n + 5u); }
+                    if (n + 6u < end) { accumulate_point(n + 6u); }
+                    if (n + 7u < end) { accumulate_point(n + 7u); }
+                    if (n + 8u < end) { accumulate_point(n + 8u); }
+                    if (n + 9u < end) { accumulate_point(n + 9u); }
+                    if (n + 10u < end) { accumulate_point(n + 10u); }
+                    if (n + 11u < end) { accumulate_point(n + 11u); }
+                    if (n + 12u < end) { accumulate_point(n + 12u); }
+                    if (n + 13u < end) { accumulate_point(n + 13u); }
+                    if (n + 14u < end) { accumulate_point(n + 14u); }
+                    if (n + 15u < end) { accumulate_point(n + 15u); }
                 }
             }
         }

@@ -38,12 +38,8 @@ pub fn normalise_name(raw: &str) -> (String, Option<String>) {
         Some((c, l)) => (c, Some(l.trim().to_string()).filter(|l| !l.is_empty())),
         None => (raw, None),
     };
-    let mut class: String = class
-        .trim()
-        .to_lowercase()
-        .chars()
-        .map(|c| if c == ' ' || c == '-' { '_' } else { c })
-        .collect();
+    let mut class: String =
+        class.trim().to_lowercase().chars().map(|c| if c == ' ' || c == '-' { '_' } else { c }).collect();
     let alias = match class.as_str() {
         "night_stand" | "nightstands" => Some("nightstand"),
         "garbage" | "garbagebin" | "trash_can" | "trash_bin" | "recycle_bin" => Some("garbage_bin"),

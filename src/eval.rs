@@ -107,7 +107,11 @@ pub struct PrecisionRecall {
 
 /// Evaluates one category: `detections` over all images, `ground_truth[image]` the category's boxes in
 /// each image (see the module doc for the rules).
-pub fn average_precision(detections: &[ScoredBox], ground_truth: &[Vec<Cuboid>], iou_threshold: f32) -> PrecisionRecall {
+pub fn average_precision(
+    detections: &[ScoredBox],
+    ground_truth: &[Vec<Cuboid>],
+    iou_threshold: f32,
+) -> PrecisionRecall {
     let positives: usize = ground_truth.iter().map(Vec::len).sum();
     let mut order: Vec<usize> = (0..detections.len()).collect();
     // A stable sort keeps the input order among equal scores.
@@ -117,14 +121,13 @@ pub fn average_precision(detections: &[ScoredBox], ground_truth: &[Vec<Cuboid>],
     for &d in &order {
         let det = &detections[d];
         let truths = ground_truth.get(det.image).map(Vec::as_slice).unwrap_or(&[]);
-        let best = truths
-            .iter()
-            .enumerate()
-            .map(|(g, truth)| (g, iou_3d(&det.cuboid, truth)))
-            .fold(None, |best: Option<(usize, f32)>, (g, iou)| match best {
+        let best = truths.iter().enumerate().map(|(g, truth)| (g, iou_3d(&det.cuboid, truth))).fold(
+            None,
+            |best: Option<(usize, f32)>, (g, iou)| match best {
                 Some((_, b)) if b >= iou => best,
                 _ => Some((g, iou)),
-            });
+            },
+        );
         let hit = match best {
             Some((g, iou)) if iou >= iou_threshold && !taken[det.image][g] => {
                 taken[det.image][g] = true;

@@ -273,9 +273,7 @@ fn read_text(path: &Path) -> Result<String> {
 fn parse_numbers(path: &Path, text: &str) -> Result<Vec<f64>> {
     text.split_whitespace()
         .map(|tok| {
-            let v: f64 = tok
-                .parse()
-                .map_err(|_| Error::invalid(path, format!("'{tok}' is not a number")))?;
+            let v: f64 = tok.parse().map_err(|_| Error::invalid(path, format!("'{tok}' is not a number")))?;
             if v.is_finite() {
                 Ok(v)
             } else {
@@ -304,10 +302,7 @@ fn read_intrinsics(path: &Path) -> Result<[[f64; 3]; 3]> {
 fn extrinsics_file(dir: &Path) -> Result<PathBuf> {
     let ext_dir = dir.join("extrinsics");
     let entries = fs::read_dir(&ext_dir).map_err(|e| Error::io(&ext_dir, e))?;
-    let mut files: Vec<PathBuf> = entries
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.is_file())
-        .collect();
+    let mut files: Vec<PathBuf> = entries.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.is_file()).collect();
     files.sort();
     files.pop().ok_or_else(|| Error::missing(&ext_dir, "no extrinsics file"))
 }
@@ -320,7 +315,8 @@ fn read_extrinsics(path: &Path) -> Result<[[f64; 3]; 3]> {
         n => return Err(Error::invalid(path, format!("expected a 3×4 (or 3×3) matrix, found {n} numbers"))),
     };
     let e = to_dmat3(&rows);
-    let orthogonality = (e * e.transpose() - DMat3::IDENTITY).to_cols_array().iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    let orthogonality =
+        (e * e.transpose() - DMat3::IDENTITY).to_cols_array().iter().fold(0.0f64, |m, x| m.max(x.abs()));
     if orthogonality > 1e-3 || (e.determinant() - 1.0).abs() > 1e-3 {
         return Err(Error::invalid(
             path,
@@ -364,7 +360,9 @@ pub fn read_depth_png(path: &Path) -> Result<(u32, u32, Vec<u16>)> {
     let img = open_image(path)?;
     let (w, h) = (img.width(), img.height());
     match img {
-        image::DynamicImage::ImageLuma16(buf) => Ok((w, h, buf.into_raw().into_iter().map(decode_depth_value).collect())),
+        image::DynamicImage::ImageLuma16(buf) => {
+            Ok((w, h, buf.into_raw().into_iter().map(decode_depth_value).collect()))
+        }
         other => Err(Error::invalid(path, format!("depth must be a 16-bit grey PNG, found {:?}", other.color()))),
     }
 }
@@ -374,7 +372,8 @@ pub fn write_depth_png(path: &Path, width: u32, height: u32, depth_mm: &[u16]) -
     let stored: Vec<u16> = depth_mm.iter().map(|&d| encode_depth_value(d)).collect();
     let buf = image::ImageBuffer::<image::Luma<u16>, _>::from_raw(width, height, stored)
         .ok_or_else(|| Error::invalid(path, format!("depth buffer does not hold {width}×{height} values")))?;
-    buf.save_with_format(path, image::ImageFormat::Png).map_err(|e| Error::Image { path: path.to_path_buf(), source: e })
+    buf.save_with_format(path, image::ImageFormat::Png)
+        .map_err(|e| Error::Image { path: path.to_path_buf(), source: e })
 }
 
 fn read_json(path: &Path) -> Result<Value> {
@@ -406,7 +405,8 @@ fn parse_polygon(path: &Path, obj: &Value, what: &str) -> Result<Option<Polygon>
     };
     let polys = polys.as_array().ok_or_else(|| Error::invalid(path, format!("{what}: 'polygon' must be an array")))?;
     let Some(poly) = polys.first() else { return Ok(None) };
-    let field = |name: &str| poly.get(name).ok_or_else(|| Error::invalid(path, format!("{what}: polygon has no '{name}'")));
+    let field =
+        |name: &str| poly.get(name).ok_or_else(|| Error::invalid(path, format!("{what}: polygon has no '{name}'")));
     let xs = number_array(path, field("X")?, &format!("{what}: X"))?;
     let zs = number_array(path, field("Z")?, &format!("{what}: Z"))?;
     if xs.len() != zs.len() {
@@ -499,10 +499,7 @@ fn read_frame(dir: &Path, depth_source: DepthSource) -> Result<Frame> {
     if !dir.is_dir() {
         return Err(Error::missing(dir, "frame directory"));
     }
-    let name = dir
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| dir.display().to_string());
+    let name = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| dir.display().to_string());
     let rgb_path = single_image(dir, "image")?;
     let rgb = open_image(&rgb_path)?.to_rgb8();
     let depth_path = single_image(dir, depth_source.dir_name())?;
@@ -517,10 +514,7 @@ fn read_frame(dir: &Path, depth_source: DepthSource) -> Result<Frame> {
     let extrinsics = read_extrinsics(&extrinsics_file(dir)?)?;
     let scene_path = dir.join("scene.txt");
     let scene = if scene_path.is_file() { Some(read_text(&scene_path)?.trim().to_string()) } else { None };
-    let objects_path = dir.join("annotation3Dfinal").join("index.json");
-    let objects = if objects_path.is_file() { read_objects(&objects_path)? } else { Vec::new() };
-    let layout_path = dir.join("annotation3Dlayout").join("index.json");
-    let layout = if layout_path.is_file() { read_layout(&layout_path)? } else { None };
+    let (objects, layout) = read_annotations(dir)?;
     Ok(Frame { name, rgb, depth_mm, k, extrinsics, scene, objects, layout })
 }
 
@@ -682,7 +676,10 @@ impl Dataset {
             }
             let path = if Path::new(line).is_absolute() { PathBuf::from(line) } else { self.root.join(line) };
             if !is_frame_dir(&path) {
-                return Err(Error::invalid(list, format!("line {}: '{}' is not a frame directory", n + 1, path.display())));
+                return Err(Error::invalid(
+                    list,
+                    format!("line {}: '{}' is not a frame directory", n + 1, path.display()),
+                ));
             }
             frames.push(path);
         }

@@ -5,7 +5,11 @@ mod cli;
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
-#[command(name = "cog-gpu", version, about = "3D object detection in indoor RGB-D images (Clouds of Oriented Gradients, on the GPU)")]
+#[command(
+    name = "cog-gpu",
+    version,
+    about = "3D object detection in indoor RGB-D images (Clouds of Oriented Gradients, on the GPU)"
+)]
 struct Cli {
     /// Force the CPU path even when a GPU adapter is available.
     #[arg(long, global = true)]

@@ -12,14 +12,17 @@
 //! objects side by side (a chair pair, a nightstand by a bed) seldom overlap by a quarter of their union.
 //!
 //! # Cost
-//! Each candidate is compared with the boxes kept so far only, and each comparison first tries cheap
-//! rejections before the exact [`iou_3d`] (a polygon clip): disjoint vertical ranges, disjoint footprint
-//! bounding circles, and the volume-ratio bound `IoU ≤ min(vol) / max(vol)`. With a top-K prefilter
-//! ([`NmsOptions::top_k`], default [`DEFAULT_TOP_K`]) only the K best candidates take part, which bounds the
-//! cost of a sliding window's 10⁵–10⁶ scored hypotheses at O(N + K·log K + K·kept): the lower-scoring rest
-//! could only survive behind at least K higher-scoring boxes, and the detector reports far fewer.
-
-use std::collections::BTreeMap;
+//! Each candidate is compared with the boxes kept so far only, and each comparison first tries a cheap
+//! rejection before the exact [`iou_3d`] (a polygon clip): an upper bound of the IoU from the footprints'
+//! axis-aligned bounding rectangles, the height ranges and the volumes (it also rejects disjoint boxes).
+//! The cost is O(N·kept) bound tests. Measured on 10 000 random boxes in a 5 m room (dev profile, one
+//! core): 15 ms at IoU 0.25 (128 kept), 110 ms at 0.5 (1051 kept), 0.85 s at 0.7 (6346 kept).
+//!
+//! The top-K prefilter ([`NmsOptions::top_k`], default [`DEFAULT_TOP_K`] = 10 000) first keeps only the K
+//! highest-scoring candidates (a linear-time selection), so a sliding window's 10⁵–10⁶ scored hypotheses
+//! cost O(N + K·log K + K·kept). It is an approximation: a box ranked below K that no higher box
+//! suppresses is lost. With K far above the number of detections a frame reports per category, only very
+//! low-scoring boxes are affected, which add little to the AP; set `top_k: None` for exact greedy NMS.
 
 use crate::error::{Error, Result};
 use crate::eval::Detection;
@@ -64,10 +67,11 @@ impl NmsOptions {
     }
 }
 
-/// What the cheap rejection tests need of a box.
+/// What the cheap rejection test needs of a box: its footprint's axis-aligned bounding rectangle, its
+/// height range and its volume.
 struct Bounds {
-    centre: glam::Vec2,
-    radius: f32,
+    min: glam::Vec2,
+    max: glam::Vec2,
     bottom: f32,
     top: f32,
     volume: f32,
@@ -75,28 +79,29 @@ struct Bounds {
 
 impl Bounds {
     fn of(c: &Cuboid) -> Self {
-        Bounds {
-            centre: c.centre.truncate(),
-            radius: 0.5 * c.size.truncate().length(),
-            bottom: c.bottom(),
-            top: c.top(),
-            volume: c.volume(),
-        }
+        let (sin, cos) = c.yaw.sin_cos();
+        let (half_w, half_d) = (0.5 * c.size.x, 0.5 * c.size.y);
+        let half = glam::Vec2::new(cos.abs() * half_w + sin.abs() * half_d, sin.abs() * half_w + cos.abs() * half_d);
+        let centre = c.centre.truncate();
+        Bounds { min: centre - half, max: centre + half, bottom: c.bottom(), top: c.top(), volume: c.volume() }
     }
 
     /// Whether the IoU of the two boxes certainly does not exceed `threshold`, from bounds alone.
+    ///
+    /// The intersection volume is at most the overlap of the footprints' bounding rectangles times the
+    /// overlap of the height ranges, and at most the smaller volume; IoU = I / (va + vb − I) grows with I,
+    /// so that bound on I bounds the IoU. A relative slack of 1e-6 keeps rounding from rejecting a pair
+    /// whose exact IoU is just above the threshold.
     fn cannot_exceed(&self, other: &Bounds, threshold: f32) -> bool {
-        if self.top <= other.bottom || other.top <= self.bottom {
+        let dz = self.top.min(other.top) - self.bottom.max(other.bottom);
+        let overlap = self.max.min(other.max) - self.min.max(other.min);
+        if dz <= 0.0 || overlap.x <= 0.0 || overlap.y <= 0.0 {
             return true;
         }
-        let reach = self.radius + other.radius;
-        if (self.centre - other.centre).length_squared() >= reach * reach {
-            return true;
-        }
-        // The intersection is at most the smaller volume and the union at least the larger one.
-        let (small, large) =
-            if self.volume <= other.volume { (self.volume, other.volume) } else { (other.volume, self.volume) };
-        large > 0.0 && small <= threshold * large
+        let (va, vb) = (self.volume as f64, other.volume as f64);
+        let intersection = (overlap.x as f64 * overlap.y as f64 * dz as f64).min(va.min(vb));
+        let union = va + vb - intersection;
+        union > 0.0 && intersection / union * (1.0 - 1e-6) <= threshold as f64
     }
 }
 
@@ -139,28 +144,37 @@ pub fn suppress(cuboids: &[Cuboid], scores: &[f32], options: &NmsOptions) -> Vec
     kept
 }
 
+/// The candidates of one category, with their positions in the input.
+#[derive(Default)]
+struct CategoryGroup<'a> {
+    category: &'a str,
+    cuboids: Vec<Cuboid>,
+    scores: Vec<f32>,
+    indices: Vec<usize>,
+}
+
 /// [`suppress`] per category: detections of different categories never suppress each other. The result
 /// is sorted by score, highest first (ties: category in order of first appearance, then input order);
 /// `max_detections` applies per category.
 pub fn nms_detections(detections: &[Detection], options: &NmsOptions) -> Vec<Detection> {
-    let mut by_category: BTreeMap<usize, (Vec<Cuboid>, Vec<f32>, Vec<usize>)> = BTreeMap::new();
-    let mut first_seen: Vec<&str> = Vec::new();
+    // One group per category, in order of first appearance.
+    let mut groups: Vec<CategoryGroup> = Vec::new();
     for (i, d) in detections.iter().enumerate() {
-        let slot = match first_seen.iter().position(|c| *c == d.category) {
+        let slot = match groups.iter().position(|g| g.category == d.category) {
             Some(p) => p,
             None => {
-                first_seen.push(&d.category);
-                first_seen.len() - 1
+                groups.push(CategoryGroup { category: &d.category, ..Default::default() });
+                groups.len() - 1
             }
         };
-        let entry = by_category.entry(slot).or_default();
-        entry.0.push(d.cuboid());
-        entry.1.push(d.score);
-        entry.2.push(i);
+        let group = &mut groups[slot];
+        group.cuboids.push(d.cuboid());
+        group.scores.push(d.score);
+        group.indices.push(i);
     }
     let mut kept: Vec<usize> = Vec::new();
-    for (cuboids, scores, indices) in by_category.values() {
-        kept.extend(suppress(cuboids, scores, options).into_iter().map(|k| indices[k]));
+    for group in &groups {
+        kept.extend(suppress(&group.cuboids, &group.scores, options).into_iter().map(|k| group.indices[k]));
     }
     // `kept` is grouped by category in order of first appearance; a stable sort by score keeps that order
     // among ties.

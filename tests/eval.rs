@@ -75,7 +75,11 @@ fn detections_file_round_trip_and_errors() {
     let path = dir.path().join("frame.json");
     let file = FrameDetections {
         frame: "synth-000001".into(),
-        detections: vec![Detection::new("bed", &Cuboid::new(Vec3::new(1.0, 2.0, -0.8), Vec3::new(1.6, 2.0, 0.5), 0.25), 1.5)],
+        detections: vec![Detection::new(
+            "bed",
+            &Cuboid::new(Vec3::new(1.0, 2.0, -0.8), Vec3::new(1.6, 2.0, 0.5), 0.25),
+            1.5,
+        )],
     };
     file.write(&path).unwrap();
     assert_eq!(FrameDetections::read(&path).unwrap(), file);

@@ -202,3 +202,14 @@ fn bad_detection_files_are_errors_naming_the_file() {
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("nowhere"));
 }
+
+#[test]
+fn annotations_read_without_images_match_the_full_reader() {
+    let dir = Path::new("../shared/data/sunrgbd/kv1-b3dodata-img_0063");
+    let frame = Frame::read(dir, Default::default()).unwrap();
+    let (objects, layout) = cog_gpu::frame::read_annotations(dir).unwrap();
+    assert!(!objects.is_empty());
+    assert_eq!(objects, frame.objects);
+    assert_eq!(layout, frame.layout);
+    assert!(cog_gpu::frame::read_annotations(&dir.join("missing")).is_err());
+}

@@ -342,3 +342,26 @@ fn polynomial_angle_matches_atan2_mod_pi() {
     }
     assert_eq!(cpu::unsigned_angle(0.0, 0.0), 0.0);
 }
+
+#[test]
+fn weights_files_round_trip_and_reject_other_layouts() {
+    use cog_gpu::features::WeightsFile;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("w.json");
+    let layout = Layout::default();
+    let weights: Vec<f32> = (0..layout.dim()).map(|n| n as f32 * 1e-4).collect();
+    let file = WeightsFile::new(layout, "bed", weights, 0.5).unwrap();
+    file.write(&path).unwrap();
+    assert_eq!(WeightsFile::read(&path).unwrap(), file);
+    // A file written for another feature order (id mismatch) is rejected, naming the file.
+    let text = std::fs::read_to_string(&path).unwrap().replace("cog-v1 grid=5x5x5", "cog-v0 grid=5x5x5");
+    std::fs::write(&path, text).unwrap();
+    let err = WeightsFile::read(&path).unwrap_err().to_string();
+    assert!(err.contains("w.json") && err.contains("layout_id"), "{err}");
+    // Wrong length; non-zero weights in a switched-off group.
+    assert!(WeightsFile::new(layout, "bed", vec![0.0; 10], 0.0).is_err());
+    let geom = Layout::new([5, 5, 5], true, Groups::GEOM).unwrap();
+    let mut w = vec![0.0; geom.dim()];
+    w[COG] = 1.0;
+    assert!(WeightsFile::new(geom, "bed", w, 0.0).unwrap_err().to_string().contains("cog bin 0"));
+}

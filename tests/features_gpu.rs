@@ -30,16 +30,20 @@ fn context() -> Option<GpuContext> {
     }
 }
 
-/// The real frame with a chair-sized window and `count` kept hypotheses spread over all yaws.
-fn real_scene(count: usize) -> (FeatureScene, Vec<Hypothesis>) {
+/// The real frame with a `category`-sized window and `count` kept hypotheses spread over all yaws.
+fn real_scene_of(category: &str, count: usize) -> (FeatureScene, Vec<Hypothesis>) {
     let frame = Frame::read(FRAME, DepthSource::Raw).unwrap();
     let pre = Preprocessed::from_frame(&frame).unwrap();
     let scene = FeatureScene::new(pre, &default_yaws(), 0.1);
-    let sizes = SizeQuantiles::from_stats_file(Path::new(STATS), "chair").unwrap().sizes();
+    let sizes = SizeQuantiles::from_stats_file(Path::new(STATS), category).unwrap().sizes();
     let set = sliding_window(&scene, &WindowOptions { sizes, min_points: 50 });
     let step = (set.hypotheses.len() / count).max(1);
     let picked: Vec<Hypothesis> = set.hypotheses.iter().step_by(step).take(count).copied().collect();
     (scene, picked)
+}
+
+fn real_scene(count: usize) -> (FeatureScene, Vec<Hypothesis>) {
+    real_scene_of("chair", count)
 }
 
 /// Compares GPU and CPU feature rows: densities and normal bins are (count / area), COG is normalised.
@@ -99,7 +103,8 @@ fn gpu_matches_cpu_on_other_grids_and_groups() {
 #[test]
 fn fused_scores_equal_dot_products_of_cpu_features() {
     let Some(ctx) = context() else { return };
-    let (scene, hyps) = real_scene(16);
+    // Bed-sized boxes: ~10⁵ points each, so the exact count comparison below covers millions of points.
+    let (scene, hyps) = real_scene_of("bed", 12);
     let layout = Layout::default();
     let (cpu_rows, _) = cpu::features(&scene, &layout, &hyps);
     // Ten weight vectors: two passes of the kernel (at most 8 per pass).
@@ -121,4 +126,29 @@ fn fused_scores_equal_dot_products_of_cpu_features() {
             );
         }
     }
+}
+
+#[test]
+fn gpu_counts_match_where_lavapipe_capped_loops() {
+    // Bed boxes whose SIMD groups of 8 columns scan > 65535 points in total: lavapipe (gallivm) caps the
+    // loop iterations of one invocation at 65535 and silently left the point loop early there, losing
+    // thousands of points (the kernel now takes 16 points per loop iteration). The first box was found by
+    // comparing the paths on 500 bed hypotheses; the others are the fullest boxes.
+    let Some(ctx) = context() else { return };
+    let frame = Frame::read(FRAME, DepthSource::Raw).unwrap();
+    let scene = FeatureScene::new(Preprocessed::from_frame(&frame).unwrap(), &default_yaws(), 0.1);
+    let sizes = SizeQuantiles::from_stats_file(Path::new(STATS), "bed").unwrap().sizes();
+    let mut all = sliding_window(&scene, &WindowOptions { sizes, min_points: 50 }).hypotheses;
+    let capped = *all
+        .iter()
+        .find(|h| h.yaw_index == 0 && h.size_index == 30 && (h.centre - glam::Vec2::new(0.85, 1.75)).length() < 1e-3)
+        .expect("the hypothesis that exposed the cap");
+    all.sort_by_key(|h| std::cmp::Reverse(h.points_inside));
+    let hyps = vec![capped, all[0], all[1]];
+    let layout = Layout::default();
+    let (cpu_rows, cpu_inside) = cpu::features(&scene, &layout, &hyps);
+    let (gpu_rows, gpu_inside) = features_gpu(&ctx, &scene, &layout, &hyps).unwrap();
+    assert!(cpu_inside.iter().all(|&n| n > 50_000), "{cpu_inside:?}");
+    assert_eq!(gpu_inside, cpu_inside);
+    assert_rows_match(&layout, &gpu_rows, &cpu_rows, "bed boxes");
 }

@@ -4,7 +4,7 @@ use std::fs;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use cog_gpu::frame::{DepthSource, Dataset, Frame, Object, RoomLayout};
+use cog_gpu::frame::{Dataset, DepthSource, Frame, Object, RoomLayout};
 use cog_gpu::geometry::Cuboid;
 use glam::{DMat3, Vec2, Vec3};
 
@@ -14,7 +14,8 @@ const KV1: &str = "../shared/data/sunrgbd/kv1-b3dodata-img_0063";
 fn handmade_frame() -> Frame {
     let (w, h) = (9u32, 7u32);
     let rgb = image::RgbImage::from_fn(w, h, |x, y| image::Rgb([(x * 20) as u8, (y * 30) as u8, 77]));
-    let depth_mm: Vec<u16> = (0..w * h).map(|i| if i % 5 == 0 { 0 } else { (300 + i * 137) as u16 }).chain([]).collect();
+    let depth_mm: Vec<u16> =
+        (0..w * h).map(|i| if i % 5 == 0 { 0 } else { (300 + i * 137) as u16 }).chain([]).collect();
     let mut depth_mm = depth_mm;
     depth_mm[3] = 9_500; // beyond the 8 m clamp: stored as is, clamped when read as metres
     depth_mm[4] = 65_535;
@@ -26,13 +27,21 @@ fn handmade_frame() -> Frame {
         extrinsics: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
         scene: Some("office".into()),
         objects: vec![
-            Object { category: "chair".into(), label: None, cuboid: Cuboid::new(Vec3::new(0.4, 2.1, -0.9), Vec3::new(0.5, 0.6, 0.9), 0.3) },
+            Object {
+                category: "chair".into(),
+                label: None,
+                cuboid: Cuboid::new(Vec3::new(0.4, 2.1, -0.9), Vec3::new(0.5, 0.6, 0.9), 0.3),
+            },
             Object {
                 category: "nightstand".into(),
                 label: Some("left one".into()),
                 cuboid: Cuboid::new(Vec3::new(-1.25, 3.5, -1.1), Vec3::new(0.45, 0.4, 0.55), -2.9),
             },
-            Object { category: "bed".into(), label: None, cuboid: Cuboid::new(Vec3::new(1.0, 3.0, -1.0), Vec3::new(1.6, 2.0, 0.6), 3.0) },
+            Object {
+                category: "bed".into(),
+                label: None,
+                cuboid: Cuboid::new(Vec3::new(1.0, 3.0, -1.0), Vec3::new(1.6, 2.0, 0.6), 3.0),
+            },
         ],
         layout: Some(RoomLayout {
             corners: vec![Vec2::new(-2.0, 0.5), Vec2::new(2.5, 0.5), Vec2::new(2.5, 5.0), Vec2::new(-2.0, 5.0)],

@@ -384,3 +384,71 @@ fn bad_input_is_an_error_not_a_panic() {
     std::fs::write(&path, &bytes[..bytes.len() - 5]).unwrap();
     assert!(matches!(CuttingPlane::resume(options(1.0), &path), Err(Error::Invalid { .. })));
 }
+
+/// Scale probe, not part of CI: `cargo test --test learn -- --ignored --nocapture scale_probe`.
+/// 40 classes of 300-D points (dim 12 000, like the paper's feature vector), 60 examples.
+#[test]
+#[ignore]
+fn scale_probe() {
+    struct Wide {
+        xs: Vec<Vec<f32>>,
+        labels: Vec<usize>,
+        classes: usize,
+        width: usize,
+    }
+    impl Wide {
+        fn phi(&self, example: usize, label: usize) -> Vec<f32> {
+            let mut features = vec![0.0; self.width * self.classes];
+            features[self.width * label..self.width * (label + 1)].copy_from_slice(&self.xs[example]);
+            features
+        }
+    }
+    impl SeparationOracle for Wide {
+        fn num_examples(&self) -> usize {
+            self.xs.len()
+        }
+        fn dim(&self) -> usize {
+            self.width * self.classes
+        }
+        fn ground_truth_features(&self, example: usize) -> Result<Vec<f32>> {
+            Ok(self.phi(example, self.labels[example]))
+        }
+        fn most_violated(&self, example: usize, w: &[f64]) -> Result<Constraint> {
+            let score = |label: usize| {
+                let loss = if label == self.labels[example] { 0.0 } else { 1.0 };
+                let block = &w[self.width * label..self.width * (label + 1)];
+                loss + block.iter().zip(&self.xs[example]).map(|(w, x)| w * f64::from(*x)).sum::<f64>()
+            };
+            let best = (0..self.classes).max_by(|a, b| score(*a).total_cmp(&score(*b))).unwrap();
+            let loss = if best == self.labels[example] { 0.0 } else { 1.0 };
+            Ok(Constraint { loss, features: self.phi(example, best) })
+        }
+    }
+    let (classes, width, count) = (40, 300, 60);
+    let mut state = 7u64;
+    let mut uniform = move || {
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (state >> 40) as f32 / (1u64 << 24) as f32 - 0.5
+    };
+    let labels: Vec<usize> = (0..count).map(|i| i % classes).collect();
+    let xs = labels
+        .iter()
+        .map(|l| (0..width).map(|j| uniform() + if j % classes == *l { 0.3 } else { 0.0 }).collect())
+        .collect();
+    let problem = Wide { xs, labels, classes, width };
+    let dir = tempfile::tempdir().unwrap();
+    let start = std::time::Instant::now();
+    // COG_SSVM_PRUNE=k sets `prune_after: Some(k)`.
+    let prune_after = std::env::var("COG_SSVM_PRUNE").ok().and_then(|v| v.parse().ok());
+    let options = SsvmOptions { epsilon: 1e-3, checkpoint: Some(dir.path().join("c")), prune_after, ..options(10.0) };
+    let solution = cog_gpu::learn::train(&problem, options).unwrap();
+    eprintln!(
+        "dim {} n {count}: {} iterations, {} constraints, primal {:.6} dual {:.6}, {:.2} s",
+        problem.dim(),
+        solution.iterations,
+        solution.num_constraints,
+        solution.primal,
+        solution.dual,
+        start.elapsed().as_secs_f64()
+    );
+}

@@ -113,7 +113,7 @@ fn matches_brute_force_on_random_boxes() {
     for i in 0..400 {
         let centre = Vec3::new(4.0 * next(), 4.0 * next(), 0.3 + 0.6 * next());
         let size = Vec3::new(0.3 + 1.5 * next(), 0.3 + 1.5 * next(), 0.3 + 1.0 * next());
-        boxes.push(Cuboid::new(centre, size, 6.28 * next()));
+        boxes.push(Cuboid::new(centre, size, std::f32::consts::TAU * next()));
         // Distinct scores so that the reference's unstable tie handling does not matter.
         scores.push(next() + i as f32 * 1e-3);
     }

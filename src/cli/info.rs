@@ -122,7 +122,11 @@ fn print_text(info: &FrameInfo) {
     }
     let pixels = (info.width * info.height) as f32;
     println!("valid depth  {} pixels ({:.1}%)", info.valid_depth, 100.0 * info.valid_depth as f32 / pixels);
-    println!("bounds       {} … {}  (upright: x right, y forward, z up; m)", fmt_opt_vec(info.bounds_min), fmt_opt_vec(info.bounds_max));
+    println!(
+        "bounds       {} … {}  (upright: x right, y forward, z up; m)",
+        fmt_opt_vec(info.bounds_min),
+        fmt_opt_vec(info.bounds_max)
+    );
     println!("floor        {}  (0.001 quantile of height)", fmt_opt(info.floor));
     println!("ceiling      {}  (0.999 quantile of height)", fmt_opt(info.ceiling));
     if info.objects.is_empty() {
@@ -133,7 +137,15 @@ fn print_text(info: &FrameInfo) {
         for o in &info.objects {
             println!(
                 "  {:<16} ({:6.3}, {:6.3}, {:6.3}) {:6.3}×{:6.3}×{:6.3} {:8.1} {:8}",
-                o.category, o.centre[0], o.centre[1], o.centre[2], o.size[0], o.size[1], o.size[2], o.yaw_deg, o.points_inside
+                o.category,
+                o.centre[0],
+                o.centre[1],
+                o.centre[2],
+                o.size[0],
+                o.size[1],
+                o.size[2],
+                o.yaw_deg,
+                o.points_inside
             );
         }
     }
@@ -151,7 +163,8 @@ fn print_text(info: &FrameInfo) {
 
 pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     let source = if args.filled_depth { DepthSource::Filled } else { DepthSource::Raw };
-    let frame = Frame::read(&args.frame, source).with_context(|| format!("cannot read frame {}", args.frame.display()))?;
+    let frame =
+        Frame::read(&args.frame, source).with_context(|| format!("cannot read frame {}", args.frame.display()))?;
     let cloud = frame.point_cloud();
     let info = describe(&frame, &cloud);
     if args.json {

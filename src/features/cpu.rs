@@ -3,10 +3,10 @@
 //!
 //! # Stages (per hypothesis; the shader runs one invocation per voxel column (i, j))
 //! 1. [`HypothesisRecord::new`] (host side in both paths): the expanded box in the yaw's rotated frame —
-//!    its low corner `lo`, voxel size `cell` and `inv_cell = grid/extent` — and the view cosine.
+//!    its low corner `lo`, voxel size `cell`, both also in fixed point — and the view cosine.
 //! 2. [`cog_frame`] per voxel: the projected COG basis at the voxel centre.
 //! 3. [`accumulate_column`]: for the bucket rows and cells that cover the column, every point whose voxel
-//!    index `⌊(p − lo)·inv_cell⌋` (per axis) is (i, j, ·) adds 1 to its voxel's count, 1 to its normal
+//!    index `⌊(p − lo)·n / extent⌋` (per axis, integers in fixed point) is (i, j, ·) adds 1 to its voxel's count, 1 to its normal
 //!    code's bin and its gradient magnitude, split between two COG bins, as fixed-point integers.
 //! 4. [`finalise_voxel`]: density, normal bins and the normalised COG of each voxel of the column.
 //! 5. View features (host) and, for scoring, the dot products with the weight vectors.
@@ -47,7 +47,7 @@ use rayon::prelude::*;
 use super::hypotheses::Hypothesis;
 use super::layout::{view_features, Layout, COG, COG_BINS, COG_EPSILON, DENSITY, NORMALS, PER_VOXEL};
 use super::preprocess::NORMAL_BINS;
-use super::scene::{FeatureScene, YawGrid};
+use super::scene::{to_fixed, FeatureScene, YawGrid};
 use crate::geometry::{projected_hull_area, voxel_corners, Cuboid, MIN_PROJECT_DEPTH};
 
 /// Fixed-point scale of the COG accumulators (2²⁰ units per unit of gradient magnitude).
@@ -68,9 +68,12 @@ pub struct HypothesisRecord {
     /// Voxel size along (s, t, z).
     pub cell: [f32; 3],
     pub _pad0: f32,
-    /// `grid / extent` per axis: a point's voxel index is `⌊(p − lo)·inv_cell⌋`.
-    pub inv_cell: [f32; 3],
-    pub _pad1: f32,
+    /// `lo` and the extent of the expanded box in fixed point ([`to_fixed`]): a point `p` (fixed point) is
+    /// in voxel `⌊(p − lo)·n / extent⌋` (integer division) along each axis when `0 ≤ p − lo < extent`.
+    pub lo_fixed: [i32; 3],
+    pub _pad1: i32,
+    pub extent_fixed: [i32; 3],
+    pub _pad2: i32,
 }
 
 impl HypothesisRecord {
@@ -81,8 +84,16 @@ impl HypothesisRecord {
         let centre_z = hyp.bottom + 0.5 * hyp.size.z;
         let lo = [hyp.centre.x - 0.5 * extent.x, hyp.centre.y - 0.5 * extent.y, centre_z - 0.5 * extent.z];
         let cell = [0, 1, 2].map(|a| extent[a] / grid[a] as f32);
-        let inv_cell = [0, 1, 2].map(|a| grid[a] as f32 / extent[a]);
-        HypothesisRecord { lo, view_x: view_cosine(&hyp.cuboid(scene)), cell, _pad0: 0.0, inv_cell, _pad1: 0.0 }
+        HypothesisRecord {
+            lo,
+            view_x: view_cosine(&hyp.cuboid(scene)),
+            cell,
+            _pad0: 0.0,
+            lo_fixed: lo.map(to_fixed),
+            _pad1: 0,
+            extent_fixed: [0, 1, 2].map(|a| to_fixed(extent[a]).max(1)),
+            _pad2: 0,
+        }
     }
 }
 
@@ -202,10 +213,11 @@ impl Default for ColumnAccumulator {
 
 /// Voxel index of coordinate `p` along one axis, if inside `[0, n)`.
 #[inline]
-fn axis_index(p: f32, lo: f32, inv_cell: f32, n: u32) -> Option<u32> {
-    let f = (p - lo) * inv_cell;
-    if f >= 0.0 && f < n as f32 {
-        Some((f as u32).min(n - 1))
+fn axis_index(p: i32, lo: i32, extent: i32, n: u32) -> Option<u32> {
+    let d = p.wrapping_sub(lo);
+    if d >= 0 && d < extent {
+        // d < extent ≤ 2³¹/9 for any box under 3 km, so d·n cannot overflow.
+        Some((d * n as i32 / extent) as u32)
     } else {
         None
     }
@@ -233,9 +245,9 @@ pub fn accumulate_column(
     let mut accepted = 0;
     for row in t_cells.0..=t_cells.1 {
         for r in &grid.records[grid.row_span(row, s_cells)] {
-            let Some(k) = axis_index(r.z, hyp.lo[2], hyp.inv_cell[2], g[2]) else { continue };
-            if axis_index(r.s, hyp.lo[0], hyp.inv_cell[0], g[0]) != Some(i)
-                || axis_index(r.t, hyp.lo[1], hyp.inv_cell[1], g[1]) != Some(j)
+            let (lo, extent) = (hyp.lo_fixed, hyp.extent_fixed);
+            let Some(k) = axis_index(r.z, lo[2], extent[2], g[2]) else { continue };
+            if axis_index(r.s, lo[0], extent[0], g[0]) != Some(i) || axis_index(r.t, lo[1], extent[1], g[1]) != Some(j)
             {
                 continue;
             }

@@ -182,7 +182,7 @@ struct CountTable {
 
 impl CountTable {
     fn build(grid: &YawGrid, floor: f32) -> CountTable {
-        let max_z = grid.records.iter().fold(floor, |m, r| m.max(r.z));
+        let max_z = grid.records.iter().fold(floor, |m, r| m.max(r.z_metres()));
         let nz = (((max_z - floor) * grid.inv_step).floor() as usize + 1).max(1);
         let dims = [grid.cells[0] as usize, grid.cells[1] as usize, nz];
         let (sx, sy) = (dims[0] + 1, dims[1] + 1);
@@ -191,7 +191,7 @@ impl CountTable {
         for row in 0..grid.cells[1] {
             for col in 0..grid.cells[0] {
                 for r in &grid.records[grid.row_span(row, (col, col))] {
-                    let z = (((r.z - floor) * grid.inv_step).floor().max(0.0) as usize).min(nz - 1);
+                    let z = (((r.z_metres() - floor) * grid.inv_step).floor().max(0.0) as usize).min(nz - 1);
                     sums[at(col as usize + 1, row as usize + 1, z + 1)] += 1;
                 }
             }

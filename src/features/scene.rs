@@ -18,14 +18,25 @@ use rayon::prelude::*;
 
 use super::preprocess::{gradient_magnitude, normal_bin, Preprocessed};
 
+/// Fixed-point units per metre of [`PointRecord`] coordinates and hypothesis boxes (2¹⁶: 15 µm steps,
+/// ±32 km range).
+pub const FIXED_PER_METRE: f32 = 65536.0;
+
+/// Metres → fixed point (rounded to nearest).
+pub fn to_fixed(metres: f32) -> i32 {
+    (metres * FIXED_PER_METRE).round() as i32
+}
+
 /// One point as the kernels read it (32 bytes; mirrors `PointRecord` in `shaders/features.wgsl`).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct PointRecord {
-    /// Rotated-frame coordinates (s, t) and height z.
-    pub s: f32,
-    pub t: f32,
-    pub z: f32,
+    /// Rotated-frame coordinates (s, t) and height z in fixed point ([`FIXED_PER_METRE`] units): voxel
+    /// membership is decided with integer arithmetic, so no compiler's float rewriting can make the CPU
+    /// and the GPU put a point on different sides of a voxel face.
+    pub s: i32,
+    pub t: i32,
+    pub z: i32,
     /// Normal code in this yaw's frame ([`normal_bin`]).
     pub normal_bin: u32,
     /// Image gradient (dx, dy) at the point's pixel and its magnitude.
@@ -55,6 +66,13 @@ pub struct YawGrid {
     /// Camera coordinates (x right, y down, z forward) of a rotated-frame point `q` are
     /// `camera_from_rotated · q` (the camera is at the origin).
     pub camera_from_rotated: Mat3,
+}
+
+impl PointRecord {
+    /// Height in metres.
+    pub fn z_metres(&self) -> f32 {
+        self.z as f32 / FIXED_PER_METRE
+    }
 }
 
 impl YawGrid {
@@ -98,9 +116,9 @@ impl YawGrid {
             let local = Vec3::new(n.x * cos + n.y * sin, -n.x * sin + n.y * cos, n.z);
             let g = pre.gradients[index];
             records[next[c] as usize] = PointRecord {
-                s: rotated[index][0],
-                t: rotated[index][1],
-                z: pre.points[index].z,
+                s: to_fixed(rotated[index][0]),
+                t: to_fixed(rotated[index][1]),
+                z: to_fixed(pre.points[index].z),
                 normal_bin: normal_bin(local),
                 gx: g.x,
                 gy: g.y,

@@ -49,7 +49,7 @@ struct Params {
     m2: [f32; 4],
 }
 const _: () = assert!(std::mem::size_of::<Params>() == 128);
-const _: () = assert!(std::mem::size_of::<HypothesisRecord>() == 48);
+const _: () = assert!(std::mem::size_of::<HypothesisRecord>() == 64);
 const _: () = assert!(std::mem::size_of::<crate::features::PointRecord>() == 32);
 
 fn group_bits(layout: &Layout) -> u32 {
