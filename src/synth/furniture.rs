@@ -1182,6 +1182,7 @@ fn pillow(rng: &mut Rng, variant: &'static str) -> Model {
 }
 
 /// A screen in a bezel facing −t with its front at `t_screen`, spanning [u0, u1] × [−w/2, w/2].
+#[allow(clippy::too_many_arguments)] // the panel's extents and state; a struct would only rename them
 fn screen_panel(b: &mut Builder, rng: &mut Rng, w: f32, u0: f32, u1: f32, t_screen: f32, panel_th: f32, on: bool) {
     let bezel_mat = b.mat(if rng.chance(0.7) {
         let mut m = mat::plastic(rng);

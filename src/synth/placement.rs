@@ -282,7 +282,7 @@ impl<'a> Planner<'a> {
     ) -> Option<usize> {
         let (w, d) = (model.size.x, model.size.y);
         for _ in 0..tries {
-            let Some(wi) = wall.or_else(|| self.random_wall(w + 0.1)) else { return None };
+            let wi = wall.or_else(|| self.random_wall(w + 0.1))?;
             let wall_ = self.walls[wi];
             if wall_.length < w + 0.04 {
                 continue;
@@ -311,7 +311,7 @@ impl<'a> Planner<'a> {
     /// Places a model into a corner-ish spot against a wall: at one end of the wall.
     fn in_corner(&mut self, entry: (ItemKind, Model), tries: usize) -> Option<usize> {
         for _ in 0..tries {
-            let Some(wi) = self.random_wall(entry.1.size.x + 0.1) else { return None };
+            let wi = self.random_wall(entry.1.size.x + 0.1)?;
             let len = self.walls[wi].length;
             let half = 0.5 * entry.1.size.x + self.rng.range(0.03, 0.2);
             let s = if self.rng.chance(0.5) { half } else { len - half };
@@ -468,7 +468,7 @@ impl<'a> Planner<'a> {
         tries: usize,
     ) -> Option<usize> {
         for _ in 0..tries {
-            let Some(wi) = wall.or_else(|| self.random_wall(model.size.x + 0.2)) else { return None };
+            let wi = wall.or_else(|| self.random_wall(model.size.x + 0.2))?;
             let w = self.walls[wi];
             if w.length < model.size.x + 0.1 {
                 continue;
@@ -503,7 +503,7 @@ impl<'a> Planner<'a> {
         let (kind, model) = self.object("door", None);
         let (ow, oh) = model.opening?;
         for _ in 0..20 {
-            let Some(wi) = wall.or_else(|| self.random_wall(model.size.x + 0.4)) else { return None };
+            let wi = wall.or_else(|| self.random_wall(model.size.x + 0.4))?;
             let w = self.walls[wi];
             if w.length < model.size.x + 0.3 {
                 continue;
