@@ -4,35 +4,8 @@
 use glam::{Vec2, Vec3};
 use image::{Rgb, RgbImage};
 
-use crate::category::category_index;
 use crate::frame::Frame;
 use crate::geometry::{Camera, MIN_PROJECT_DEPTH};
-
-/// A distinct colour per category index.
-fn category_colour(index: Option<usize>) -> [u8; 3] {
-    const PALETTE: [[u8; 3]; 19] = [
-        [230, 25, 75],
-        [60, 180, 75],
-        [255, 225, 25],
-        [0, 130, 200],
-        [245, 130, 48],
-        [145, 30, 180],
-        [70, 240, 240],
-        [240, 50, 230],
-        [210, 245, 60],
-        [250, 190, 212],
-        [0, 128, 128],
-        [220, 190, 255],
-        [170, 110, 40],
-        [255, 250, 200],
-        [128, 0, 0],
-        [170, 255, 195],
-        [128, 128, 0],
-        [255, 215, 180],
-        [0, 0, 128],
-    ];
-    index.map(|i| PALETTE[i % PALETTE.len()]).unwrap_or([255, 255, 255])
-}
 
 /// A turbo-like colour map for t in [0, 1] (blue near, red far).
 fn colour_map(t: f32) -> [u8; 3] {
@@ -86,7 +59,7 @@ pub fn preview(frame: &Frame) -> RgbImage {
     }
     let cam = Camera::new(frame.intrinsics(), frame.rtilt());
     for obj in &frame.objects {
-        let colour = category_colour(category_index(&obj.category));
+        let colour = crate::draw::category_colour(&obj.category);
         let c = obj.cuboid.corners();
         const EDGES: [(usize, usize); 12] =
             [(0, 1), (1, 2), (2, 3), (3, 0), (4, 5), (5, 6), (6, 7), (7, 4), (0, 4), (1, 5), (2, 6), (3, 7)];
