@@ -98,17 +98,7 @@ impl RoomLayout {
     /// Whether the ground-plane point lies inside the room polygon (even-odd rule; the polygon may be
     /// non-convex, as real annotations are).
     pub fn contains_xy(&self, p: Vec2) -> bool {
-        let n = self.corners.len();
-        let mut inside = false;
-        let mut j = n.wrapping_sub(1);
-        for i in 0..n {
-            let (a, b) = (self.corners[i], self.corners[j]);
-            if (a.y > p.y) != (b.y > p.y) && p.x < (b.x - a.x) * (p.y - a.y) / (b.y - a.y) + a.x {
-                inside = !inside;
-            }
-            j = i;
-        }
-        inside
+        crate::geometry::polygon_contains(&self.corners, p)
     }
 
     /// Whether the point is inside the polygon and between floor and ceiling (inclusive).

@@ -589,3 +589,18 @@ pub fn wall_distance(cuboid: &Cuboid, room_corners: &[Vec2]) -> Option<f32> {
 pub fn wall_angle(cuboid: &Cuboid, room_corners: &[Vec2]) -> Option<f32> {
     nearest_wall(cuboid, room_corners).map(|w| w.angle)
 }
+
+/// Whether a ground-plane point lies inside a simple polygon (even-odd rule, so the polygon may be
+/// non-convex and run either way round, as real room annotations do). An empty polygon contains nothing.
+pub fn polygon_contains(polygon: &[Vec2], p: Vec2) -> bool {
+    let mut inside = false;
+    let mut j = polygon.len().wrapping_sub(1);
+    for i in 0..polygon.len() {
+        let (a, b) = (polygon[i], polygon[j]);
+        if (a.y > p.y) != (b.y > p.y) && p.x < (b.x - a.x) * (p.y - a.y) / (b.y - a.y) + a.x {
+            inside = !inside;
+        }
+        j = i;
+    }
+    inside
+}

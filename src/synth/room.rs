@@ -278,17 +278,7 @@ impl Room {
 
     /// Whether a floor point is inside the polygon (even-odd rule).
     pub fn contains(&self, p: Vec2) -> bool {
-        let n = self.polygon.len();
-        let mut inside = false;
-        let mut j = n - 1;
-        for i in 0..n {
-            let (a, b) = (self.polygon[i], self.polygon[j]);
-            if (a.y > p.y) != (b.y > p.y) && p.x < (b.x - a.x) * (p.y - a.y) / (b.y - a.y) + a.x {
-                inside = !inside;
-            }
-            j = i;
-        }
-        inside
+        crate::geometry::polygon_contains(&self.polygon, p)
     }
 
     /// Distance from a floor point to the nearest wall segment.
