@@ -13,9 +13,10 @@ use anyhow::bail;
 use serde_json::json;
 
 use super::GlobalOptions;
+use cog_gpu::features::fast::{FastEngine, FastOptions};
 use cog_gpu::features::hypotheses::{DEFAULT_MIN_POINTS, DEFAULT_STEP};
 use cog_gpu::features::window::{category_sizes, DEFAULT_SIZE_STATS};
-use cog_gpu::features::{Backend, Layout, PreparedWindow};
+use cog_gpu::features::{cpu, Backend, Hypothesis, Layout, PreparedWindow};
 use cog_gpu::frame::{DepthSource, Frame};
 
 /// The real frame benchmarked when no `--frame` is given (until the synthetic standard frame exists).
@@ -44,9 +45,25 @@ pub struct Args {
     pub step: f32,
     #[arg(long, default_value_t = DEFAULT_MIN_POINTS)]
     pub min_points: u32,
+    /// Which feature path to time: `exact` (the CPU and/or GPU path chosen by --cpu/--gpu/--both),
+    /// `fast` (the shared-work approximation, CPU), or `all` (both, plus the cosine similarity of the
+    /// two paths' feature vectors on up to 300 of the kept hypotheses).
+    #[arg(long, value_enum, default_value_t = PathChoice::All)]
+    pub features: PathChoice,
+    /// Lattice cells per centre step of the fast path.
+    #[arg(long, default_value_t = cog_gpu::features::fast::DEFAULT_SUBDIVISIONS)]
+    pub subdivisions: u32,
     /// Print one JSON object.
     #[arg(long)]
     pub json: bool,
+}
+
+/// Feature paths `bench` can time.
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum PathChoice {
+    Exact,
+    Fast,
+    All,
 }
 
 /// Deterministic weights in [−1, 1) (a 64-bit LCG; no dependency on a random crate).
@@ -82,8 +99,11 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         }
         _ => kept.clone(),
     };
-    let gpu = if want_gpu { cog_gpu::gpu::acquire(false) } else { None };
-    if args.gpu && gpu.is_none() {
+    let run_exact = args.features != PathChoice::Fast;
+    let run_fast = args.features != PathChoice::Exact;
+    let fast_options = FastOptions { subdivisions: args.subdivisions.max(1) };
+    let gpu = if want_gpu && run_exact { cog_gpu::gpu::acquire(false) } else { None };
+    if args.gpu && run_exact && gpu.is_none() {
         bail!("--gpu: no GPU adapter (see the warning above)");
     }
     let mut backends = Vec::new();
@@ -93,7 +113,34 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     if want_cpu {
         backends.push(Backend::Cpu);
     }
+    if !run_exact {
+        backends.clear();
+    }
     let mut paths = serde_json::Map::new();
+    if run_fast {
+        let start = Instant::now();
+        let engine = FastEngine::new(&window.scene, &layout, fast_options);
+        let lattice_s = start.elapsed().as_secs_f64();
+        let scores = engine.scores(&scored, &weights);
+        let score_s = start.elapsed().as_secs_f64();
+        std::hint::black_box(scores);
+        paths.insert(
+            "fast".into(),
+            json!({
+                "adapter": format!("CPU, rayon, {} threads (shared-work approximation, subdivisions {})",
+                    rayon::current_num_threads(), fast_options.subdivisions),
+                "hypotheses_generated": window.set.generated,
+                "hypotheses_kept": kept.len(),
+                "hypotheses_scored": scored.len(),
+                "preprocess_s": window.preprocess_s,
+                "lattice_s": lattice_s,
+                "score_s": score_s,
+                "hypotheses_per_s": scored.len() as f64 / score_s,
+            }),
+        );
+    }
+    let similarity =
+        if run_fast && run_exact { Some(cosine_report(&window, &layout, &scored, fast_options)) } else { None };
     for backend in backends {
         let start = Instant::now();
         let (_, updates) = backend.scores(&window.scene, &layout, &scored, &weights)?;
@@ -124,6 +171,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         "category": args.category,
         "layout": layout.id(),
         "paths": paths,
+        "fast_vs_exact_cosine": similarity,
     });
     if args.json {
         println!("{}", serde_json::to_string(&report)?);
@@ -145,6 +193,14 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         scored.len(),
         window.preprocess_s
     );
+    if let Some(sim) = &similarity {
+        println!(
+            "fast vs exact features on {} hypotheses: cosine similarity mean {:.4}, min {:.4}",
+            sim["hypotheses"],
+            sim["mean"].as_f64().unwrap_or(f64::NAN),
+            sim["min"].as_f64().unwrap_or(f64::NAN)
+        );
+    }
     for (name, p) in &paths {
         println!(
             "{name:>4}: score {:.3} s, {:.0} hypotheses/s, {:.3e} point·voxel updates/s  [{}]",
@@ -155,4 +211,37 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// Cosine similarity of fast and exact feature vectors on up to 300 of `hypotheses` (evenly spread).
+fn cosine_report(
+    window: &PreparedWindow,
+    layout: &Layout,
+    hypotheses: &[Hypothesis],
+    options: FastOptions,
+) -> serde_json::Value {
+    let stride = (hypotheses.len() / 300).max(1);
+    let sample: Vec<Hypothesis> = hypotheses.iter().step_by(stride).take(300).copied().collect();
+    let dim = layout.dim();
+    let (exact, _) = cpu::features(&window.scene, layout, &sample);
+    let fast = FastEngine::new(&window.scene, layout, options).features(&sample);
+    let cosines: Vec<f64> = exact.chunks(dim).zip(fast.chunks(dim)).map(|(a, b)| cosine(a, b)).collect();
+    let mean = cosines.iter().sum::<f64>() / cosines.len().max(1) as f64;
+    let min = cosines.iter().copied().fold(f64::INFINITY, f64::min);
+    json!({"hypotheses": cosines.len(), "mean": mean, "min": min})
+}
+
+/// Cosine similarity of two vectors (1 when both are zero).
+pub fn cosine(a: &[f32], b: &[f32]) -> f64 {
+    let (mut ab, mut aa, mut bb) = (0.0f64, 0.0f64, 0.0f64);
+    for (&x, &y) in a.iter().zip(b) {
+        ab += x as f64 * y as f64;
+        aa += x as f64 * x as f64;
+        bb += y as f64 * y as f64;
+    }
+    if aa == 0.0 && bb == 0.0 {
+        1.0
+    } else {
+        ab / (aa.sqrt() * bb.sqrt()).max(f64::MIN_POSITIVE)
+    }
 }

@@ -180,8 +180,9 @@ pub fn unsigned_angle(y: f32, x: f32) -> f32 {
     angle
 }
 
-/// The two COG bins of a gradient and their fixed-point shares (see the module doc).
-pub fn cog_split(frame: &CogFrame, gx: f32, gy: f32, magnitude: f32) -> (usize, u32, usize, u32) {
+/// Where a gradient falls among the COG bins: the lower bin `⌊9φ/π⌋` and the fraction of the way to the
+/// next one (see the module doc).
+pub fn cog_position(frame: &CogFrame, gx: f32, gy: f32) -> (usize, f32) {
     use std::f32::consts::PI;
     let (ex, ey) = (-gy, gx);
     let alpha = frame.dz.y * ex - frame.dz.x * ey;
@@ -189,7 +190,12 @@ pub fn cog_split(frame: &CogFrame, gx: f32, gy: f32, magnitude: f32) -> (usize, 
     let phi = unsigned_angle(alpha, -beta);
     let position = phi * (COG_BINS as f32 / PI);
     let bin0 = (position.floor() as usize).min(COG_BINS - 1);
-    let frac = position - bin0 as f32;
+    (bin0, position - bin0 as f32)
+}
+
+/// The two COG bins of a gradient and their fixed-point shares (see the module doc).
+pub fn cog_split(frame: &CogFrame, gx: f32, gy: f32, magnitude: f32) -> (usize, u32, usize, u32) {
+    let (bin0, frac) = cog_position(frame, gx, gy);
     let bin1 = (bin0 + 1) % COG_BINS;
     let scaled = magnitude * COG_FIXED_SCALE;
     let share1 = (frac * scaled + 0.5) as u32;

@@ -6,6 +6,7 @@
 //! hypothesis of a yaw) → [`sliding_window`] → [`cpu::features`] / [`cpu::scores`] or the GPU twins.
 
 pub mod cpu;
+pub mod fast;
 pub mod hypotheses;
 pub mod layout;
 pub mod preprocess;

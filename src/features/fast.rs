@@ -1,0 +1,458 @@
+//! The fast path: features and fused scores of many hypotheses with the work shared across hypotheses,
+//! an approximation of the exact path ([`super::cpu`]) chosen with `--features fast` (the default of
+//! `detect` and `train`; `exact` stays available everywhere).
+//!
+//! # Why
+//! The exact path visits, for every hypothesis, every point inside its expanded box: a bed's sliding
+//! window on a 640×480 frame is ~10⁹ point visits with a projected COG basis per voxel. Here the points are
+//! binned once, and a hypothesis only reads sums:
+//!
+//! 1. **Per yaw** ([`YawLattice`]): every point of the yaw's rotated frame gets a ground cell on a lattice
+//!    of side `step / subdivisions` aligned with the hypothesis centres (the centres lie on cell
+//!    centres, or on cell corners for even subdivisions), its normal code, and its COG bins and fixed-point
+//!    shares — the projected COG basis taken **at the point itself** instead of at its voxel's centre
+//!    (the basis varies slowly; at the point it is, if anything, closer to the paper's intent).
+//! 2. **Per yaw, bottom and height** ([`LayerTable`]): the sliding window puts every box on the floor, so
+//!    for one (yaw, height) the voxel layers along z are the same for all hypotheses. Every point is given
+//!    its exact layer, and each layer holds a 2D summed-area table over the ground cells of the 35 integer
+//!    channels (count, 25 normal bins, 9 COG bins). Sums are `u32` with wrapping arithmetic: differences of
+//!    the table are exact whatever the order, so the result is bit-for-bit reproducible.
+//! 3. **Per hypothesis**: a voxel column covers the ground cells whose centres lie inside it (the only
+//!    approximation of membership: along width and depth, voxel faces snap to the nearest cell boundary —
+//!    half a cell, 2.5 cm at the default, at most; a cell centre on a face, or within [`TIE_CELLS`] cells
+//!    below it, belongs to the voxel above the face; along z membership is exact). Its 35 sums for each layer
+//!    are four table reads; the 8×8 cell boundaries of a 7×7 grid are shared by all its voxels.
+//! 4. **Per voxel**: density and normal bins are divided by the projected area `A` linearised at the voxel
+//!    centre `P` (camera coordinates): a small box with edge vectors `e_s, e_t, e_z` projects to
+//!    `fx·fy·(|S_s·P| + |S_t·P| + |S_z·P|)/P.z³` pixels², `S` the face area vectors — the exact path takes the
+//!    hull of the 8 projected corners; the two agree to O((voxel size / distance)²). A voxel whose centre
+//!    is less than [`MIN_PROJECT_DEPTH`] in front of the camera has density and normal bins 0 (the exact
+//!    path: any corner). COG sums are normalised as in the exact path.
+//!
+//! Hypotheses whose bottom and height differ from the sliding window's (ground truths in training) get a
+//! table of their own; centres off the lattice are handled by the same boundary rule.
+//!
+//! The agreement with the exact path is measured by `tests/features_fast.rs` (feature cosine similarity)
+//! and by `cog-gpu bench --features both`.
+
+use std::collections::HashMap;
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+use super::cpu::{cog_frame, cog_position, dot, view_cosine, HypothesisRecord};
+use super::hypotheses::Hypothesis;
+use super::layout::{view_features, Layout, COG, COG_BINS, COG_EPSILON, DENSITY, NORMALS, PER_VOXEL, VIEW};
+use super::preprocess::NORMAL_BINS;
+use super::scene::{FeatureScene, YawGrid, FIXED_PER_METRE};
+use crate::geometry::MIN_PROJECT_DEPTH;
+
+/// Integer channels per ground cell: count, 25 normal bins, 9 COG bins, one pad (so a cell is 144 bytes).
+pub const CHANNELS: usize = 36;
+/// Default lattice cells per hypothesis step along width and depth.
+pub const DEFAULT_SUBDIVISIONS: u32 = 2;
+/// A cell centre within this many cells below a voxel face counts as inside the voxel above the face.
+pub const TIE_CELLS: f32 = 1e-4;
+/// Largest COG fixed-point scale (units per unit of gradient magnitude).
+const MAX_COG_SCALE: f32 = 4096.0;
+
+/// Options of the fast path.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FastOptions {
+    /// Lattice cells per hypothesis step along the ground axes (1 = cells of the step itself).
+    pub subdivisions: u32,
+}
+
+impl Default for FastOptions {
+    fn default() -> Self {
+        FastOptions { subdivisions: DEFAULT_SUBDIVISIONS }
+    }
+}
+
+/// One point as the fast path bins it.
+#[derive(Clone, Copy, Debug, Default)]
+struct LatticePoint {
+    /// Ground cell index `t·cells_s + s`.
+    cell: u32,
+    /// Height (metres).
+    z: f32,
+    normal_bin: u8,
+    cog_bins: [u8; 2],
+    /// Fixed-point shares of the gradient magnitude for the two COG bins (0 when it has none).
+    cog_shares: [u32; 2],
+}
+
+/// Step 1 of the module doc: the points of one yaw on the ground lattice.
+pub struct YawLattice {
+    origin: [f32; 2],
+    cell: f32,
+    cells: [usize; 2],
+    points: Vec<LatticePoint>,
+}
+
+/// Step 2 of the module doc: summed-area tables of one (yaw, bottom, height).
+pub struct LayerTable {
+    /// `(cells_s + 1) × (cells_t + 1)` entries per layer, each [`CHANNELS`] wide; entry (x, y) holds the
+    /// sums of the cells `< x` along s and `< y` along t.
+    sums: Vec<u32>,
+    stride: [usize; 2],
+}
+
+/// The fast path over one scene and layout.
+pub struct FastEngine<'a> {
+    scene: &'a FeatureScene,
+    layout: Layout,
+    options: FastOptions,
+    lattices: Vec<YawLattice>,
+    /// COG units per unit of gradient magnitude.
+    cog_scale: f32,
+}
+
+impl<'a> FastEngine<'a> {
+    /// Bins the points of every yaw of `scene` (step 1).
+    pub fn new(scene: &'a FeatureScene, layout: &Layout, options: FastOptions) -> FastEngine<'a> {
+        let subdivisions = options.subdivisions.max(1);
+        // Largest total of one COG channel: every point with the largest magnitude √2 in one voxel. The
+        // scale keeps it below 2³², so wrapped differences equal the true sums.
+        let points = scene.pre.len().max(1) as f32;
+        let mut cog_scale = MAX_COG_SCALE;
+        while cog_scale > 1.0 && points * std::f32::consts::SQRT_2 * cog_scale >= u32::MAX as f32 {
+            cog_scale *= 0.5;
+        }
+        let lattices =
+            scene.yaws.par_iter().map(|grid| YawLattice::build(scene, grid, subdivisions, cog_scale, layout)).collect();
+        FastEngine { scene, layout: *layout, options: FastOptions { subdivisions }, lattices, cog_scale }
+    }
+
+    pub fn options(&self) -> FastOptions {
+        self.options
+    }
+
+    /// Features of `hypotheses`, row-major `hypotheses.len() × layout.dim()`.
+    pub fn features(&self, hypotheses: &[Hypothesis]) -> Vec<f32> {
+        let dim = self.layout.dim();
+        let mut out = vec![0.0f32; hypotheses.len() * dim];
+        let mut rows: Vec<Option<&mut [f32]>> = out.chunks_mut(dim.max(1)).map(Some).collect();
+        let groups = group_by_table(hypotheses);
+        // Hand each group the rows of its hypotheses.
+        let mut work: Vec<(TableKey, Vec<(usize, &mut [f32])>)> = Vec::with_capacity(groups.len());
+        for (key, members) in groups {
+            let rows_of_group = members.iter().map(|&n| (n, rows[n].take().expect("each row once"))).collect();
+            work.push((key, rows_of_group));
+        }
+        work.into_par_iter().for_each(|(key, members)| {
+            let table = self.table(key);
+            members.into_par_iter().for_each(|(n, row)| {
+                self.hypothesis(&table, &hypotheses[n], |voxel, values| {
+                    row[voxel * PER_VOXEL..(voxel + 1) * PER_VOXEL].copy_from_slice(values);
+                });
+                if self.layout.groups.view {
+                    let offset = self.layout.view_offset();
+                    row[offset..offset + VIEW].copy_from_slice(&self.view(&hypotheses[n]));
+                }
+            });
+        });
+        out
+    }
+
+    /// Fused scores `scores[h·W + w] = weights[w] · φ(h)` (each weight vector of length `layout.dim()`).
+    pub fn scores(&self, hypotheses: &[Hypothesis], weights: &[Vec<f32>]) -> Vec<f32> {
+        let count = weights.len();
+        let mut scores = vec![0.0f32; hypotheses.len() * count];
+        let groups = group_by_table(hypotheses);
+        let per_group: Vec<Vec<(usize, Vec<f32>)>> = groups
+            .into_par_iter()
+            .map(|(key, members)| {
+                let table = self.table(key);
+                members
+                    .into_par_iter()
+                    .map(|n| {
+                        let hyp = &hypotheses[n];
+                        let mut row = vec![0.0f32; count];
+                        self.hypothesis(&table, hyp, |voxel, values| {
+                            let offset = voxel * PER_VOXEL;
+                            for (score, w) in row.iter_mut().zip(weights) {
+                                *score += dot(&w[offset..offset + PER_VOXEL], values);
+                            }
+                        });
+                        if self.layout.groups.view {
+                            let view = self.view(hyp);
+                            let offset = self.layout.view_offset();
+                            for (score, w) in row.iter_mut().zip(weights) {
+                                *score += dot(&w[offset..offset + VIEW], &view);
+                            }
+                        }
+                        (n, row)
+                    })
+                    .collect()
+            })
+            .collect();
+        for (n, row) in per_group.into_iter().flatten() {
+            scores[n * count..(n + 1) * count].copy_from_slice(&row);
+        }
+        scores
+    }
+
+    fn view(&self, hyp: &Hypothesis) -> [f32; VIEW] {
+        view_features(view_cosine(&hyp.cuboid(self.scene)))
+    }
+
+    /// Step 2: the layer table of one (yaw, bottom, height).
+    fn table(&self, key: TableKey) -> LayerTable {
+        let lattice = &self.lattices[key.yaw_index as usize];
+        let g = self.layout.grid();
+        let expansion = self.layout.expansion();
+        let (bottom, height) = (f32::from_bits(key.bottom_bits), f32::from_bits(key.height_bits));
+        let extent = height * expansion[2];
+        let z_lo = bottom + 0.5 * height - 0.5 * extent;
+        LayerTable::build(lattice, z_lo, extent / g[2] as f32, g[2] as usize)
+    }
+
+    /// Step 3 for one hypothesis: calls `visit([i, j, k], integer sums)` for every non-empty voxel.
+    fn for_each_voxel_sums(
+        &self,
+        table: &LayerTable,
+        record: &HypothesisRecord,
+        lattice: &YawLattice,
+        mut visit: impl FnMut([usize; 3], &[u32; CHANNELS]),
+    ) {
+        let g = self.layout.grid();
+        let (nx, ny) = (g[0] as usize, g[1] as usize);
+        // Voxel i along an axis covers the lattice cells xs[i]..xs[i+1]: those whose centre lies in it.
+        let boundaries = |axis: usize, n: usize| -> Vec<usize> {
+            (0..=n)
+                .map(|i| {
+                    let face = record.lo[axis] + i as f32 * record.cell[axis];
+                    // Ties (a cell centre on a face, common: centres and sizes are round numbers)
+                    // go to the voxel above the face, robustly against rounding.
+                    let first = ((face - lattice.origin[axis]) / lattice.cell - 0.5 - TIE_CELLS).ceil();
+                    first.clamp(0.0, lattice.cells[axis] as f32) as usize
+                })
+                .collect()
+        };
+        let (xs, ys) = (boundaries(0, nx), boundaries(1, ny));
+        // Sums at the (nx+1)×(ny+1) boundary corners of one layer, shared by its voxels.
+        let mut corners = vec![[0u32; CHANNELS]; (nx + 1) * (ny + 1)];
+        for k in 0..g[2] as usize {
+            for (j, &y) in ys.iter().enumerate() {
+                for (i, &x) in xs.iter().enumerate() {
+                    corners[j * (nx + 1) + i] = table.at(k, x, y);
+                }
+            }
+            for j in 0..ny {
+                for i in 0..nx {
+                    let c = |di: usize, dj: usize| &corners[(j + dj) * (nx + 1) + i + di];
+                    let (high, left, low, both) = (c(1, 1), c(0, 1), c(1, 0), c(0, 0));
+                    let mut sums = [0u32; CHANNELS];
+                    for ch in 0..CHANNELS {
+                        sums[ch] = high[ch].wrapping_sub(left[ch]).wrapping_sub(low[ch]).wrapping_add(both[ch]);
+                    }
+                    if sums[0] != 0 {
+                        visit([i, j, k], &sums);
+                    }
+                }
+            }
+        }
+    }
+
+    /// The integer sums (count, 25 normal bins, 9 COG bins in units of 1/[`FastEngine::cog_scale`], pad)
+    /// of every voxel of `hyp`, indexed by ℓ ([`Layout::voxel_index`]). For tests and debugging.
+    pub fn voxel_sums(&self, hyp: &Hypothesis) -> Vec<[u32; CHANNELS]> {
+        let table = self.table(key_of(hyp));
+        let record = HypothesisRecord::new(self.scene, &self.layout, hyp);
+        let mut out = vec![[0u32; CHANNELS]; self.layout.voxel_count()];
+        self.for_each_voxel_sums(&table, &record, &self.lattices[hyp.yaw_index as usize], |[i, j, k], sums| {
+            out[self.layout.voxel_index(i as u32, j as u32, k as u32)] = *sums;
+        });
+        out
+    }
+
+    /// COG fixed-point units per unit of gradient magnitude.
+    pub fn cog_scale(&self) -> f32 {
+        self.cog_scale
+    }
+
+    /// Steps 3–4 for one hypothesis: calls `visit(voxel index ℓ, its 35 features)` for every non-empty
+    /// voxel (empty voxels are all zeros, as in the exact path).
+    fn hypothesis(&self, table: &LayerTable, hyp: &Hypothesis, mut visit: impl FnMut(usize, &[f32; PER_VOXEL])) {
+        let grid: &YawGrid = &self.scene.yaws[hyp.yaw_index as usize];
+        let record = HypothesisRecord::new(self.scene, &self.layout, hyp);
+        let m = grid.camera_from_rotated;
+        let [fx, fy, _, _] = self.scene.pre.camera.intrinsics;
+        let [vs, vt, vz] = record.cell;
+        let face_areas = [vt * vz, vs * vz, vs * vt];
+        let groups = self.layout.groups;
+        let inv_cog_scale = 1.0 / self.cog_scale;
+        let lattice = &self.lattices[hyp.yaw_index as usize];
+        self.for_each_voxel_sums(table, &record, lattice, |[i, j, k], sums| {
+            let centre = Vec3::new(
+                record.lo[0] + (i as f32 + 0.5) * vs,
+                record.lo[1] + (j as f32 + 0.5) * vt,
+                record.lo[2] + (k as f32 + 0.5) * vz,
+            );
+            let p = m * centre;
+            let mut values = [0.0f32; PER_VOXEL];
+            if p.z >= MIN_PROJECT_DEPTH {
+                let area = fx
+                    * fy
+                    * (face_areas[0] * m.x_axis.dot(p).abs()
+                        + face_areas[1] * m.y_axis.dot(p).abs()
+                        + face_areas[2] * m.z_axis.dot(p).abs())
+                    / (p.z * p.z * p.z);
+                let inv_area = 1.0 / area.max(1.0);
+                if groups.density {
+                    values[DENSITY] = sums[0] as f32 * inv_area;
+                }
+                if groups.normals {
+                    for b in 0..NORMAL_BINS {
+                        values[NORMALS + b] = sums[1 + b] as f32 * inv_area;
+                    }
+                }
+            }
+            if groups.cog {
+                let mut norm_sq = 0.0f32;
+                for b in 0..COG_BINS {
+                    let v = sums[COG + b] as f32 * inv_cog_scale;
+                    values[COG + b] = v;
+                    norm_sq += v * v;
+                }
+                let scale = 1.0 / (norm_sq + COG_EPSILON).sqrt();
+                for v in &mut values[COG..COG + COG_BINS] {
+                    *v *= scale;
+                }
+            }
+            visit(self.layout.voxel_index(i as u32, j as u32, k as u32), &values);
+        });
+    }
+}
+
+fn key_of(hyp: &Hypothesis) -> TableKey {
+    TableKey { yaw_index: hyp.yaw_index, bottom_bits: hyp.bottom.to_bits(), height_bits: hyp.size.z.to_bits() }
+}
+
+/// Hypotheses that share a [`LayerTable`]: same yaw, bottom and height.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+struct TableKey {
+    yaw_index: u16,
+    bottom_bits: u32,
+    height_bits: u32,
+}
+
+/// Groups hypothesis indices by table key, in a deterministic order.
+fn group_by_table(hypotheses: &[Hypothesis]) -> Vec<(TableKey, Vec<usize>)> {
+    let mut groups: HashMap<TableKey, Vec<usize>> = HashMap::new();
+    for (n, hyp) in hypotheses.iter().enumerate() {
+        groups.entry(key_of(hyp)).or_default().push(n);
+    }
+    let mut groups: Vec<_> = groups.into_iter().collect();
+    groups.sort_by_key(|(key, _)| *key);
+    groups
+}
+
+impl YawLattice {
+    fn build(scene: &FeatureScene, grid: &YawGrid, subdivisions: u32, cog_scale: f32, layout: &Layout) -> YawLattice {
+        let cell = grid.step / subdivisions as f32;
+        let cells = [0, 1].map(|a| (grid.cells[a] * subdivisions) as usize);
+        let origin = grid.origin;
+        let intrinsics = scene.pre.camera.intrinsics;
+        let use_cog = layout.groups.cog;
+        let points = grid
+            .records
+            .par_iter()
+            .map(|r| {
+                let q = Vec3::new(r.s as f32, r.t as f32, r.z as f32) / FIXED_PER_METRE;
+                let index = |axis: usize| -> usize {
+                    let c = ((q[axis] - origin[axis]) / cell).floor();
+                    c.clamp(0.0, (cells[axis] - 1) as f32) as usize
+                };
+                let mut point = LatticePoint {
+                    cell: (index(1) * cells[0] + index(0)) as u32,
+                    z: q.z,
+                    normal_bin: r.normal_bin as u8,
+                    ..LatticePoint::default()
+                };
+                if use_cog && r.magnitude > 0.0 {
+                    if let Some(frame) = cog_frame(grid, intrinsics, q) {
+                        let (bin0, frac) = cog_position(&frame, r.gx, r.gy);
+                        let scaled = r.magnitude * cog_scale;
+                        point.cog_bins = [bin0 as u8, ((bin0 + 1) % COG_BINS) as u8];
+                        point.cog_shares = [((1.0 - frac) * scaled + 0.5) as u32, (frac * scaled + 0.5) as u32];
+                    }
+                }
+                point
+            })
+            .collect();
+        YawLattice { origin, cell, cells, points }
+    }
+}
+
+impl LayerTable {
+    fn build(lattice: &YawLattice, z_lo: f32, z_step: f32, layers: usize) -> LayerTable {
+        let [cs, ct] = lattice.cells;
+        let stride = [cs + 1, ct + 1];
+        let per_layer = stride[0] * stride[1];
+        let mut sums = vec![0u32; layers * per_layer * CHANNELS];
+        let inv_step = 1.0 / z_step;
+        for p in &lattice.points {
+            let layer = ((p.z - z_lo) * inv_step).floor();
+            if !(layer >= 0.0 && layer < layers as f32) {
+                continue;
+            }
+            let (x, y) = (p.cell as usize % cs, p.cell as usize / cs);
+            // Cell (x, y) is stored at table entry (x + 1, y + 1) before the prefix sums.
+            let base = ((layer as usize * stride[1] + y + 1) * stride[0] + x + 1) * CHANNELS;
+            let entry = &mut sums[base..base + CHANNELS];
+            entry[0] += 1;
+            entry[1 + p.normal_bin as usize] += 1;
+            entry[COG + p.cog_bins[0] as usize] = entry[COG + p.cog_bins[0] as usize].wrapping_add(p.cog_shares[0]);
+            entry[COG + p.cog_bins[1] as usize] = entry[COG + p.cog_bins[1] as usize].wrapping_add(p.cog_shares[1]);
+        }
+        // Inclusive 2D prefix sums per layer: along s, then along t.
+        sums.par_chunks_mut(per_layer * CHANNELS).for_each(|layer| {
+            for y in 1..stride[1] {
+                let row = y * stride[0];
+                for x in 1..stride[0] {
+                    let (prev, cur) = layer.split_at_mut((row + x) * CHANNELS);
+                    let left = &prev[(row + x - 1) * CHANNELS..];
+                    for ch in 0..CHANNELS {
+                        cur[ch] = cur[ch].wrapping_add(left[ch]);
+                    }
+                }
+            }
+            for y in 2..stride[1] {
+                let (prev, cur) = layer.split_at_mut(y * stride[0] * CHANNELS);
+                let above = &prev[(y - 1) * stride[0] * CHANNELS..];
+                for (value, up) in cur[..stride[0] * CHANNELS].iter_mut().zip(above) {
+                    *value = value.wrapping_add(*up);
+                }
+            }
+        });
+        LayerTable { sums, stride }
+    }
+
+    /// The sums of layer `k` over the cells `< x` along s and `< y` along t.
+    fn at(&self, k: usize, x: usize, y: usize) -> [u32; CHANNELS] {
+        let base = ((k * self.stride[1] + y) * self.stride[0] + x) * CHANNELS;
+        let mut out = [0u32; CHANNELS];
+        out.copy_from_slice(&self.sums[base..base + CHANNELS]);
+        out
+    }
+}
+
+/// Convenience: fused scores on the fast path, the same signature as [`super::cpu::scores`] but without
+/// the point·voxel count (the fast path does not visit points per hypothesis; 0 is returned).
+pub fn scores(
+    scene: &FeatureScene,
+    layout: &Layout,
+    hypotheses: &[Hypothesis],
+    weights: &[Vec<f32>],
+    options: FastOptions,
+) -> (Vec<f32>, u64) {
+    let engine = FastEngine::new(scene, layout, options);
+    (engine.scores(hypotheses, weights), 0)
+}
+
+/// Convenience: features on the fast path (row-major).
+pub fn features(scene: &FeatureScene, layout: &Layout, hypotheses: &[Hypothesis], options: FastOptions) -> Vec<f32> {
+    FastEngine::new(scene, layout, options).features(hypotheses)
+}
