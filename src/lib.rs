@@ -7,6 +7,7 @@
 //! `synth` writes frames in the same layout the `frame` module reads.
 
 pub mod category;
+pub mod detect;
 pub mod draw;
 pub mod error;
 pub mod eval;
@@ -15,6 +16,7 @@ pub mod frame;
 pub mod geometry;
 pub mod gpu;
 pub mod learn;
+pub mod model;
 pub mod nms;
 pub mod synth;
 

@@ -30,6 +30,10 @@ enum Command {
     Bench(cli::bench::Args),
     /// Average precision of detection files against a dataset's ground truth (SUN RGB-D rules).
     Eval(cli::eval::Args),
+    /// Detect objects with trained models: per frame a detections JSON and an overlay picture.
+    Detect(cli::detect::Args),
+    /// Train one category's detector (structural SVM) on annotated frames and write a model file.
+    Train(cli::train::Args),
 }
 
 fn main() {
@@ -42,6 +46,8 @@ fn main() {
         Command::Score(args) => cli::score::run(args, &options),
         Command::Bench(args) => cli::bench::run(args, &options),
         Command::Eval(args) => cli::eval::run(args, &options),
+        Command::Train(args) => cli::train::run(args, &options),
+        Command::Detect(args) => cli::detect::run(args, &options),
     };
     if let Err(err) = result {
         eprintln!("error: {err:#}");

@@ -1,10 +1,12 @@
 //! Subcommands of the `cog-gpu` binary.
 
 pub mod bench;
+pub mod detect;
 pub mod eval;
 pub mod info;
 pub mod score;
 pub mod synth;
+pub mod train;
 
 /// Options shared by every subcommand.
 pub struct GlobalOptions {

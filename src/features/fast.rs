@@ -57,7 +57,7 @@ pub const TIE_CELLS: f32 = 1e-4;
 const MAX_COG_SCALE: f32 = 4096.0;
 
 /// Options of the fast path.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct FastOptions {
     /// Lattice cells per hypothesis step along the ground axes (1 = cells of the step itself).
     pub subdivisions: u32,

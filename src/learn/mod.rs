@@ -26,6 +26,7 @@
 //! Stop when the primal objective decreases by less than a tolerance.
 
 pub mod checkpoint;
+pub mod detector;
 pub mod qp;
 pub mod ssvm;
 

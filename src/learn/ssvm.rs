@@ -165,6 +165,12 @@ impl CuttingPlane {
         Ok(CuttingPlane { options, state, gram: Vec::new(), ground_truth: Vec::new(), bound_to_oracle: false })
     }
 
+    /// Changes the cap on total QP solves (e.g. to run a few iterations at a time with different oracles:
+    /// the working set and `w` carry over between `train` calls on oracles with the same ground truth).
+    pub fn set_max_iterations(&mut self, max_iterations: usize) {
+        self.options.max_iterations = max_iterations;
+    }
+
     /// Current weights (empty before the first `train`).
     pub fn w(&self) -> &[f64] {
         &self.state.w

@@ -1,0 +1,161 @@
+//! `cog-gpu detect [FRAME_DIR...] [--models DIR] [--out DIR] [--categories a,b,...] ...`: detects objects
+//! with trained models and writes, per frame, `<out>/<frame>.json` (detections) and `<out>/<frame>.png`
+//! (overlay). See `cog_gpu::detect` for what happens per frame.
+//!
+//! Defaults: every frame under `assets/sample/`, the models of `assets/models/`, output `detections/`.
+//! When a default `assets/...` path does not exist relative to the current directory, the crate's own
+//! `assets/` is used, so `cargo run --release -- detect` works from anywhere in a checkout. A frame that
+//! cannot be read stops the run with an error naming it (files already written are kept).
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{bail, Context};
+use cog_gpu::category::normalise_name;
+use cog_gpu::detect::{detect_frame, overlay, DetectOptions};
+use cog_gpu::eval::FrameDetections;
+use cog_gpu::features::Backend;
+use cog_gpu::frame::{is_frame_dir, DepthSource, Frame};
+use cog_gpu::model::{read_models_dir, FeaturePath};
+use cog_gpu::nms::DEFAULT_NMS_IOU;
+use indicatif::{ProgressBar, ProgressStyle};
+
+use super::GlobalOptions;
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// Frame directories, or directories searched recursively for frames; default: `assets/sample/`.
+    pub frames: Vec<PathBuf>,
+    /// Directory of model files (`<category>.json`).
+    #[arg(long, default_value = "assets/models")]
+    pub models: PathBuf,
+    /// Output directory for `<frame>.json` and `<frame>.png`.
+    #[arg(long, default_value = "detections")]
+    pub out: PathBuf,
+    /// Only these categories (comma-separated); default: every model in --models.
+    #[arg(long, value_delimiter = ',')]
+    pub categories: Vec<String>,
+    /// IoU above which 3D NMS suppresses a lower-scoring box of the same category.
+    #[arg(long, default_value_t = DEFAULT_NMS_IOU)]
+    pub nms_iou: f32,
+    /// Detections kept per category and frame.
+    #[arg(long, default_value_t = 20)]
+    pub max_per_category: usize,
+    /// Drop detections scoring below this (overrides the models' thresholds).
+    #[arg(long, allow_hyphen_values = true)]
+    pub min_score: Option<f32>,
+    /// Do not write the overlay pictures.
+    #[arg(long)]
+    pub no_overlay: bool,
+    /// Print the detections of all frames as one JSON array on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// `path` if it exists, else the same relative path inside the crate's checkout (for the defaults).
+fn resolve_default(path: &Path) -> PathBuf {
+    if path.exists() || path.is_absolute() {
+        return path.to_path_buf();
+    }
+    let in_crate = Path::new(env!("CARGO_MANIFEST_DIR")).join(path);
+    if in_crate.exists() {
+        in_crate
+    } else {
+        path.to_path_buf()
+    }
+}
+
+/// Frame directories of the arguments (each a frame, or searched recursively).
+fn frame_dirs(args: &[PathBuf]) -> anyhow::Result<Vec<PathBuf>> {
+    let roots = if args.is_empty() { vec![resolve_default(Path::new("assets/sample"))] } else { args.to_vec() };
+    let mut frames = Vec::new();
+    for root in roots {
+        if is_frame_dir(&root) {
+            frames.push(root);
+            continue;
+        }
+        if !root.is_dir() {
+            bail!("{}: not a frame directory (intrinsics.txt and image/) nor a directory of frames", root.display());
+        }
+        let found = cog_gpu::frame::Dataset::open(&root)?.frames;
+        if found.is_empty() {
+            bail!("{}: no frame directories found", root.display());
+        }
+        frames.extend(found);
+    }
+    Ok(frames)
+}
+
+pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
+    let detect_options = DetectOptions {
+        nms_iou: args.nms_iou,
+        max_per_category: args.max_per_category,
+        min_score: args.min_score,
+        ..DetectOptions::default()
+    };
+    detect_options.validate()?;
+    let categories: Vec<String> = args.categories.iter().map(|c| normalise_name(c).0).collect();
+    let models_dir =
+        if args.models == Path::new("assets/models") { resolve_default(&args.models) } else { args.models.clone() };
+    let models = read_models_dir(&models_dir, (!categories.is_empty()).then_some(categories.as_slice()))?;
+    let frames = frame_dirs(&args.frames)?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating the output directory {}", args.out.display()))?;
+    let needs_gpu = models.iter().any(|m| m.features.path == FeaturePath::Exact);
+    let gpu = if needs_gpu { cog_gpu::gpu::acquire(options.force_cpu) } else { None };
+    let backend = match &gpu {
+        Some(ctx) => Backend::Gpu(ctx),
+        None => Backend::Cpu,
+    };
+    log::info!(
+        "{} frame(s), models: {}",
+        frames.len(),
+        models.iter().map(|m| m.category.as_str()).collect::<Vec<_>>().join(", ")
+    );
+    let progress = if frames.len() > 1 { ProgressBar::new(frames.len() as u64) } else { ProgressBar::hidden() };
+    if let Ok(style) = ProgressStyle::with_template("{bar:30} {pos}/{len} frames, {elapsed_precise} (eta {eta}) {msg}")
+    {
+        progress.set_style(style);
+    }
+    let started = Instant::now();
+    let mut results = Vec::new();
+    for dir in &frames {
+        progress.set_message(dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default());
+        let frame = Frame::read(dir, DepthSource::Raw)?;
+        let detections = detect_frame(&frame, &models, backend, &detect_options)
+            .with_context(|| format!("detecting in {}", dir.display()))?;
+        let json_path = args.out.join(format!("{}.json", frame.name));
+        detections.write(&json_path)?;
+        if !args.no_overlay {
+            let png_path = args.out.join(format!("{}.png", frame.name));
+            overlay(&frame, &detections)
+                .save(&png_path)
+                .with_context(|| format!("writing the overlay {}", png_path.display()))?;
+        }
+        results.push(detections);
+        progress.inc(1);
+    }
+    progress.finish_and_clear();
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&results)?);
+        return Ok(());
+    }
+    print_summary(&results, &args.out, started.elapsed().as_secs_f64());
+    Ok(())
+}
+
+/// One line per frame: detections per category and the best score.
+fn print_summary(results: &[FrameDetections], out: &Path, seconds: f64) {
+    for r in results {
+        let mut counts: Vec<(String, usize, f32)> = Vec::new();
+        for d in &r.detections {
+            match counts.iter_mut().find(|c| c.0 == d.category) {
+                Some(c) => c.1 += 1,
+                None => counts.push((d.category.clone(), 1, d.score)),
+            }
+        }
+        let text: Vec<String> = counts.iter().map(|(c, n, best)| format!("{c} {n} (best {best:.2})")).collect();
+        println!("{}: {} detections: {}", r.frame, r.detections.len(), text.join(", "));
+    }
+    println!("wrote {} frame(s) to {} in {seconds:.1} s", results.len(), out.display());
+}

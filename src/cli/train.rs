@@ -1,0 +1,258 @@
+//! `cog-gpu train --data DIR --category C [--out FILE] [--c C] [--eps E] [--resume] ...`: trains one
+//! category's detector with the n-slack structural SVM (paper eq. 4–5; see `cog_gpu::learn` and
+//! `cog_gpu::learn::detector` for the examples and the oracle) and writes a model file.
+//!
+//! Choices (defaults sized so that the ten large categories train in about an hour on 2 cores):
+//! * at most `--positives 40` instances (spread evenly over the dataset) and `--negatives 10` frames
+//!   without the category;
+//! * the training sliding window uses a 0.2 m centre step (`--step`); the model is written with the
+//!   detection step `--detect-step 0.1`;
+//! * sizes: quantiles of the training annotations of the category;
+//! * features: the fast path (`--features exact` for the exact one, much slower);
+//! * a checkpoint `<out>.ckpt` after every iteration; `--resume` continues from it (same data and options);
+//! * full loss-augmented inference every `--full-every 3` iterations, the 300 best candidates of each
+//!   example (`--candidates`) in between; convergence is accepted only after a full pass;
+//! * constraints whose α stayed 0 for `--prune-after 4` solves leave the working set (keeps the QP small).
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{bail, Context};
+use cog_gpu::category::{normalise_name, CATEGORIES};
+use cog_gpu::features::fast::{FastOptions, DEFAULT_SUBDIVISIONS};
+use cog_gpu::features::hypotheses::{DEFAULT_MIN_POINTS, DEFAULT_STEP};
+use cog_gpu::features::{Groups, Layout, SizeQuantiles};
+use cog_gpu::frame::Dataset;
+use cog_gpu::learn::detector::{
+    collect_examples, instances_of, read_all_annotations, DetectorOracle, ExampleLimits, FeatureEngine,
+    TrainingSettings,
+};
+use cog_gpu::learn::{CuttingPlane, SsvmOptions};
+use cog_gpu::model::{FeaturePath, FeatureSettings, Model, WindowSettings};
+
+use super::GlobalOptions;
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// Training dataset: every frame directory below it (annotations in annotation3Dfinal/index.json).
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Optional split list restricting the dataset (one frame directory per line, relative to --data).
+    #[arg(long)]
+    pub split: Option<PathBuf>,
+    /// Category to train (one of the 19).
+    #[arg(long)]
+    pub category: String,
+    /// Model file to write; default `models/<category>.json`.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Regularisation constant C of eq. 4.
+    #[arg(long = "c", default_value_t = 1.0)]
+    pub c: f64,
+    /// Stop when no constraint is violated by more than this (loss units).
+    #[arg(long = "eps", default_value_t = 0.05)]
+    pub epsilon: f64,
+    /// Cap on cutting-plane iterations (QP solves), counted across resumes.
+    #[arg(long, default_value_t = 25)]
+    pub max_iterations: usize,
+    /// Continue from the checkpoint `<out>.ckpt`.
+    #[arg(long)]
+    pub resume: bool,
+    /// Most instances of the category to train on.
+    #[arg(long, default_value_t = 40)]
+    pub positives: usize,
+    /// Most frames without the category to train on.
+    #[arg(long, default_value_t = 10)]
+    pub negatives: usize,
+    /// Centre step of the training sliding window (metres).
+    #[arg(long, default_value_t = 0.2)]
+    pub step: f32,
+    /// Centre step written into the model for detection (metres).
+    #[arg(long, default_value_t = DEFAULT_STEP)]
+    pub detect_step: f32,
+    /// Skip hypotheses with fewer points inside.
+    #[arg(long, default_value_t = DEFAULT_MIN_POINTS)]
+    pub min_points: u32,
+    /// Feature path: fast (shared-work approximation) or exact.
+    #[arg(long, value_enum, default_value_t = PathArg::Fast)]
+    pub features: PathArg,
+    /// Lattice cells per centre step of the fast path.
+    #[arg(long, default_value_t = DEFAULT_SUBDIVISIONS)]
+    pub subdivisions: u32,
+    /// Feature groups (the paper's ablation): comma-separated of density, normals, cog, view.
+    #[arg(long, default_value = "density,normals,cog,view")]
+    pub groups: String,
+    /// Do not expand the 5×5×5 grid by a voxel layer (the paper's "+expanded" off).
+    #[arg(long)]
+    pub no_expand: bool,
+    /// Full loss-augmented inference every this many iterations; in between, only each example's
+    /// cached best candidates are searched (1: always full).
+    #[arg(long, default_value_t = 3)]
+    pub full_every: usize,
+    /// Candidates cached per example by a full pass.
+    #[arg(long, default_value_t = 300)]
+    pub candidates: usize,
+    /// Drop constraints whose α stayed 0 for this many solves.
+    #[arg(long, default_value_t = 4)]
+    pub prune_after: u32,
+}
+
+/// `--features` values.
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum PathArg {
+    Fast,
+    Exact,
+}
+
+/// Parses a comma-separated group list.
+pub fn parse_groups(text: &str) -> anyhow::Result<Groups> {
+    let mut groups = Groups { density: false, normals: false, cog: false, view: false };
+    for name in text.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+        match name {
+            "density" => groups.density = true,
+            "normals" => groups.normals = true,
+            "cog" => groups.cog = true,
+            "view" => groups.view = true,
+            "geom" => (groups.density, groups.normals) = (true, true),
+            other => bail!("unknown feature group '{other}' (expected density, normals, cog, view or geom)"),
+        }
+    }
+    if !(groups.density || groups.normals || groups.cog || groups.view) {
+        bail!("--groups '{text}' switches every feature group off");
+    }
+    Ok(groups)
+}
+
+pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
+    let started = Instant::now();
+    let (category, _) = normalise_name(&args.category);
+    if !CATEGORIES.contains(&category.as_str()) {
+        bail!("unknown category '{}'; the categories are: {}", args.category, CATEGORIES.join(", "));
+    }
+    for (name, value) in [("--step", args.step), ("--detect-step", args.detect_step)] {
+        if !(value.is_finite() && (0.01..=1.0).contains(&value)) {
+            bail!("{name} must be between 0.01 and 1 metre, got {value}");
+        }
+    }
+    let layout = Layout::new([5, 5, 5], !args.no_expand, parse_groups(&args.groups)?)?;
+    let out = args.out.clone().unwrap_or_else(|| PathBuf::from("models").join(format!("{category}.json")));
+    let checkpoint = PathBuf::from(format!("{}.ckpt", out.display()));
+    if args.resume && !checkpoint.is_file() {
+        bail!("--resume: no checkpoint at {}", checkpoint.display());
+    }
+    if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating the model directory {}", dir.display()))?;
+    }
+
+    let mut dataset = Dataset::open(&args.data)?;
+    if let Some(split) = &args.split {
+        dataset = dataset.with_split(split)?;
+    }
+    if dataset.is_empty() {
+        bail!("no frame directories under {}", args.data.display());
+    }
+    let annotations = read_all_annotations(&dataset.frames)?;
+    let truths: Vec<_> = annotations.iter().flat_map(|objects| instances_of(objects, &category)).collect();
+    if truths.is_empty() {
+        bail!("{} frames under {} hold no '{category}' to train on", dataset.len(), args.data.display());
+    }
+    let sizes = SizeQuantiles::from_cuboids(&truths)?;
+    let engine = match args.features {
+        PathArg::Fast => FeatureEngine::Fast(FastOptions { subdivisions: args.subdivisions.max(1) }),
+        PathArg::Exact => FeatureEngine::Exact,
+    };
+    let settings =
+        TrainingSettings { layout, sizes: sizes.sizes(), step: args.step, min_points: args.min_points, engine };
+    let limits = ExampleLimits { positives: args.positives, negatives: args.negatives };
+    log::info!(
+        "{category}: {} instances in {} frames; preparing up to {} positive and {} negative examples",
+        truths.len(),
+        dataset.len(),
+        args.positives,
+        args.negatives
+    );
+    let examples = collect_examples(&dataset.frames, &category, limits, &settings)?;
+    let positives = examples.iter().filter(|e| e.truth.is_some()).count();
+    let hypotheses: usize = examples.iter().map(|e| e.hypotheses.hypotheses.len()).sum();
+    log::info!(
+        "{category}: {positives} positive and {} negative examples, {hypotheses} hypotheses, prepared in {:.1} s",
+        examples.len() - positives,
+        started.elapsed().as_secs_f64()
+    );
+    let mut oracle = DetectorOracle::new(settings, examples)?;
+    oracle.full_every = args.full_every.max(1);
+    oracle.candidate_count = args.candidates.max(1);
+
+    let ssvm = SsvmOptions {
+        c: args.c,
+        epsilon: args.epsilon,
+        max_iterations: args.max_iterations,
+        quiet: false,
+        checkpoint: Some(checkpoint.clone()),
+        prune_after: Some(args.prune_after),
+        qp_tolerance: 1e-7,
+    };
+    let mut solver = if args.resume {
+        log::info!("resuming from {}", checkpoint.display());
+        CuttingPlane::resume(ssvm, &checkpoint)?
+    } else {
+        CuttingPlane::new(ssvm)?
+    };
+    // Convergence counts only when found by a full pass (see `DetectorOracle`'s candidate cache).
+    let solution = loop {
+        let solution = solver.train(&oracle)?;
+        if !solution.converged || oracle.last_pass_was_full() {
+            break solution;
+        }
+        log::info!("no violation among the cached candidates: checking the whole sliding window");
+        oracle.force_full_pass();
+    };
+    let seconds = started.elapsed().as_secs_f64();
+    log::info!(
+        "{category}: {} after {} iterations, objective {:.4}, max violation {:.3}, {} constraints, {:.0} s",
+        if solution.converged { "converged" } else { "stopped at the iteration cap" },
+        solution.iterations,
+        solution.primal,
+        solution.max_violation,
+        solution.num_constraints,
+        seconds
+    );
+    let training = serde_json::json!({
+        "data": args.data.display().to_string(),
+        "split": args.split.as_ref().map(|s| s.display().to_string()),
+        "frames": dataset.len(),
+        "positives": positives,
+        "negatives": oracle.examples.len() - positives,
+        "training_step": args.step,
+        "full_every": args.full_every,
+        "candidates": args.candidates,
+        "c": args.c,
+        "epsilon": args.epsilon,
+        "iterations": solution.iterations,
+        "converged": solution.converged,
+        "objective": solution.primal,
+        "max_violation": solution.max_violation,
+        "constraints": solution.num_constraints,
+        "seconds": seconds,
+        "cog_gpu_version": env!("CARGO_PKG_VERSION"),
+    });
+    let weights: Vec<f32> = solution.w.iter().map(|&v| v as f32).collect();
+    let features = FeatureSettings {
+        path: match args.features {
+            PathArg::Fast => FeaturePath::Fast,
+            PathArg::Exact => FeaturePath::Exact,
+        },
+        subdivisions: args.subdivisions.max(1),
+    };
+    let window = WindowSettings { step: args.detect_step, min_points: args.min_points };
+    let model = Model::new(&category, layout, sizes, window, features, weights, training)?;
+    model.write(&out)?;
+    println!(
+        "wrote {} ({category}: {positives} positives, {} iterations, {}, {:.0} s)",
+        out.display(),
+        solution.iterations,
+        if solution.converged { "converged" } else { "iteration cap reached" },
+        seconds
+    );
+    Ok(())
+}

@@ -1,0 +1,155 @@
+//! Detection: every model's sliding window on a frame, scores, threshold, 3D non-maximum suppression, and
+//! the overlay picture.
+//!
+//! Per frame the preprocessing (gradients, normals, floor) and the per-yaw grids are computed once and
+//! shared by all models with the same window step; each model then enumerates its own sizes' hypotheses
+//! and scores them with its feature path (`fast`: [`crate::features::fast`], CPU; `exact`: the GPU kernel
+//! when an adapter is present, else the CPU reference). Of each category the best
+//! [`DetectOptions::candidates`] hypotheses scoring at least the model's threshold go through 3D NMS
+//! ([`crate::nms`], IoU [`DetectOptions::nms_iou`]) and at most [`DetectOptions::max_per_category`] are
+//! reported, sorted by score over all categories.
+
+use std::collections::BTreeMap;
+
+use image::RgbImage;
+
+use crate::draw::{category_colour, contrasting, draw_cuboid_with, draw_label};
+use crate::error::{Error, Result};
+use crate::eval::{Detection, FrameDetections};
+use crate::features::fast::FastEngine;
+use crate::features::hypotheses::{default_yaws, sliding_window, WindowOptions};
+use crate::features::{Backend, FeatureScene, Hypothesis, Preprocessed};
+use crate::frame::Frame;
+use crate::geometry::Camera;
+use crate::model::{FeaturePath, Model};
+use crate::nms::{nms_detections, NmsOptions, DEFAULT_NMS_IOU};
+
+/// Settings of [`detect_frame`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DetectOptions {
+    /// NMS IoU threshold.
+    pub nms_iou: f32,
+    /// Detections kept per category after NMS.
+    pub max_per_category: usize,
+    /// Highest-scoring hypotheses per category that enter NMS.
+    pub candidates: usize,
+    /// Overrides every model's threshold.
+    pub min_score: Option<f32>,
+}
+
+impl Default for DetectOptions {
+    fn default() -> Self {
+        DetectOptions { nms_iou: DEFAULT_NMS_IOU, max_per_category: 20, candidates: 2000, min_score: None }
+    }
+}
+
+impl DetectOptions {
+    pub fn validate(&self) -> Result<()> {
+        if !(0.0..=1.0).contains(&self.nms_iou) {
+            return Err(Error::Input(format!("the NMS IoU must be in [0, 1], got {}", self.nms_iou)));
+        }
+        if self.max_per_category == 0 || self.candidates == 0 {
+            return Err(Error::Input("max detections per category and candidates must be at least 1".into()));
+        }
+        if self.min_score.is_some_and(|s| s.is_nan()) {
+            return Err(Error::Input("the minimum score is not a number".into()));
+        }
+        Ok(())
+    }
+}
+
+/// Scores of `hypotheses` for one model (`w·φ + bias`), with the model's feature path.
+pub fn score_hypotheses(
+    scene: &FeatureScene,
+    model: &Model,
+    hypotheses: &[Hypothesis],
+    backend: Backend,
+) -> Result<Vec<f32>> {
+    let weights = std::slice::from_ref(&model.weights);
+    let scores = match model.features.path {
+        FeaturePath::Fast => {
+            FastEngine::new(scene, &model.layout, model.features.fast_options()).scores(hypotheses, weights)
+        }
+        FeaturePath::Exact => backend.scores(scene, &model.layout, hypotheses, weights)?.0,
+    };
+    Ok(scores.into_iter().map(|s| s + model.bias).collect())
+}
+
+/// Detects every model's category in `frame`.
+pub fn detect_frame(
+    frame: &Frame,
+    models: &[Model],
+    backend: Backend,
+    options: &DetectOptions,
+) -> Result<FrameDetections> {
+    options.validate()?;
+    let pre = Preprocessed::from_frame(frame)?;
+    detect_preprocessed(&frame.name, pre, models, backend, options)
+}
+
+/// [`detect_frame`] on an already preprocessed frame.
+pub fn detect_preprocessed(
+    name: &str,
+    pre: Preprocessed,
+    models: &[Model],
+    backend: Backend,
+    options: &DetectOptions,
+) -> Result<FrameDetections> {
+    // One scene per distinct window step (the yaw grids' cell is the step).
+    let mut scenes: BTreeMap<u32, FeatureScene> = BTreeMap::new();
+    for model in models {
+        scenes
+            .entry(model.window.step.to_bits())
+            .or_insert_with(|| FeatureScene::new(pre.clone(), &default_yaws(), model.window.step));
+    }
+    let mut candidates = Vec::new();
+    for model in models {
+        let scene = &scenes[&model.window.step.to_bits()];
+        let window =
+            sliding_window(scene, &WindowOptions { sizes: model.sizes(), min_points: model.window.min_points });
+        let hypotheses = &window.hypotheses;
+        let scores = score_hypotheses(scene, model, hypotheses, backend)?;
+        let threshold = options.min_score.unwrap_or(model.threshold);
+        let mut order: Vec<usize> = (0..hypotheses.len()).filter(|&n| scores[n] >= threshold).collect();
+        let by_score = |a: &usize, b: &usize| scores[*b].total_cmp(&scores[*a]).then(a.cmp(b));
+        if order.len() > options.candidates {
+            order.select_nth_unstable_by(options.candidates - 1, by_score);
+            order.truncate(options.candidates);
+        }
+        order.sort_by(by_score);
+        candidates.extend(
+            order.into_iter().map(|n| Detection::new(&model.category, &hypotheses[n].cuboid(scene), scores[n])),
+        );
+    }
+    let nms =
+        NmsOptions { iou_threshold: options.nms_iou, max_detections: Some(options.max_per_category), top_k: None };
+    Ok(FrameDetections { frame: name.to_string(), detections: nms_detections(&candidates, &nms) })
+}
+
+/// The RGB image with each detection's cuboid projected in its category's colour (front face thick) and a
+/// "category score" label at the top of its projection; the best detection is drawn last (on top).
+pub fn overlay(frame: &Frame, detections: &FrameDetections) -> RgbImage {
+    let mut image = frame.rgb.clone();
+    let camera = Camera::new(frame.intrinsics(), frame.rtilt());
+    let scale = if image.width() >= 480 { 2 } else { 1 };
+    let mut order: Vec<&Detection> = detections.detections.iter().collect();
+    order.sort_by(|a, b| a.score.total_cmp(&b.score));
+    for d in &order {
+        draw_cuboid_with(&mut image, &camera, &d.cuboid(), category_colour(&d.category), scale, 2 * scale + 1);
+    }
+    for d in &order {
+        let cuboid = d.cuboid();
+        let projected: Vec<_> = cuboid.corners().iter().filter_map(|&c| camera.project(c)).collect();
+        if projected.is_empty() {
+            continue;
+        }
+        let x = projected.iter().map(|p| p.x).fold(f32::INFINITY, f32::min);
+        let y = projected.iter().map(|p| p.y).fold(f32::INFINITY, f32::min);
+        let colour = category_colour(&d.category);
+        let text = format!("{} {:.2}", d.category, d.score);
+        let x = (x as i64).clamp(0, image.width() as i64 - 1);
+        let y = (y as i64 - 10 * scale as i64).clamp(0, image.height() as i64 - 1);
+        draw_label(&mut image, x, y, &text, contrasting(colour), colour, scale);
+    }
+    image
+}

@@ -1,0 +1,253 @@
+//! Model files: one trained category per JSON file, `<category>.json` in a models directory.
+//!
+//! ```json
+//! {
+//!   "format": "cog-gpu-model", "version": 1, "category": "bed",
+//!   "layout_id": "cog-v1 grid=5x5x5 expanded=1 groups=density,normals,cog,view",
+//!   "layout": {"base_grid": [5, 5, 5], "expanded": true,
+//!              "groups": {"density": true, "normals": true, "cog": true, "view": true}},
+//!   "sizes": {"widths": [5 numbers], "depths": [3], "heights": [3]},
+//!   "window": {"step": 0.1, "min_points": 50},
+//!   "features": {"path": "fast", "subdivisions": 2},
+//!   "bias": 0.0, "threshold": 0.0,
+//!   "weights": [layout.dim() numbers, in the order of `features::layout`],
+//!   "training": {free-form provenance: data, C, ε, iterations, seconds, ...}
+//! }
+//! ```
+//!
+//! The score of a hypothesis is `weights · φ + bias`; detection drops hypotheses scoring below
+//! `threshold`. The structural SVM puts the "no object" answer at score 0 and asks true boxes to score ≥ 1
+//! and wrong ones ≤ −1 (up to slack), so the default threshold 0 reports exactly the boxes the model
+//! prefers to "no object". Evaluation wants the whole precision–recall curve: run `detect --min-score -1`
+//! (or lower) for it.
+//!
+//! Reading checks everything a model is used for, with errors that name the file and the field: format
+//! and version, that `layout_id` is this build's id of `layout` (feature order), the weights' length and
+//! finiteness, zero weights on switched-off groups, the sizes (5/3/3 positive), the window step and the
+//! category.
+
+use std::path::Path;
+
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+
+use crate::category::{normalise_name, CATEGORIES};
+use crate::error::{Error, Result};
+use crate::features::fast::FastOptions;
+use crate::features::{Layout, SizeQuantiles};
+
+pub const MODEL_FORMAT: &str = "cog-gpu-model";
+pub const MODEL_VERSION: u32 = 1;
+/// Default detection threshold (see the module doc).
+pub const DEFAULT_THRESHOLD: f32 = 0.0;
+
+/// Which feature implementation a model was trained with (and is scored with).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum FeaturePath {
+    /// `features::cpu` / the GPU kernel: exact, slow.
+    Exact,
+    /// `features::fast`: shared-work approximation.
+    Fast,
+}
+
+/// Feature settings of a model.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FeatureSettings {
+    pub path: FeaturePath,
+    /// Lattice cells per centre step of the fast path.
+    #[serde(default = "default_subdivisions")]
+    pub subdivisions: u32,
+}
+
+fn default_subdivisions() -> u32 {
+    crate::features::fast::DEFAULT_SUBDIVISIONS
+}
+
+impl FeatureSettings {
+    pub fn fast_options(&self) -> FastOptions {
+        FastOptions { subdivisions: self.subdivisions }
+    }
+}
+
+/// Sliding-window settings of a model.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WindowSettings {
+    /// Centre step (metres).
+    pub step: f32,
+    /// Hypotheses with fewer points inside are skipped.
+    pub min_points: u32,
+}
+
+/// One category's detector.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Model {
+    pub format: String,
+    pub version: u32,
+    pub category: String,
+    pub layout_id: String,
+    pub layout: Layout,
+    pub sizes: SizeQuantiles,
+    pub window: WindowSettings,
+    pub features: FeatureSettings,
+    #[serde(default)]
+    pub bias: f32,
+    #[serde(default = "default_threshold")]
+    pub threshold: f32,
+    pub weights: Vec<f32>,
+    #[serde(default)]
+    pub training: serde_json::Value,
+}
+
+fn default_threshold() -> f32 {
+    DEFAULT_THRESHOLD
+}
+
+impl Model {
+    /// A checked model with bias 0 and the default threshold.
+    pub fn new(
+        category: &str,
+        layout: Layout,
+        sizes: SizeQuantiles,
+        window: WindowSettings,
+        features: FeatureSettings,
+        weights: Vec<f32>,
+        training: serde_json::Value,
+    ) -> Result<Model> {
+        let model = Model {
+            format: MODEL_FORMAT.into(),
+            version: MODEL_VERSION,
+            category: category.into(),
+            layout_id: layout.id(),
+            layout,
+            sizes,
+            window,
+            features,
+            bias: 0.0,
+            threshold: DEFAULT_THRESHOLD,
+            weights,
+            training,
+        };
+        model.check().map_err(Error::Input)?;
+        Ok(model)
+    }
+
+    /// The hypothesis sizes (45 for the paper's quantiles).
+    pub fn sizes(&self) -> Vec<Vec3> {
+        self.sizes.sizes()
+    }
+
+    /// Everything reading checks (see the module doc).
+    pub fn check(&self) -> std::result::Result<(), String> {
+        if self.format != MODEL_FORMAT {
+            return Err(format!("format is '{}', expected '{MODEL_FORMAT}'", self.format));
+        }
+        if self.version != MODEL_VERSION {
+            return Err(format!(
+                "version {} is not supported (this build reads version {MODEL_VERSION})",
+                self.version
+            ));
+        }
+        let (category, _) = normalise_name(&self.category);
+        if category != self.category || !CATEGORIES.contains(&category.as_str()) {
+            return Err(format!("category '{}' is not one of: {}", self.category, CATEGORIES.join(", ")));
+        }
+        self.layout.validate().map_err(|e| format!("layout: {e}"))?;
+        if self.layout_id != self.layout.id() {
+            return Err(format!(
+                "layout_id '{}' does not match this build's feature layout '{}' (the model was written for \
+                 another feature order; retrain it)",
+                self.layout_id,
+                self.layout.id()
+            ));
+        }
+        if self.weights.len() != self.layout.dim() {
+            return Err(format!("weights has {} numbers, the layout needs {}", self.weights.len(), self.layout.dim()));
+        }
+        if let Some(i) = self.weights.iter().position(|w| !w.is_finite()) {
+            return Err(format!("weights[{i}] is not a finite number"));
+        }
+        let mask = self.layout.mask();
+        if let Some(i) = self.weights.iter().zip(&mask).position(|(w, on)| !on && *w != 0.0) {
+            return Err(format!(
+                "weights[{i}] ({}) belongs to a switched-off feature group and must be 0",
+                self.layout.describe(i)
+            ));
+        }
+        let lists =
+            [("widths", &self.sizes.widths, 5), ("depths", &self.sizes.depths, 3), ("heights", &self.sizes.heights, 3)];
+        for (name, values, count) in lists {
+            if values.len() != count || values.iter().any(|v| !(v.is_finite() && *v > 0.0 && *v < 20.0)) {
+                return Err(format!("sizes.{name} must hold {count} sizes in (0, 20) m, found {values:?}"));
+            }
+        }
+        if !(self.window.step.is_finite() && (0.01..=1.0).contains(&self.window.step)) {
+            return Err(format!("window.step must be between 0.01 and 1 m, found {}", self.window.step));
+        }
+        if self.features.subdivisions == 0 || self.features.subdivisions > 16 {
+            return Err(format!("features.subdivisions must be 1..=16, found {}", self.features.subdivisions));
+        }
+        if !self.bias.is_finite() || self.threshold.is_nan() {
+            return Err("bias must be finite and threshold a number".into());
+        }
+        Ok(())
+    }
+
+    /// Reads and checks a model file.
+    pub fn read(path: &Path) -> Result<Model> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let model: Model =
+            serde_json::from_str(&text).map_err(|e| Error::invalid(path, format!("not a cog-gpu model file: {e}")))?;
+        model.check().map_err(|e| Error::invalid(path, e))?;
+        Ok(model)
+    }
+
+    /// Writes the model (checked first), via a temporary file and a rename so a crash never leaves half a
+    /// model.
+    pub fn write(&self, path: &Path) -> Result<()> {
+        self.check().map_err(|e| Error::invalid(path, e))?;
+        let text = serde_json::to_string(self).map_err(|e| Error::invalid(path, e.to_string()))?;
+        let temporary = path.with_extension("json.tmp");
+        std::fs::write(&temporary, text).map_err(|e| Error::io(&temporary, e))?;
+        std::fs::rename(&temporary, path).map_err(|e| Error::io(path, e))
+    }
+}
+
+/// The models of a directory (`*.json`), sorted by category. With `categories`, exactly those (each must
+/// have a model); without, every model file. A directory without models is an error.
+pub fn read_models_dir(dir: &Path, categories: Option<&[String]>) -> Result<Vec<Model>> {
+    if !dir.is_dir() {
+        return Err(Error::missing(dir, "models directory"));
+    }
+    let mut models = Vec::new();
+    let entries = std::fs::read_dir(dir).map_err(|e| Error::io(dir, e))?;
+    let mut paths: Vec<_> = entries
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "json") && p.is_file())
+        .collect();
+    paths.sort();
+    for path in paths {
+        let model = Model::read(&path)?;
+        if path.file_stem().and_then(|s| s.to_str()) != Some(model.category.as_str()) {
+            return Err(Error::invalid(
+                &path,
+                format!("holds a '{}' model; name it {}.json", model.category, model.category),
+            ));
+        }
+        models.push(model);
+    }
+    if let Some(wanted) = categories {
+        for category in wanted {
+            if !models.iter().any(|m| &m.category == category) {
+                return Err(Error::invalid(dir, format!("no model for category '{category}' ({category}.json)")));
+            }
+        }
+        models.retain(|m| wanted.contains(&m.category));
+    }
+    if models.is_empty() {
+        return Err(Error::invalid(dir, "holds no model files (<category>.json)"));
+    }
+    models.sort_by(|a, b| a.category.cmp(&b.category));
+    Ok(models)
+}

@@ -1,0 +1,192 @@
+//! Detection: scores against an independent computation, NMS and caps, the overlay, and the CLI.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use cog_gpu::detect::{detect_frame, overlay, DetectOptions};
+use cog_gpu::eval::FrameDetections;
+use cog_gpu::features::{Backend, Groups, Layout, Preprocessed, SizeQuantiles};
+use cog_gpu::frame::{DepthSource, Frame};
+use cog_gpu::geometry::{iou_3d, projected_hull_area, Camera};
+use cog_gpu::model::{FeaturePath, FeatureSettings, Model, WindowSettings};
+
+const SAMPLE: &str = "assets/sample/synth-bedroom-s52";
+
+fn bed_sizes() -> SizeQuantiles {
+    SizeQuantiles { widths: vec![1.4, 1.5, 1.6, 1.7, 1.8], depths: vec![1.9, 2.0, 2.1], heights: vec![0.45, 0.5, 0.55] }
+}
+
+/// A one-voxel model whose score is the box's point density: weight 1 on the density, 0 elsewhere.
+fn density_model(path: FeaturePath, step: f32) -> Model {
+    let layout = Layout::new([1, 1, 1], false, Groups::GEOM).unwrap();
+    let mut weights = vec![0.0; layout.dim()];
+    weights[0] = 1.0;
+    let mut model = Model::new(
+        "bed",
+        layout,
+        bed_sizes(),
+        WindowSettings { step, min_points: 500 },
+        FeatureSettings { path, subdivisions: 2 },
+        weights,
+        serde_json::Value::Null,
+    )
+    .unwrap();
+    model.threshold = 0.0;
+    model
+}
+
+#[test]
+fn exact_scores_are_point_densities_and_detections_obey_nms() {
+    let frame = Frame::read(SAMPLE, DepthSource::Raw).unwrap();
+    let model = density_model(FeaturePath::Exact, 0.3);
+    let options = DetectOptions { max_per_category: 5, ..DetectOptions::default() };
+    let result = detect_frame(&frame, std::slice::from_ref(&model), Backend::Cpu, &options).unwrap();
+    let detections = &result.detections;
+    assert!(!detections.is_empty() && detections.len() <= 5, "{} detections", detections.len());
+    assert_eq!(result.frame, frame.name);
+    // Independent score of each detection: points inside its cuboid over the area of its projected hull.
+    let pre = Preprocessed::from_frame(&frame).unwrap();
+    let camera = Camera::new(frame.intrinsics(), frame.rtilt());
+    for d in detections {
+        assert_eq!(d.category, "bed");
+        let cuboid = d.cuboid();
+        let inside = pre.points.iter().filter(|p| cuboid.contains(**p)).count() as f32;
+        let area = projected_hull_area(&camera, &cuboid.corners()).unwrap();
+        let expected = inside / area.max(1.0);
+        // Points exactly on a face may go either way between fixed-point and float membership.
+        assert!((d.score - expected).abs() <= 0.005 * expected + 2.0 / area, "score {} vs {expected}", d.score);
+        assert!(d.score >= model.threshold);
+    }
+    for pair in detections.windows(2) {
+        assert!(pair[0].score >= pair[1].score, "sorted by score");
+    }
+    for (i, a) in detections.iter().enumerate() {
+        for b in &detections[i + 1..] {
+            assert!(iou_3d(&a.cuboid(), &b.cuboid()) <= options.nms_iou + 1e-6);
+        }
+    }
+    // The overlay: the frame's size, drawn where the best box's corners project.
+    let picture = overlay(&frame, &result);
+    assert_eq!(picture.dimensions(), frame.rgb.dimensions());
+    let changed = picture.pixels().zip(frame.rgb.pixels()).filter(|(a, b)| a != b).count();
+    assert!(changed > 100, "{changed} pixels changed");
+    let corner =
+        detections[0].cuboid().corners().iter().filter_map(|&c| camera.project(c)).find(|p| {
+            p.x >= 1.0 && p.y >= 1.0 && p.x < frame.width() as f32 - 1.0 && p.y < frame.height() as f32 - 1.0
+        });
+    if let Some(p) = corner {
+        let (x, y) = (p.x.round() as u32, p.y.round() as u32);
+        assert_ne!(picture.get_pixel(x, y), frame.rgb.get_pixel(x, y), "corner ({x}, {y}) not drawn");
+    }
+}
+
+#[test]
+fn a_threshold_above_every_score_leaves_no_detection() {
+    let frame = Frame::read(SAMPLE, DepthSource::Raw).unwrap();
+    let model = density_model(FeaturePath::Fast, 0.3);
+    let options = DetectOptions { min_score: Some(1e9), ..DetectOptions::default() };
+    assert!(detect_frame(&frame, &[model], Backend::Cpu, &options).unwrap().detections.is_empty());
+    let bad = DetectOptions { nms_iou: 1.5, ..DetectOptions::default() };
+    assert!(detect_frame(&frame, &[], Backend::Cpu, &bad).is_err());
+}
+
+fn binary() -> &'static str {
+    env!("CARGO_BIN_EXE_cog-gpu")
+}
+
+fn run(args: &[&str]) -> std::process::Output {
+    Command::new(binary()).args(args).env("NODEVICE_SELECT", "1").output().expect("run cog-gpu")
+}
+
+fn models_dir(dir: &Path) -> PathBuf {
+    let models = dir.join("models");
+    std::fs::create_dir_all(&models).unwrap();
+    density_model(FeaturePath::Fast, 0.2).write(&models.join("bed.json")).unwrap();
+    models
+}
+
+#[test]
+fn the_cli_writes_detections_and_overlays() {
+    let dir = tempfile::tempdir().unwrap();
+    let models = models_dir(dir.path());
+    let out = dir.path().join("out");
+    let output = run(&[
+        "--cpu",
+        "detect",
+        SAMPLE,
+        "--models",
+        models.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--max-per-category",
+        "3",
+    ]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{stderr}");
+    let name = "synth-bedroom-s52";
+    let read = FrameDetections::read(&out.join(format!("{name}.json"))).unwrap();
+    assert_eq!(read.frame, name);
+    assert!(!read.detections.is_empty() && read.detections.len() <= 3);
+    let png = image::open(out.join(format!("{name}.png"))).unwrap();
+    assert_eq!((png.width(), png.height()), (320, 240));
+    // --json prints the same detections.
+    let output = run(&[
+        "--cpu",
+        "detect",
+        SAMPLE,
+        "--models",
+        models.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--max-per-category",
+        "3",
+        "--no-overlay",
+        "--json",
+    ]);
+    assert!(output.status.success());
+    let printed: Vec<FrameDetections> = serde_json::from_slice(&output.stdout).unwrap();
+    assert_eq!(printed, vec![read]);
+}
+
+#[test]
+fn the_cli_names_bad_inputs() {
+    let dir = tempfile::tempdir().unwrap();
+    let models = models_dir(dir.path());
+    let out = dir.path().join("out");
+    let corrupt = dir.path().join("corrupt");
+    std::fs::create_dir_all(&corrupt).unwrap();
+    std::fs::write(corrupt.join("bed.json"), "{\"format\": \"cog-gpu-model\"").unwrap();
+    let missing_frame = dir.path().join("no-such-frame");
+    let cases: Vec<(Vec<&str>, String)> = vec![
+        (
+            vec!["detect", SAMPLE, "--models", "/nonexistent/models", "--out", out.to_str().unwrap()],
+            "/nonexistent/models".into(),
+        ),
+        (
+            vec!["detect", SAMPLE, "--models", corrupt.to_str().unwrap(), "--out", out.to_str().unwrap()],
+            "bed.json".into(),
+        ),
+        (
+            vec![
+                "detect",
+                missing_frame.to_str().unwrap(),
+                "--models",
+                models.to_str().unwrap(),
+                "--out",
+                out.to_str().unwrap(),
+            ],
+            "no-such-frame".into(),
+        ),
+        (vec!["detect", SAMPLE, "--models", models.to_str().unwrap(), "--categories", "sofa"], "sofa".into()),
+        (vec!["detect", SAMPLE, "--models", models.to_str().unwrap(), "--nms-iou", "2"], "IoU".into()),
+    ];
+    for (args, needle) in cases {
+        let mut full = vec!["--cpu"];
+        full.extend(&args);
+        let output = run(&full);
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(1), "{args:?}: {stderr}");
+        assert!(stderr.contains(&needle), "{args:?}: expected '{needle}' in {stderr}");
+        assert!(!stderr.contains("panicked"), "{stderr}");
+    }
+}

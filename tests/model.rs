@@ -1,0 +1,94 @@
+//! Model files: round trip and every validation failure, each naming the file and the problem.
+
+use std::path::Path;
+
+use cog_gpu::features::{Groups, Layout, SizeQuantiles};
+use cog_gpu::model::{read_models_dir, FeaturePath, FeatureSettings, Model, WindowSettings};
+
+fn sizes() -> SizeQuantiles {
+    SizeQuantiles { widths: vec![0.5, 0.6, 0.7, 0.8, 0.9], depths: vec![0.5, 0.6, 0.7], heights: vec![0.7, 0.8, 0.9] }
+}
+
+fn model(category: &str) -> Model {
+    let layout = Layout::new([3, 3, 3], false, Groups::GEOM).unwrap();
+    let mask = layout.mask();
+    let weights = (0..layout.dim()).map(|n| if mask[n] { (n % 7) as f32 * 0.1 - 0.3 } else { 0.0 }).collect();
+    Model::new(
+        category,
+        layout,
+        sizes(),
+        WindowSettings { step: 0.1, min_points: 50 },
+        FeatureSettings { path: FeaturePath::Fast, subdivisions: 2 },
+        weights,
+        serde_json::json!({"note": "test"}),
+    )
+    .unwrap()
+}
+
+#[test]
+fn a_model_survives_a_round_trip() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("chair.json");
+    let m = model("chair");
+    m.write(&path).unwrap();
+    assert_eq!(Model::read(&path).unwrap(), m);
+    let text = std::fs::read_to_string(&path).unwrap();
+    assert!(text.contains("\"format\":\"cog-gpu-model\"") && text.contains("\"path\":\"fast\""));
+}
+
+/// Writes `m` as JSON, applies `edit` to the JSON value, and returns the read error message.
+fn read_error(dir: &Path, edit: impl Fn(&mut serde_json::Value)) -> String {
+    let path = dir.join("chair.json");
+    let mut value = serde_json::to_value(model("chair")).unwrap();
+    edit(&mut value);
+    std::fs::write(&path, serde_json::to_string(&value).unwrap()).unwrap();
+    let err = Model::read(&path).expect_err("the edited model must be rejected").to_string();
+    assert!(err.contains("chair.json"), "the error must name the file: {err}");
+    err
+}
+
+#[test]
+fn every_invalid_field_is_rejected_with_its_reason() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    assert!(read_error(d, |v| v["format"] = "cog-gpu-weights".into()).contains("format"));
+    assert!(read_error(d, |v| v["version"] = 7.into()).contains("version 7"));
+    assert!(read_error(d, |v| v["category"] = "spaceship".into()).contains("spaceship"));
+    assert!(read_error(d, |v| v["layout_id"] = "cog-v0 grid=3x3x3".into()).contains("layout_id"));
+    assert!(read_error(d, |v| {
+        v["weights"].as_array_mut().unwrap().pop();
+    })
+    .contains("weights has"));
+    assert!(read_error(d, |v| v["weights"][3] = serde_json::Value::Null).contains("not a cog-gpu model file"));
+    // The COG block of voxel 0 is switched off in a GEOM layout: entry 26.
+    assert!(read_error(d, |v| v["weights"][26] = 0.5.into()).contains("switched-off"));
+    assert!(read_error(d, |v| v["sizes"]["widths"] = serde_json::json!([0.5, 0.6])).contains("sizes.widths"));
+    assert!(read_error(d, |v| v["sizes"]["heights"][1] = (-1.0).into()).contains("sizes.heights"));
+    assert!(read_error(d, |v| v["window"]["step"] = 0.0.into()).contains("window.step"));
+    assert!(read_error(d, |v| v["features"]["path"] = "magic".into()).contains("not a cog-gpu model file"));
+    assert!(read_error(d, |v| v["features"]["subdivisions"] = 0.into()).contains("subdivisions"));
+    std::fs::write(d.join("chair.json"), "{ truncated").unwrap();
+    assert!(Model::read(&d.join("chair.json")).unwrap_err().to_string().contains("chair.json"));
+}
+
+#[test]
+fn a_models_directory_is_read_by_category() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let missing = read_models_dir(&d.join("nowhere"), None).unwrap_err().to_string();
+    assert!(missing.contains("nowhere"), "{missing}");
+    assert!(read_models_dir(d, None).unwrap_err().to_string().contains("no model files"));
+    model("sofa").write(&d.join("sofa.json")).unwrap();
+    model("bed").write(&d.join("bed.json")).unwrap();
+    std::fs::write(d.join("notes.txt"), "not a model").unwrap();
+    let all = read_models_dir(d, None).unwrap();
+    assert_eq!(all.iter().map(|m| m.category.as_str()).collect::<Vec<_>>(), ["bed", "sofa"]);
+    let some = read_models_dir(d, Some(&["sofa".to_string()])).unwrap();
+    assert_eq!(some.len(), 1);
+    let absent = read_models_dir(d, Some(&["toilet".to_string()])).unwrap_err().to_string();
+    assert!(absent.contains("toilet"), "{absent}");
+    // A file whose name is not its category.
+    model("bed").write(&d.join("desk.json")).unwrap();
+    let misnamed = read_models_dir(d, None).unwrap_err().to_string();
+    assert!(misnamed.contains("desk.json") && misnamed.contains("'bed'"), "{misnamed}");
+}

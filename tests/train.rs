@@ -1,0 +1,241 @@
+//! Training: the detector's loss-augmented inference against an independent maximisation, the example
+//! construction, and `cog-gpu train` end to end on a tiny synthetic dataset (model, checkpoint, resume,
+//! errors).
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use cog_gpu::features::fast::{FastEngine, FastOptions};
+use cog_gpu::features::{Groups, Layout, Preprocessed, SizeQuantiles};
+use cog_gpu::frame::{DepthSource, Frame};
+use cog_gpu::geometry::{structured_loss, Cuboid};
+use cog_gpu::learn::detector::{
+    nearest_yaw_index, without_points_in, Answer, DetectorOracle, FeatureEngine, TrainingExample, TrainingSettings,
+};
+
+const FRAME: &str = "../shared/data/sunrgbd/kv1-b3dodata-img_0063";
+
+fn binary() -> &'static str {
+    env!("CARGO_BIN_EXE_cog-gpu")
+}
+
+fn run(args: &[&str]) -> std::process::Output {
+    Command::new(binary()).args(args).env("NODEVICE_SELECT", "1").output().expect("run cog-gpu")
+}
+
+#[test]
+fn nearest_yaw_wraps_around_the_circle() {
+    let step = std::f32::consts::TAU / 16.0;
+    assert_eq!(nearest_yaw_index(0.0), 0);
+    assert_eq!(nearest_yaw_index(0.49 * step), 0);
+    assert_eq!(nearest_yaw_index(0.51 * step), 1);
+    assert_eq!(nearest_yaw_index(-0.4 * step), 0);
+    assert_eq!(nearest_yaw_index(-step), 15);
+    assert_eq!(nearest_yaw_index(std::f32::consts::TAU - 0.1 * step), 0);
+    assert_eq!(nearest_yaw_index(3.0 * std::f32::consts::PI), 8);
+}
+
+fn real_frame() -> (Frame, Preprocessed) {
+    let frame = Frame::read(FRAME, DepthSource::Raw).unwrap();
+    let pre = Preprocessed::from_frame(&frame).unwrap();
+    (frame, pre)
+}
+
+#[test]
+fn other_instances_lose_exactly_their_points() {
+    let (frame, pre) = real_frame();
+    let others: Vec<Cuboid> = frame.objects.iter().take(2).map(|o| o.cuboid).collect();
+    let inside = pre.points.iter().filter(|p| others.iter().any(|c| c.contains(**p))).count();
+    assert!(inside > 1000, "the first two boxes hold {inside} points");
+    let kept = without_points_in(&pre, &others);
+    assert_eq!(kept.len(), pre.len() - inside);
+    assert_eq!(kept.normals.len(), kept.len());
+    assert_eq!(kept.gradients.len(), kept.len());
+    assert!(kept.points.iter().all(|p| !others.iter().any(|c| c.contains(*p))));
+}
+
+/// A small problem on the real frame: chair sizes, a coarse window, the 3×3×3 grid.
+fn small_oracle() -> DetectorOracle {
+    let (frame, pre) = real_frame();
+    let chairs: Vec<Cuboid> = frame.objects.iter().filter(|o| o.category == "chair").map(|o| o.cuboid).collect();
+    assert!(!chairs.is_empty());
+    let sizes = SizeQuantiles::from_cuboids(&chairs).unwrap().sizes().into_iter().step_by(7).collect();
+    let settings = TrainingSettings {
+        layout: Layout::new([3, 3, 3], false, Groups::ALL).unwrap(),
+        sizes,
+        step: 0.3,
+        min_points: 50,
+        engine: FeatureEngine::Fast(FastOptions::default()),
+    };
+    let positive = TrainingExample::new("chair".into(), &pre, Some(chairs[0]), &chairs[1..], &settings);
+    let negative = TrainingExample::new("none".into(), &pre, None, &[], &settings);
+    DetectorOracle::new(settings, vec![positive, negative]).unwrap()
+}
+
+#[test]
+fn loss_augmented_inference_finds_the_maximum_over_all_answers() {
+    let oracle = small_oracle();
+    let layout = oracle.settings.layout;
+    // Deterministic weights of both signs.
+    let w: Vec<f32> = (0..layout.dim()).map(|n| (((n * 2654435761) % 1000) as f32 / 1000.0 - 0.45) * 0.3).collect();
+    for (i, ex) in oracle.examples.iter().enumerate() {
+        let hyps = &ex.hypotheses.hypotheses;
+        assert!(hyps.len() > 10);
+        // Independent maximisation: features of every hypothesis, dot products, the loss from geometry.
+        let features = FastEngine::new(&ex.scene, &layout, FastOptions::default()).features(hyps);
+        let mut best = if ex.truth.is_some() { 1.0f64 } else { 0.0 }; // "no object"
+        for (h, row) in hyps.iter().zip(features.chunks(layout.dim())) {
+            let score: f64 = row.iter().zip(&w).map(|(&a, &b)| a as f64 * b as f64).sum();
+            let loss = structured_loss(ex.truth.as_ref(), Some(&h.cuboid(&ex.scene))) as f64;
+            best = best.max(loss + score);
+        }
+        let (answer, loss) = oracle.loss_augmented_argmax(i, &w).unwrap();
+        let value = match answer {
+            Answer::NoObject => loss as f64,
+            Answer::GroundTruth => {
+                let truth = ex.truth_hypothesis().unwrap();
+                let row = FastEngine::new(&ex.scene, &layout, FastOptions::default()).features(&[truth]);
+                assert_eq!(loss, 0.0);
+                row.iter().zip(&w).map(|(&a, &b)| a as f64 * b as f64).sum()
+            }
+            Answer::Hypothesis(n) => {
+                let expected = structured_loss(ex.truth.as_ref(), Some(&hyps[n].cuboid(&ex.scene)));
+                assert!((loss - expected).abs() < 1e-6, "loss {loss} vs {expected}");
+                let row = &features[n * layout.dim()..(n + 1) * layout.dim()];
+                loss as f64 + row.iter().zip(&w).map(|(&a, &b)| a as f64 * b as f64).sum::<f64>()
+            }
+        };
+        assert!(value >= best - 1e-3 * (1.0 + best.abs()), "example {i}: oracle {value} < brute force {best}");
+    }
+}
+
+/// A tiny synthetic bedroom dataset written by `cog-gpu synth`.
+fn tiny_dataset(dir: &Path) -> PathBuf {
+    let data = dir.join("data");
+    let out = run(&[
+        "synth",
+        "--out",
+        data.to_str().unwrap(),
+        "--frames",
+        "4",
+        "--seed",
+        "11",
+        "--width",
+        "160",
+        "--height",
+        "120",
+        "--rooms",
+        "bedroom",
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    data
+}
+
+fn train_args<'a>(data: &'a str, out: &'a str, iterations: &'a str) -> Vec<&'a str> {
+    vec![
+        "train",
+        "--data",
+        data,
+        "--category",
+        "bed",
+        "--out",
+        out,
+        "--positives",
+        "3",
+        "--negatives",
+        "1",
+        "--step",
+        "0.4",
+        "--max-iterations",
+        iterations,
+        "--full-every",
+        "1",
+    ]
+}
+
+#[test]
+fn train_writes_a_model_and_resumes_to_the_same_weights() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = tiny_dataset(dir.path());
+    let data = data.to_str().unwrap();
+    let straight = dir.path().join("straight/bed.json");
+    let split = dir.path().join("split/bed.json");
+    let out = run(&train_args(data, straight.to_str().unwrap(), "3"));
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(Path::new(&format!("{}.ckpt", straight.display())).is_file());
+    // Two iterations, then resume to three.
+    let out = run(&train_args(data, split.to_str().unwrap(), "2"));
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let mut resumed = train_args(data, split.to_str().unwrap(), "3");
+    resumed.push("--resume");
+    let out = run(&resumed);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let read = |p: &Path| -> serde_json::Value { serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap() };
+    let (a, b) = (read(&straight), read(&split));
+    assert_eq!(a["category"], "bed");
+    assert_eq!(a["weights"].as_array().unwrap().len(), Layout::default().dim());
+    assert_eq!(a["weights"], b["weights"], "a resumed run must end with the same weights");
+    assert!(a["weights"].as_array().unwrap().iter().any(|v| v.as_f64().unwrap() != 0.0));
+}
+
+#[test]
+fn train_rejects_bad_input_with_clear_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let missing = dir.path().join("nowhere");
+    let out_model = dir.path().join("m/bed.json");
+    let cases: Vec<(Vec<String>, &str)> = vec![
+        (
+            vec!["train".into(), "--data".into(), missing.display().to_string(), "--category".into(), "bed".into()],
+            "nowhere",
+        ),
+        (
+            vec!["train".into(), "--data".into(), FRAME.into(), "--category".into(), "spaceship".into()],
+            "unknown category",
+        ),
+        (
+            vec![
+                "train".into(),
+                "--data".into(),
+                FRAME.into(),
+                "--category".into(),
+                "bathtub".into(),
+                "--out".into(),
+                out_model.display().to_string(),
+            ],
+            "no 'bathtub'",
+        ),
+        (
+            vec![
+                "train".into(),
+                "--data".into(),
+                FRAME.into(),
+                "--category".into(),
+                "chair".into(),
+                "--out".into(),
+                out_model.display().to_string(),
+                "--resume".into(),
+            ],
+            "no checkpoint",
+        ),
+        (
+            vec![
+                "train".into(),
+                "--data".into(),
+                FRAME.into(),
+                "--category".into(),
+                "chair".into(),
+                "--groups".into(),
+                "colour".into(),
+            ],
+            "unknown feature group",
+        ),
+    ];
+    for (args, needle) in cases {
+        let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+        let out = run(&refs);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {stderr}");
+        assert!(stderr.contains(needle), "{args:?}: expected '{needle}' in: {stderr}");
+        assert!(!stderr.contains("panicked"), "{stderr}");
+    }
+}
