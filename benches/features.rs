@@ -1,11 +1,13 @@
-//! Feature-engine throughput on the real frame: preprocessing, and fused scoring of a fixed, evenly spread
-//! subset of the bed sliding window on the CPU path and (when an adapter exists) the GPU path.
+//! Feature-engine throughput on the real frame: preprocessing, fused scoring of a fixed, evenly spread
+//! subset of the bed sliding window on the exact CPU path and (when an adapter exists) the GPU path, and the
+//! fast path on the whole bed window (lattice, tables and scores).
 //! `cargo bench --bench features`; `cog-gpu bench` reports the full window with the same code.
 
 use std::path::Path;
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 
+use cog_gpu::features::fast::{FastEngine, FastOptions};
 use cog_gpu::features::window::{category_sizes, DEFAULT_SIZE_STATS};
 use cog_gpu::features::{cpu, Hypothesis, Layout, PreparedWindow, Preprocessed};
 use cog_gpu::frame::{DepthSource, Frame};
@@ -40,6 +42,11 @@ fn bench(c: &mut Criterion) {
             b.iter(|| cog_gpu::gpu::features::scores_gpu(&ctx, &window.scene, &layout, &hyps, &w).expect("gpu scoring"))
         });
     }
+    let all = &window.set.hypotheses;
+    group.throughput(Throughput::Elements(all.len() as u64));
+    group.bench_function("score_fast_full_window", |b| {
+        b.iter(|| FastEngine::new(&window.scene, &layout, FastOptions::default()).scores(all, &w))
+    });
     group.finish();
 }
 

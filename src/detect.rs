@@ -5,7 +5,8 @@
 //! shared by all models with the same window step; each model then enumerates its own sizes' hypotheses
 //! and scores them with its feature path (`fast`: [`crate::features::fast`], CPU; `exact`: the GPU kernel
 //! when an adapter is present, else the CPU reference). Of each category the best
-//! [`DetectOptions::candidates`] hypotheses scoring at least the model's threshold go through 3D NMS
+//! hypotheses scoring at least the model's threshold (all, or the best [`DetectOptions::candidates`]) go
+//! through 3D NMS
 //! ([`crate::nms`], IoU [`DetectOptions::nms_iou`]) and at most [`DetectOptions::max_per_category`] are
 //! reported, sorted by score over all categories.
 
@@ -31,15 +32,17 @@ pub struct DetectOptions {
     pub nms_iou: f32,
     /// Detections kept per category after NMS.
     pub max_per_category: usize,
-    /// Highest-scoring hypotheses per category that enter NMS.
-    pub candidates: usize,
+    /// Highest-scoring hypotheses per category that enter NMS; `None`: all above the threshold. A limit
+    /// starves NMS: the best few thousand boxes of a sliding window crowd around a handful of places (all
+    /// sizes and yaws of one object), so after suppression only a few detections would be left.
+    pub candidates: Option<usize>,
     /// Overrides every model's threshold.
     pub min_score: Option<f32>,
 }
 
 impl Default for DetectOptions {
     fn default() -> Self {
-        DetectOptions { nms_iou: DEFAULT_NMS_IOU, max_per_category: 20, candidates: 2000, min_score: None }
+        DetectOptions { nms_iou: DEFAULT_NMS_IOU, max_per_category: 20, candidates: None, min_score: None }
     }
 }
 
@@ -48,7 +51,7 @@ impl DetectOptions {
         if !(0.0..=1.0).contains(&self.nms_iou) {
             return Err(Error::Input(format!("the NMS IoU must be in [0, 1], got {}", self.nms_iou)));
         }
-        if self.max_per_category == 0 || self.candidates == 0 {
+        if self.max_per_category == 0 || self.candidates == Some(0) {
             return Err(Error::Input("max detections per category and candidates must be at least 1".into()));
         }
         if self.min_score.is_some_and(|s| s.is_nan()) {
@@ -112,9 +115,9 @@ pub fn detect_preprocessed(
         let threshold = options.min_score.unwrap_or(model.threshold);
         let mut order: Vec<usize> = (0..hypotheses.len()).filter(|&n| scores[n] >= threshold).collect();
         let by_score = |a: &usize, b: &usize| scores[*b].total_cmp(&scores[*a]).then(a.cmp(b));
-        if order.len() > options.candidates {
-            order.select_nth_unstable_by(options.candidates - 1, by_score);
-            order.truncate(options.candidates);
+        if let Some(limit) = options.candidates.filter(|&k| order.len() > k) {
+            order.select_nth_unstable_by(limit - 1, by_score);
+            order.truncate(limit);
         }
         order.sort_by(by_score);
         candidates.extend(

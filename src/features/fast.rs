@@ -135,7 +135,7 @@ impl<'a> FastEngine<'a> {
         let mut rows: Vec<Option<&mut [f32]>> = out.chunks_mut(dim.max(1)).map(Some).collect();
         let groups = group_by_table(hypotheses);
         // Hand each group the rows of its hypotheses.
-        let mut work: Vec<(TableKey, Vec<(usize, &mut [f32])>)> = Vec::with_capacity(groups.len());
+        let mut work: Vec<(TableKey, GroupRows)> = Vec::with_capacity(groups.len());
         for (key, members) in groups {
             let rows_of_group = members.iter().map(|&n| (n, rows[n].take().expect("each row once"))).collect();
             work.push((key, rows_of_group));
@@ -329,6 +329,9 @@ impl<'a> FastEngine<'a> {
 fn key_of(hyp: &Hypothesis) -> TableKey {
     TableKey { yaw_index: hyp.yaw_index, bottom_bits: hyp.bottom.to_bits(), height_bits: hyp.size.z.to_bits() }
 }
+
+/// The output rows of one table group's hypotheses, with their hypothesis indices.
+type GroupRows<'a> = Vec<(usize, &'a mut [f32])>;
 
 /// Hypotheses that share a [`LayerTable`]: same yaw, bottom and height.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]

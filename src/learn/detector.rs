@@ -114,7 +114,7 @@ pub fn without_points_in(pre: &Preprocessed, cuboids: &[Cuboid]) -> Preprocessed
     let keep: Vec<bool> = pre.points.iter().map(|p| !cuboids.iter().any(|c| c.contains(*p))).collect();
     let pick = |values: &[_]| values.iter().zip(&keep).filter(|(_, &k)| k).map(|(v, _)| *v).collect();
     Preprocessed {
-        camera: pre.camera.clone(),
+        camera: pre.camera,
         image_size: pre.image_size,
         points: pick(&pre.points),
         normals: pick(&pre.normals),
@@ -281,7 +281,7 @@ impl SeparationOracle for DetectorOracle {
 
     fn most_violated_batch(&self, examples: &[usize], w: &[f64]) -> Result<Vec<Constraint>> {
         let call = self.batch_calls.fetch_add(1, Ordering::SeqCst);
-        let full = self.force_full.swap(false, Ordering::SeqCst) || call % self.full_every.max(1) == 0;
+        let full = self.force_full.swap(false, Ordering::SeqCst) || call.is_multiple_of(self.full_every.max(1));
         self.cached.store(!full, Ordering::SeqCst);
         examples.par_iter().map(|&example| self.most_violated(example, w)).collect()
     }
