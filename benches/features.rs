@@ -1,6 +1,7 @@
 //! Feature-engine throughput on the real frame: preprocessing, fused scoring of a fixed, evenly spread
 //! subset of the bed sliding window on the exact CPU path and (when an adapter exists) the GPU path, and the
-//! fast path on the whole bed window (lattice, tables and scores).
+//! fast path on the whole bed window (lattice, tables and scores) on the CPU and (when an adapter exists)
+//! with the GPU scoring kernel (`gpu::fast`).
 //! `cargo bench --bench features`; `cog-gpu bench` reports the full window with the same code.
 
 use std::path::Path;
@@ -37,9 +38,10 @@ fn bench(c: &mut Criterion) {
     let w = weights(layout.dim());
     group.throughput(Throughput::Elements(hyps.len() as u64));
     group.bench_function("score_cpu", |b| b.iter(|| cpu::scores(&window.scene, &layout, &hyps, &w)));
-    if let Some(ctx) = cog_gpu::gpu::acquire(false) {
+    let gpu = cog_gpu::gpu::acquire(false);
+    if let Some(ctx) = &gpu {
         group.bench_function("score_gpu", |b| {
-            b.iter(|| cog_gpu::gpu::features::scores_gpu(&ctx, &window.scene, &layout, &hyps, &w).expect("gpu scoring"))
+            b.iter(|| cog_gpu::gpu::features::scores_gpu(ctx, &window.scene, &layout, &hyps, &w).expect("gpu scoring"))
         });
     }
     let all = &window.set.hypotheses;
@@ -47,6 +49,14 @@ fn bench(c: &mut Criterion) {
     group.bench_function("score_fast_full_window", |b| {
         b.iter(|| FastEngine::new(&window.scene, &layout, FastOptions::default()).scores(all, &w))
     });
+    if let Some(ctx) = &gpu {
+        group.bench_function("score_fast_gpu_full_window", |b| {
+            b.iter(|| {
+                let engine = FastEngine::new(&window.scene, &layout, FastOptions::default());
+                cog_gpu::gpu::fast::fast_scores_gpu(ctx, &engine, all, &w).expect("fast gpu scoring")
+            })
+        });
+    }
     group.finish();
 }
 

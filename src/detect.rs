@@ -3,8 +3,9 @@
 //!
 //! Per frame the preprocessing (gradients, normals, floor) and the per-yaw grids are computed once and
 //! shared by all models with the same window step; each model then enumerates its own sizes' hypotheses
-//! and scores them with its feature path (`fast`: [`crate::features::fast`], CPU; `exact`: the GPU kernel
-//! when an adapter is present, else the CPU reference). Of each category the best
+//! and scores them with its feature path (`fast`: [`crate::features::fast`], its tables built on the CPU and
+//! scored by the GPU kernel [`crate::gpu::fast`] when an adapter is present, else on the CPU; `exact`: the
+//! GPU kernel when an adapter is present, else the CPU reference). Of each category the best
 //! hypotheses scoring at least the model's threshold (all, or the best [`DetectOptions::candidates`]) go
 //! through 3D NMS
 //! ([`crate::nms`], IoU [`DetectOptions::nms_iou`]) and at most [`DetectOptions::max_per_category`] are
@@ -71,7 +72,8 @@ pub fn score_hypotheses(
     let weights = std::slice::from_ref(&model.weights);
     let scores = match model.features.path {
         FeaturePath::Fast => {
-            FastEngine::new(scene, &model.layout, model.features.fast_options()).scores(hypotheses, weights)
+            let engine = FastEngine::new(scene, &model.layout, model.features.fast_options());
+            crate::gpu::fast::fast_scores(backend, &engine, hypotheses, weights)
         }
         FeaturePath::Exact => backend.scores(scene, &model.layout, hypotheses, weights)?.0,
     };

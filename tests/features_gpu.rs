@@ -3,6 +3,8 @@
 //! Without an adapter these tests fail with a clear message, unless `COG_GPU_SKIP_GPU_TESTS=1` (then they
 //! pass after saying they were skipped). Run with `NODEVICE_SELECT=1`.
 
+mod common;
+
 use std::path::Path;
 
 use cog_gpu::features::layout::{Groups, Layout, COG, PER_VOXEL};
@@ -17,17 +19,7 @@ const FRAME: &str = "../shared/data/sunrgbd/kv1-b3dodata-img_0063";
 const STATS: &str = "../shared/data/sunrgbd-size-stats.json";
 
 fn context() -> Option<GpuContext> {
-    match GpuContext::new() {
-        Ok(ctx) => Some(ctx),
-        Err(e) if std::env::var("COG_GPU_SKIP_GPU_TESTS").as_deref() == Ok("1") => {
-            eprintln!("skipped: no GPU adapter ({e}) and COG_GPU_SKIP_GPU_TESTS=1");
-            None
-        }
-        Err(e) => panic!(
-            "no GPU adapter for the GPU tests: {e}. Install a Vulkan driver (mesa-vulkan-drivers gives lavapipe) \
-             and run with NODEVICE_SELECT=1, or set COG_GPU_SKIP_GPU_TESTS=1 to skip them"
-        ),
-    }
+    common::gpu_context()
 }
 
 /// The real frame with a `category`-sized window and `count` kept hypotheses spread over all yaws.

@@ -5,6 +5,11 @@
 //! `--cpu` is the global flag; without any of the three flags both paths run. `preprocess_s` is the shared
 //! CPU preprocessing (gradients, normals, floor, yaw grids, hypotheses); `score_s` the fused scoring of the
 //! kept hypotheses, including uploads and read-back on the GPU path.
+//!
+//! Paths (keys of `paths` in `--json`): `cpu` and `gpu` (exact path), `fast` (fast path on the CPU) and
+//! `fast_gpu` (fast path: lattice and tables on the CPU, scoring by `gpu::fast`; it also reports
+//! `max_relative_difference_vs_fast_cpu` when both ran). `--cpu` runs only the CPU entries, `--gpu` only the
+//! GPU ones. For the fast entries `score_s` includes the lattice (`lattice_s`) and the tables.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -46,7 +51,7 @@ pub struct Args {
     #[arg(long, default_value_t = DEFAULT_MIN_POINTS)]
     pub min_points: u32,
     /// Which feature path to time: `exact` (the CPU and/or GPU path chosen by --cpu/--gpu/--both),
-    /// `fast` (the shared-work approximation, CPU), or `all` (both, plus the cosine similarity of the
+    /// `fast` (the shared-work approximation, on the CPU and/or GPU likewise), or `all` (both, plus the cosine similarity of the
     /// two paths' feature vectors on up to 300 of the kept hypotheses).
     #[arg(long, value_enum, default_value_t = PathChoice::All)]
     pub features: PathChoice,
@@ -102,8 +107,9 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     let run_exact = args.features != PathChoice::Fast;
     let run_fast = args.features != PathChoice::Exact;
     let fast_options = FastOptions { subdivisions: args.subdivisions.max(1) };
-    let gpu = if want_gpu && run_exact { cog_gpu::gpu::acquire(false) } else { None };
-    if args.gpu && run_exact && gpu.is_none() {
+    // Both feature paths have a GPU twin (exact: gpu::features, fast: gpu::fast).
+    let gpu = if want_gpu { cog_gpu::gpu::acquire(false) } else { None };
+    if args.gpu && gpu.is_none() {
         bail!("--gpu: no GPU adapter (see the warning above)");
     }
     let mut backends = Vec::new();
@@ -117,27 +123,41 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         backends.clear();
     }
     let mut paths = serde_json::Map::new();
-    if run_fast {
+    // The fast path's CPU scores, kept to report how far the GPU's are from them.
+    let mut fast_cpu_scores = None;
+    if run_fast && want_cpu {
         let start = Instant::now();
         let engine = FastEngine::new(&window.scene, &layout, fast_options);
         let lattice_s = start.elapsed().as_secs_f64();
         let scores = engine.scores(&scored, &weights);
         let score_s = start.elapsed().as_secs_f64();
-        std::hint::black_box(scores);
-        paths.insert(
-            "fast".into(),
-            json!({
-                "adapter": format!("CPU, rayon, {} threads (shared-work approximation, subdivisions {})",
-                    rayon::current_num_threads(), fast_options.subdivisions),
-                "hypotheses_generated": window.set.generated,
-                "hypotheses_kept": kept.len(),
-                "hypotheses_scored": scored.len(),
-                "preprocess_s": window.preprocess_s,
-                "lattice_s": lattice_s,
-                "score_s": score_s,
-                "hypotheses_per_s": scored.len() as f64 / score_s,
-            }),
+        fast_cpu_scores = Some(std::hint::black_box(scores));
+        let adapter = format!(
+            "CPU, rayon, {} threads (shared-work approximation, subdivisions {})",
+            rayon::current_num_threads(),
+            fast_options.subdivisions
         );
+        paths.insert("fast".into(), fast_entry(adapter, &window, kept.len(), scored.len(), lattice_s, score_s));
+    }
+    if let (true, Some(ctx)) = (run_fast, &gpu) {
+        // Same steps as the CPU entry: lattice, then tables (CPU) and scoring (GPU), uploads and read-back.
+        let start = Instant::now();
+        let engine = FastEngine::new(&window.scene, &layout, fast_options);
+        let lattice_s = start.elapsed().as_secs_f64();
+        let scores = cog_gpu::gpu::fast::fast_scores_gpu(ctx, &engine, &scored, &weights)?;
+        let score_s = start.elapsed().as_secs_f64();
+        // Largest |GPU − CPU| over max(|CPU|, 1): float summation order only (see gpu::fast).
+        let difference = fast_cpu_scores.as_ref().map(|cpu_scores| {
+            scores.iter().zip(cpu_scores).map(|(&g, &c)| ((g - c).abs() / c.abs().max(1.0)) as f64).fold(0.0, f64::max)
+        });
+        let adapter = format!(
+            "{} (fast path: tables on the CPU, scores on the GPU, subdivisions {})",
+            ctx.adapter_summary(),
+            fast_options.subdivisions
+        );
+        let mut entry = fast_entry(adapter, &window, kept.len(), scored.len(), lattice_s, score_s);
+        entry["max_relative_difference_vs_fast_cpu"] = json!(difference);
+        paths.insert("fast_gpu".into(), entry);
     }
     let similarity =
         if run_fast && run_exact { Some(cosine_report(&window, &layout, &scored, fast_options)) } else { None };
@@ -203,7 +223,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     }
     for (name, p) in &paths {
         println!(
-            "{name:>4}: score {:.3} s, {:.0} hypotheses/s, {:.3e} point·voxel updates/s  [{}]",
+            "{name:>8}: score {:.3} s, {:.0} hypotheses/s, {:.3e} point·voxel updates/s  [{}]",
             p["score_s"].as_f64().unwrap_or(0.0),
             p["hypotheses_per_s"].as_f64().unwrap_or(0.0),
             p["point_voxel_updates_per_s"].as_f64().unwrap_or(0.0),
@@ -244,4 +264,25 @@ pub fn cosine(a: &[f32], b: &[f32]) -> f64 {
     } else {
         ab / (aa.sqrt() * bb.sqrt()).max(f64::MIN_POSITIVE)
     }
+}
+
+/// One fast-path entry of the JSON report (`score_s` counts tables and scoring, after the lattice).
+fn fast_entry(
+    adapter: String,
+    window: &PreparedWindow,
+    kept: usize,
+    scored: usize,
+    lattice_s: f64,
+    score_s: f64,
+) -> serde_json::Value {
+    json!({
+        "adapter": adapter,
+        "hypotheses_generated": window.set.generated,
+        "hypotheses_kept": kept,
+        "hypotheses_scored": scored,
+        "preprocess_s": window.preprocess_s,
+        "lattice_s": lattice_s,
+        "score_s": score_s,
+        "hypotheses_per_s": scored as f64 / score_s,
+    })
 }

@@ -16,7 +16,7 @@ use cog_gpu::detect::{detect_frame, overlay, DetectOptions};
 use cog_gpu::eval::FrameDetections;
 use cog_gpu::features::Backend;
 use cog_gpu::frame::{is_frame_dir, DepthSource, Frame};
-use cog_gpu::model::{read_models_dir, FeaturePath};
+use cog_gpu::model::read_models_dir;
 use cog_gpu::nms::DEFAULT_NMS_IOU;
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -44,6 +44,10 @@ pub struct Args {
     /// Drop detections scoring below this (overrides the models' thresholds).
     #[arg(long, allow_hyphen_values = true)]
     pub min_score: Option<f32>,
+    /// Overrides every model's sliding-window centre step (metres; the models' own is 0.1): coarser is
+    /// faster (4× fewer hypotheses at 0.2) and places boxes less precisely.
+    #[arg(long)]
+    pub step: Option<f32>,
     /// Do not write the overlay pictures.
     #[arg(long)]
     pub no_overlay: bool,
@@ -97,12 +101,20 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     let categories: Vec<String> = args.categories.iter().map(|c| normalise_name(c).0).collect();
     let models_dir =
         if args.models == Path::new("assets/models") { resolve_default(&args.models) } else { args.models.clone() };
-    let models = read_models_dir(&models_dir, (!categories.is_empty()).then_some(categories.as_slice()))?;
+    let mut models = read_models_dir(&models_dir, (!categories.is_empty()).then_some(categories.as_slice()))?;
+    if let Some(step) = args.step {
+        if !(step.is_finite() && (0.01..=1.0).contains(&step)) {
+            bail!("--step must be between 0.01 and 1 metre, got {step}");
+        }
+        for model in &mut models {
+            model.window.step = step;
+        }
+    }
     let frames = frame_dirs(&args.frames)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating the output directory {}", args.out.display()))?;
-    let needs_gpu = models.iter().any(|m| m.features.path == FeaturePath::Exact);
-    let gpu = if needs_gpu { cog_gpu::gpu::acquire(options.force_cpu) } else { None };
+    // Both feature paths score on the GPU when there is one (fast: gpu::fast, exact: gpu::features).
+    let gpu = if models.is_empty() { None } else { cog_gpu::gpu::acquire(options.force_cpu) };
     let backend = match &gpu {
         Some(ctx) => Backend::Gpu(ctx),
         None => Backend::Cpu,

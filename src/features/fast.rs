@@ -128,6 +128,16 @@ impl<'a> FastEngine<'a> {
         self.options
     }
 
+    /// The scene the engine was built on.
+    pub fn scene(&self) -> &'a FeatureScene {
+        self.scene
+    }
+
+    /// The feature layout the engine computes.
+    pub fn layout(&self) -> &Layout {
+        &self.layout
+    }
+
     /// Features of `hypotheses`, row-major `hypotheses.len() × layout.dim()`.
     pub fn features(&self, hypotheses: &[Hypothesis]) -> Vec<f32> {
         let dim = self.layout.dim();
@@ -193,12 +203,13 @@ impl<'a> FastEngine<'a> {
         scores
     }
 
-    fn view(&self, hyp: &Hypothesis) -> [f32; VIEW] {
+    /// The 12 view features of `hyp` (shared with the GPU twin, which adds them on the CPU).
+    pub(crate) fn view(&self, hyp: &Hypothesis) -> [f32; VIEW] {
         view_features(view_cosine(&hyp.cuboid(self.scene)))
     }
 
     /// Step 2: the layer table of one (yaw, bottom, height).
-    fn table(&self, key: TableKey) -> LayerTable {
+    pub(crate) fn table(&self, key: TableKey) -> LayerTable {
         let lattice = &self.lattices[key.yaw_index as usize];
         let g = self.layout.grid();
         let expansion = self.layout.expansion();
@@ -218,19 +229,7 @@ impl<'a> FastEngine<'a> {
     ) {
         let g = self.layout.grid();
         let (nx, ny) = (g[0] as usize, g[1] as usize);
-        // Voxel i along an axis covers the lattice cells xs[i]..xs[i+1]: those whose centre lies in it.
-        let boundaries = |axis: usize, n: usize| -> Vec<usize> {
-            (0..=n)
-                .map(|i| {
-                    let face = record.lo[axis] + i as f32 * record.cell[axis];
-                    // Ties (a cell centre on a face, common: centres and sizes are round numbers)
-                    // go to the voxel above the face, robustly against rounding.
-                    let first = ((face - lattice.origin[axis]) / lattice.cell - 0.5 - TIE_CELLS).ceil();
-                    first.clamp(0.0, lattice.cells[axis] as f32) as usize
-                })
-                .collect()
-        };
-        let (xs, ys) = (boundaries(0, nx), boundaries(1, ny));
+        let [xs, ys] = voxel_boundaries(&g, record, lattice);
         // Sums at the (nx+1)×(ny+1) boundary corners of one layer, shared by its voxels.
         let mut corners = vec![[0u32; CHANNELS]; (nx + 1) * (ny + 1)];
         for k in 0..g[2] as usize {
@@ -265,6 +264,13 @@ impl<'a> FastEngine<'a> {
             out[self.layout.voxel_index(i as u32, j as u32, k as u32)] = *sums;
         });
         out
+    }
+
+    /// Step 3's cell boundaries of a hypothesis (`record` of a hypothesis of yaw `yaw_index`): voxel i
+    /// along s covers the lattice cells `xs[i]..xs[i+1]`, voxel j along t `ys[j]..ys[j+1]` — the indices
+    /// the scoring uses, exposed for the GPU twin.
+    pub(crate) fn voxel_boundaries(&self, record: &HypothesisRecord, yaw_index: u16) -> [Vec<usize>; 2] {
+        voxel_boundaries(&self.layout.grid(), record, &self.lattices[yaw_index as usize])
     }
 
     /// COG fixed-point units per unit of gradient magnitude.
@@ -326,7 +332,24 @@ impl<'a> FastEngine<'a> {
     }
 }
 
-fn key_of(hyp: &Hypothesis) -> TableKey {
+/// Step 3's membership rule: voxel i along s covers the lattice cells `xs[i]..xs[i+1]` (those whose centre
+/// lies in it), likewise `ys` along t; `nx + 1` and `ny + 1` boundaries.
+fn voxel_boundaries(g: &[u32; 3], record: &HypothesisRecord, lattice: &YawLattice) -> [Vec<usize>; 2] {
+    let boundaries = |axis: usize, n: usize| -> Vec<usize> {
+        (0..=n)
+            .map(|i| {
+                let face = record.lo[axis] + i as f32 * record.cell[axis];
+                // Ties (a cell centre on a face, common: centres and sizes are round numbers)
+                // go to the voxel above the face, robustly against rounding.
+                let first = ((face - lattice.origin[axis]) / lattice.cell - 0.5 - TIE_CELLS).ceil();
+                first.clamp(0.0, lattice.cells[axis] as f32) as usize
+            })
+            .collect()
+    };
+    [boundaries(0, g[0] as usize), boundaries(1, g[1] as usize)]
+}
+
+pub(crate) fn key_of(hyp: &Hypothesis) -> TableKey {
     TableKey { yaw_index: hyp.yaw_index, bottom_bits: hyp.bottom.to_bits(), height_bits: hyp.size.z.to_bits() }
 }
 
@@ -335,14 +358,14 @@ type GroupRows<'a> = Vec<(usize, &'a mut [f32])>;
 
 /// Hypotheses that share a [`LayerTable`]: same yaw, bottom and height.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-struct TableKey {
-    yaw_index: u16,
+pub(crate) struct TableKey {
+    pub(crate) yaw_index: u16,
     bottom_bits: u32,
     height_bits: u32,
 }
 
 /// Groups hypothesis indices by table key, in a deterministic order.
-fn group_by_table(hypotheses: &[Hypothesis]) -> Vec<(TableKey, Vec<usize>)> {
+pub(crate) fn group_by_table(hypotheses: &[Hypothesis]) -> Vec<(TableKey, Vec<usize>)> {
     let mut groups: HashMap<TableKey, Vec<usize>> = HashMap::new();
     for (n, hyp) in hypotheses.iter().enumerate() {
         groups.entry(key_of(hyp)).or_default().push(n);
@@ -431,6 +454,16 @@ impl LayerTable {
             }
         });
         LayerTable { sums, stride }
+    }
+
+    /// All entries, layer by layer, `(k·stride[1] + y)·stride[0] + x` entries of [`CHANNELS`] words each.
+    pub(crate) fn sums(&self) -> &[u32] {
+        &self.sums
+    }
+
+    /// Entries per row (cells along s + 1) and rows per layer (cells along t + 1).
+    pub(crate) fn stride(&self) -> [usize; 2] {
+        self.stride
     }
 
     /// The sums of layer `k` over the cells `< x` along s and `< y` along t.

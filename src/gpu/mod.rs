@@ -36,6 +36,7 @@
 //! index is past the job's end (the grid may hold a few more invocations than asked for).
 
 pub mod depth_points;
+pub mod fast;
 pub mod features;
 
 use std::borrow::Cow;
@@ -165,6 +166,7 @@ fn wgsl_workgroup_size(spec: &KernelSpec) -> Result<[u32; 3]> {
 pub struct Kernels {
     pub depth_points: Kernel,
     pub features: Kernel,
+    pub fast_scores: Kernel,
 }
 
 impl Kernels {
@@ -172,6 +174,7 @@ impl Kernels {
         Ok(Kernels {
             depth_points: Kernel::new(device, &depth_points::KERNEL)?,
             features: Kernel::new(device, &features::KERNEL)?,
+            fast_scores: Kernel::new(device, &fast::KERNEL)?,
         })
     }
 }

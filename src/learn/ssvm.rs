@@ -197,8 +197,11 @@ impl CuttingPlane {
         self.bind(oracle)?;
         let progress = self.progress_bar();
         let mut history = Vec::new();
+        let mut qp_seconds = 0.0;
         let solution = loop {
+            let oracle_started = std::time::Instant::now();
             let evaluation = self.evaluate(oracle)?;
+            let oracle_seconds = oracle_started.elapsed().as_secs_f64();
             let report = IterationReport {
                 iteration: self.state.iteration,
                 constraints: self.state.constraints.len(),
@@ -208,14 +211,17 @@ impl CuttingPlane {
                 max_violation: evaluation.max_violation,
             };
             log::info!(
-                "SSVM iteration {}: {} constraints (+{}), primal {:.6}, dual {:.6}, gap {:.3e}, max violation {:.3e}",
+                "SSVM iteration {}: {} constraints (+{}), primal {:.6}, dual {:.6}, gap {:.3e}, max violation {:.3e} \
+                 (inference {:.1} s, previous QP {:.1} s)",
                 report.iteration,
                 report.constraints,
                 report.added,
                 report.primal,
                 report.dual,
                 report.gap(),
-                report.max_violation
+                report.max_violation,
+                oracle_seconds,
+                qp_seconds
             );
             progress.set_message(format!(
                 "iteration {} | constraints {} (+{}) | objective {:.6} (dual {:.6}) | max violation {:.2e}",
@@ -236,7 +242,9 @@ impl CuttingPlane {
                 };
             }
             self.add_constraints(evaluation.candidates);
+            let qp_started = std::time::Instant::now();
             self.solve_working_set()?;
+            qp_seconds = qp_started.elapsed().as_secs_f64();
             self.state.iteration += 1;
             self.prune();
             if let Some(path) = &self.options.checkpoint {

@@ -1,0 +1,202 @@
+// Fused scores of the fast path (src/features/fast.rs, steps 3–4) from one summed-area LayerTable.
+// CPU twin: `fast_scores_main` in src/gpu/fast.rs (same names, same loop and reduction order).
+//
+// One workgroup of 64 invocations per hypothesis. Invocation `lid` takes the voxels ℓ = lid, lid + 64, …
+// (ℓ = (k·ny + j)·nx + i, the layout's order; at most 9 voxels for the largest grid), reads the voxel's
+// 36 channels as four table corners (u32 wrapping differences: exact whatever the order), finalises the
+// 35 features (density and normal bins over the linearised projected area, normalised COG; an empty
+// voxel contributes nothing) and dots them with up to MAX_WEIGHTS weight vectors. Everything is vec4 and
+// the loops over channels and weights are written out or of constant length: lavapipe keeps dynamically
+// indexed private arrays in memory and gathers them lane by lane (a first version with a `values` array
+// and scalar loads was 1.4× slower). On lavapipe the kernel is bound by its 45 non-uniform vec4 loads per
+// voxel (36 table, 9 weights), which gallivm performs lane by lane. The 64 partial scores
+// per weight vector are reduced in workgroup memory in a fixed tree order, so the result is the same
+// bits on every run. The view features are added on the CPU (12 numbers per hypothesis).
+//
+// Loops are short (≤ 9 voxels × ≤ 36 channels per invocation): far from gallivm's 65535-iteration cap
+// (see shaders/features.wgsl).
+
+const MAX_WEIGHTS: u32 = 8u;
+const WORKGROUP: u32 = 64u;
+const MIN_PROJECT_DEPTH: f32 = 1e-3;
+const COG_EPSILON: f32 = 0.01;
+
+// One hypothesis: its expanded box's low corner and voxel size in the yaw's rotated frame.
+struct FastRecord {
+    lo: vec4<f32>,   // s, t, z, unused
+    cell: vec4<f32>, // voxel size along s, t, z, unused
+}
+
+struct FastParams {
+    grid: vec4<u32>,  // nx, ny, nz, dim (unused)
+    job: vec4<u32>,   // hypothesis count, weight count, group bits (1 density, 2 normals, 4 cog), boundaries per hypothesis
+    table: vec4<u32>, // entries per table row (cells along s + 1), rows per layer (cells along t + 1), unused, unused
+    scale: vec4<f32>, // fx, fy, 1 / cog_scale, unused
+    m0: vec4<f32>,    // camera_from_rotated, column 0 (xyz)
+    m1: vec4<f32>,    // column 1
+    m2: vec4<f32>,    // column 2
+}
+
+@group(0) @binding(0) var<uniform> params: FastParams;
+// The LayerTable, one vec4 per 4 channels (CHANNELS = 36 = 9 vec4 per entry).
+@group(0) @binding(1) var<storage, read> table: array<vec4<u32>>;
+@group(0) @binding(2) var<storage, read> records: array<FastRecord>;
+// Per hypothesis: nx + 1 cell boundaries along s, then ny + 1 along t (voxel i covers cells xs[i]..xs[i+1]).
+@group(0) @binding(3) var<storage, read> bounds: array<u32>;
+// The pass's weight vectors without the view part, each voxel padded to 36 (pad weight 0):
+// weights[(w·voxels + ℓ)·9 + c] holds the weights of channels 4c..4c+3 of voxel ℓ.
+@group(0) @binding(4) var<storage, read> weights: array<vec4<f32>>;
+@group(0) @binding(5) var<storage, read_write> out: array<f32>;
+
+var<workgroup> partial: array<f32, 512>; // WORKGROUP × MAX_WEIGHTS
+
+fn camera_point(q: vec3<f32>) -> vec3<f32> {
+    return params.m0.xyz * q.x + params.m1.xyz * q.y + params.m2.xyz * q.z;
+}
+
+// Written out (not dot()) so the order of the additions is the CPU's.
+fn dot3(a: vec3<f32>, b: vec3<f32>) -> f32 {
+    return a.x * b.x + a.y * b.y + a.z * b.z;
+}
+
+// acc + a·b, adding the four products one after the other (the CPU twin's order).
+fn dot_acc(acc: f32, a: vec4<f32>, b: vec4<f32>) -> f32 {
+    return (((acc + a.x * b.x) + a.y * b.y) + a.z * b.z) + a.w * b.w;
+}
+
+// Channels 4c..4c+3 of the voxel whose corners are the entries (in vec4 units) high, left, low, both.
+fn sums(high: u32, left: u32, low: u32, both: u32, c: u32) -> vec4<u32> {
+    return table[high + c] - table[left + c] - table[low + c] + table[both + c];
+}
+
+@compute @workgroup_size(64)
+fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+        @builtin(local_invocation_index) lid: u32) {
+    let h = wg.x + wg.y * nwg.x;
+    let nx = params.grid.x;
+    let ny = params.grid.y;
+    let nz = params.grid.z;
+    let weight_count = params.job.y;
+    let groups = params.job.z;
+    let use_density = (groups & 1u) != 0u;
+    let use_normals = (groups & 2u) != 0u;
+    let use_cog = (groups & 4u) != 0u;
+    // Uniform control flow up to the barriers: out-of-range work is masked, not returned from.
+    let working = h < params.job.x;
+    var my_partial: array<f32, 8>;
+
+    if (working) {
+        let record = records[h];
+        let lo = record.lo.xyz;
+        let cell = record.cell.xyz;
+        let face_areas = vec3<f32>(cell.y * cell.z, cell.x * cell.z, cell.x * cell.y);
+        let fx = params.scale.x;
+        let fy = params.scale.y;
+        let inv_cog_scale = params.scale.z;
+        let b = h * params.job.w;
+        let row = params.table.x;
+        let voxels = nx * ny * nz;
+        for (var v = lid; v < voxels; v += WORKGROUP) {
+            let i = v % nx;
+            let j = (v / nx) % ny;
+            let k = v / (nx * ny);
+            // Step 3: the voxel's sums, four corners of layer k (9 vec4 per entry).
+            let x0 = bounds[b + i];
+            let x1 = bounds[b + i + 1u];
+            let y0 = bounds[b + nx + 1u + j];
+            let y1 = bounds[b + nx + 1u + j + 1u];
+            let layer = k * params.table.y;
+            let high = ((layer + y1) * row + x1) * 9u;
+            let left = ((layer + y1) * row + x0) * 9u;
+            let low = ((layer + y0) * row + x1) * 9u;
+            let both = ((layer + y0) * row + x0) * 9u;
+            let s0 = sums(high, left, low, both, 0u);
+            if (s0.x == 0u) {
+                continue;
+            }
+            // Step 4: each channel's multiplier: 1/area for density and normal bins, 1/cog_scale times the
+            // COG normalisation for COG bins, 0 for switched-off groups.
+            var density = 0.0;
+            var normal = 0.0;
+            let centre = vec3<f32>(lo.x + (f32(i) + 0.5) * cell.x, lo.y + (f32(j) + 0.5) * cell.y,
+                                   lo.z + (f32(k) + 0.5) * cell.z);
+            let p = camera_point(centre);
+            if (p.z >= MIN_PROJECT_DEPTH) {
+                let area = fx * fy
+                    * (face_areas.x * abs(dot3(params.m0.xyz, p)) + face_areas.y * abs(dot3(params.m1.xyz, p))
+                       + face_areas.z * abs(dot3(params.m2.xyz, p)))
+                    / (p.z * p.z * p.z);
+                let inv_area = 1.0 / max(area, 1.0);
+                density = select(0.0, inv_area, use_density);
+                normal = select(0.0, inv_area, use_normals);
+            }
+            // COG bins are channels 26..34: s6.zw, s7, s8.xyz.
+            let s6 = sums(high, left, low, both, 6u);
+            let s7 = sums(high, left, low, both, 7u);
+            let s8 = sums(high, left, low, both, 8u);
+            var cog = 0.0;
+            if (use_cog) {
+                let g6 = vec4<f32>(s6) * inv_cog_scale;
+                let g7 = vec4<f32>(s7) * inv_cog_scale;
+                let g8 = vec4<f32>(s8) * inv_cog_scale;
+                var norm_sq = 0.0;
+                norm_sq += g6.z * g6.z;
+                norm_sq += g6.w * g6.w;
+                norm_sq += g7.x * g7.x;
+                norm_sq += g7.y * g7.y;
+                norm_sq += g7.z * g7.z;
+                norm_sq += g7.w * g7.w;
+                norm_sq += g8.x * g8.x;
+                norm_sq += g8.y * g8.y;
+                norm_sq += g8.z * g8.z;
+                // (sum · 2⁻ⁿ) · scale = sum · (2⁻ⁿ · scale) exactly: 1/cog_scale is a power of two.
+                cog = inv_cog_scale * (1.0 / sqrt(norm_sq + COG_EPSILON));
+            }
+            let f0 = vec4<f32>(s0) * vec4<f32>(density, normal, normal, normal);
+            let f1 = vec4<f32>(sums(high, left, low, both, 1u)) * normal;
+            let f2 = vec4<f32>(sums(high, left, low, both, 2u)) * normal;
+            let f3 = vec4<f32>(sums(high, left, low, both, 3u)) * normal;
+            let f4 = vec4<f32>(sums(high, left, low, both, 4u)) * normal;
+            let f5 = vec4<f32>(sums(high, left, low, both, 5u)) * normal;
+            let f6 = vec4<f32>(s6) * vec4<f32>(normal, normal, cog, cog);
+            let f7 = vec4<f32>(s7) * cog;
+            let f8 = vec4<f32>(s8) * vec4<f32>(cog, cog, cog, 0.0);
+            // Constant trip count (unrolled by the driver): my_partial stays in registers.
+            for (var w = 0u; w < MAX_WEIGHTS; w++) {
+                if (w < weight_count) {
+                    let wb = (w * voxels + v) * 9u;
+                    var acc = 0.0;
+                    acc = dot_acc(acc, weights[wb], f0);
+                    acc = dot_acc(acc, weights[wb + 1u], f1);
+                    acc = dot_acc(acc, weights[wb + 2u], f2);
+                    acc = dot_acc(acc, weights[wb + 3u], f3);
+                    acc = dot_acc(acc, weights[wb + 4u], f4);
+                    acc = dot_acc(acc, weights[wb + 5u], f5);
+                    acc = dot_acc(acc, weights[wb + 6u], f6);
+                    acc = dot_acc(acc, weights[wb + 7u], f7);
+                    acc = dot_acc(acc, weights[wb + 8u], f8);
+                    my_partial[w] += acc;
+                }
+            }
+        }
+    }
+
+    for (var w = 0u; w < MAX_WEIGHTS; w++) {
+        partial[lid * MAX_WEIGHTS + w] = my_partial[w];
+    }
+    workgroupBarrier();
+    // Fixed tree: partial[l] += partial[l + stride] for stride 32, 16, …, 1.
+    for (var stride = WORKGROUP / 2u; stride > 0u; stride = stride / 2u) {
+        if (lid < stride) {
+            for (var w = 0u; w < MAX_WEIGHTS; w++) {
+                partial[lid * MAX_WEIGHTS + w] += partial[(lid + stride) * MAX_WEIGHTS + w];
+            }
+        }
+        workgroupBarrier();
+    }
+    if (lid == 0u && working) {
+        for (var w = 0u; w < weight_count; w++) {
+            out[h * weight_count + w] = partial[w];
+        }
+    }
+}

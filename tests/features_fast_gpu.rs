@@ -1,0 +1,170 @@
+//! The fast-path scoring kernel (`shaders/fast_scores.wgsl`) against its CPU twin
+//! (`gpu::fast::fast_scores_reference`) and against `FastEngine::scores`, on lavapipe or any adapter.
+//!
+//! Without an adapter these tests fail with a clear message, unless `COG_GPU_SKIP_GPU_TESTS=1` (then they
+//! pass after saying they were skipped). Run with `NODEVICE_SELECT=1`.
+//!
+//! Tolerance: the three differ only in the order of float additions (and in the driver's rounding of
+//! `u32 → f32`, division and `sqrt`), so scores agree to 1e-5 relative to the magnitude of the dot product,
+//! `Σ|w_i·φ_i|` (the score itself can cancel to near 0 with random signed weights).
+
+mod common;
+
+use std::path::Path;
+
+use cog_gpu::features::fast::{FastEngine, FastOptions};
+use cog_gpu::features::layout::{Groups, Layout};
+use cog_gpu::features::{Hypothesis, PreparedWindow, SizeQuantiles};
+use cog_gpu::frame::{DepthSource, Frame};
+use cog_gpu::gpu::fast::{fast_scores_gpu, fast_scores_gpu_chunked, fast_scores_reference, MAX_CHUNK};
+use cog_gpu::gpu::GpuContext;
+use cog_gpu::synth::{self, SynthOptions};
+
+const FRAME: &str = "../shared/data/sunrgbd/kv1-b3dodata-img_0063";
+const STATS: &str = "../shared/data/sunrgbd-size-stats.json";
+
+fn context() -> Option<GpuContext> {
+    common::gpu_context()
+}
+
+fn sizes(category: &str) -> Vec<glam::Vec3> {
+    SizeQuantiles::from_stats_file(Path::new(STATS), category).unwrap().sizes()
+}
+
+/// The real frame's `category` window.
+fn real_window(category: &str) -> PreparedWindow {
+    let frame = Frame::read(FRAME, DepthSource::Raw).unwrap();
+    PreparedWindow::new(&frame, sizes(category), 0.1, 50).unwrap()
+}
+
+/// A small synthetic frame (160×120) and its `category` window.
+fn synthetic_window(category: &str) -> PreparedWindow {
+    let frame = synth::generate_frame(3, 0, &SynthOptions::small(160, 120)).unwrap().frame;
+    PreparedWindow::new(&frame, sizes(category), 0.1, 50).unwrap()
+}
+
+/// Up to `count` kept hypotheses, evenly spread (so all yaws and sizes appear).
+fn sample(window: &PreparedWindow, count: usize) -> Vec<Hypothesis> {
+    let kept = &window.set.hypotheses;
+    let stride = (kept.len() / count).max(1);
+    kept.iter().step_by(stride).take(count).copied().collect()
+}
+
+/// `count` pseudo-random weight vectors in [−1, 1) (a 64-bit LCG per vector).
+fn random_weights(layout: &Layout, count: usize, seed: u64) -> Vec<Vec<f32>> {
+    (0..count as u64)
+        .map(|w| {
+            let mut state = (seed * 1000 + w).wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (0..layout.dim())
+                .map(|_| {
+                    state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                    ((state >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
+                })
+                .collect()
+        })
+        .collect()
+}
+
+fn bits(v: &[f32]) -> Vec<u32> {
+    v.iter().map(|x| x.to_bits()).collect()
+}
+
+/// Asserts `got ≈ expected` within 1e-5 of the magnitude `Σ|w_i·φ_i|` (see the module doc); `magnitude`
+/// holds those sums, laid out like the scores.
+fn assert_scores_match(got: &[f32], expected: &[f32], magnitude: &[f32], what: &str) {
+    assert_eq!(got.len(), expected.len(), "{what}");
+    let mut worst = 0.0f64;
+    for (n, ((&g, &e), &m)) in got.iter().zip(expected).zip(magnitude).enumerate() {
+        let scale = (m as f64).max(e.abs() as f64).max(1e-6);
+        let relative = (g as f64 - e as f64).abs() / scale;
+        worst = worst.max(relative);
+        assert!(relative <= 1e-5, "{what}: score {n}: {g} vs {e} (magnitude {m}, relative {relative:.2e})");
+    }
+    eprintln!("{what}: {} scores, worst relative difference {worst:.2e}", got.len());
+}
+
+/// GPU vs CPU twin vs `FastEngine::scores` for `layout` on `hyps`; returns the GPU scores.
+fn compare_paths(
+    ctx: &GpuContext,
+    window: &PreparedWindow,
+    layout: &Layout,
+    hyps: &[Hypothesis],
+    weights: &[Vec<f32>],
+    what: &str,
+) -> Vec<f32> {
+    let engine = FastEngine::new(&window.scene, layout, FastOptions::default());
+    let engine_scores = engine.scores(hyps, weights);
+    let reference = fast_scores_reference(&engine, hyps, weights, MAX_CHUNK).unwrap();
+    let gpu = fast_scores_gpu(ctx, &engine, hyps, weights).unwrap();
+    // Σ|w_i·φ_i|: every feature is ≥ 0, so the engine's scores with |w| are exactly that sum.
+    let abs_weights: Vec<Vec<f32>> = weights.iter().map(|w| w.iter().map(|x| x.abs()).collect()).collect();
+    let magnitude = engine.scores(hyps, &abs_weights);
+    assert!(magnitude.iter().all(|&m| m > 0.0), "{what}: a hypothesis with no features");
+    assert_scores_match(&gpu, &reference, &magnitude, &format!("{what}: GPU vs CPU twin"));
+    assert_scores_match(&reference, &engine_scores, &magnitude, &format!("{what}: CPU twin vs FastEngine::scores"));
+    assert_scores_match(&gpu, &engine_scores, &magnitude, &format!("{what}: GPU vs FastEngine::scores"));
+    gpu
+}
+
+#[test]
+fn gpu_fast_scores_match_the_cpu_on_a_real_frame_and_are_reproducible() {
+    let Some(ctx) = context() else { return };
+    let window = real_window("bed");
+    let layout = Layout::default();
+    let hyps = sample(&window, 2000);
+    assert!(hyps.len() >= 1500, "{} hypotheses", hyps.len());
+    let weights = random_weights(&layout, 3, 1);
+    let gpu = compare_paths(&ctx, &window, &layout, &hyps, &weights, "real frame, default layout");
+    // Bit-identical across runs (exact integer sums, fixed reduction order).
+    let engine = FastEngine::new(&window.scene, &layout, FastOptions::default());
+    let again = fast_scores_gpu(&ctx, &engine, &hyps, &weights).unwrap();
+    assert_eq!(bits(&again), bits(&gpu), "GPU fast scores differ between runs");
+}
+
+#[test]
+fn gpu_fast_scores_match_the_cpu_on_a_synthetic_frame() {
+    let Some(ctx) = context() else { return };
+    let window = synthetic_window("chair");
+    let hyps = sample(&window, 3000);
+    assert!(hyps.len() >= 1000, "{} hypotheses", hyps.len());
+    let layout = Layout::default();
+    compare_paths(&ctx, &window, &layout, &hyps, &random_weights(&layout, 2, 2), "synthetic frame");
+}
+
+#[test]
+fn gpu_fast_scores_honour_switched_off_groups_and_other_grids() {
+    let Some(ctx) = context() else { return };
+    let window = synthetic_window("table");
+    let hyps = sample(&window, 600);
+    let off = |density, normals, cog, view| Groups { density, normals, cog, view };
+    for layout in [
+        Layout::new([5, 5, 5], true, off(true, false, true, false)).unwrap(),
+        Layout::new([5, 5, 5], true, off(false, true, false, true)).unwrap(),
+        Layout::new([5, 5, 5], true, off(false, false, true, true)).unwrap(),
+        Layout::new([3, 1, 3], true, Groups::GEOM).unwrap(),
+        Layout::new([5, 5, 7], false, Groups::ALL).unwrap(),
+    ] {
+        compare_paths(&ctx, &window, &layout, &hyps, &random_weights(&layout, 3, 3), &layout.id());
+    }
+}
+
+#[test]
+fn chunked_dispatches_and_weight_passes_equal_the_single_dispatch() {
+    let Some(ctx) = context() else { return };
+    let window = synthetic_window("bed");
+    let layout = Layout::default();
+    let hyps = sample(&window, 400);
+    // Ten weight vectors: two passes of the kernel (at most 8 per pass).
+    let weights = random_weights(&layout, 10, 4);
+    let engine = FastEngine::new(&window.scene, &layout, FastOptions::default());
+    let whole = fast_scores_gpu(&ctx, &engine, &hyps, &weights).unwrap();
+    let chunked = fast_scores_gpu_chunked(&ctx, &engine, &hyps, &weights, 7).unwrap();
+    assert_eq!(bits(&chunked), bits(&whole), "chunks of 7 hypotheses");
+    // The CPU twin runs the same dispatches: chunking does not change its bits either.
+    let reference = fast_scores_reference(&engine, &hyps, &weights, 7).unwrap();
+    assert_eq!(bits(&reference), bits(&fast_scores_reference(&engine, &hyps, &weights, MAX_CHUNK).unwrap()));
+    let abs_weights: Vec<Vec<f32>> = weights.iter().map(|w| w.iter().map(|x| x.abs()).collect()).collect();
+    let magnitude = engine.scores(&hyps, &abs_weights);
+    assert_scores_match(&whole, &reference, &magnitude, "ten weight vectors: GPU vs CPU twin");
+    assert_scores_match(&whole, &engine.scores(&hyps, &weights), &magnitude, "ten weight vectors: GPU vs engine");
+}
