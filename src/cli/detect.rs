@@ -51,6 +51,10 @@ pub struct Args {
     /// Do not write the overlay pictures.
     #[arg(long)]
     pub no_overlay: bool,
+    /// Boxes drawn on an overlay: the frame's best this many detections over all categories (the JSON keeps
+    /// all of them); a picture with every box above the threshold is unreadable.
+    #[arg(long, default_value_t = 8)]
+    pub overlay_top: usize,
     /// Print the detections of all frames as one JSON array on stdout.
     #[arg(long)]
     pub json: bool,
@@ -140,7 +144,12 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         detections.write(&json_path)?;
         if !args.no_overlay {
             let png_path = args.out.join(format!("{}.png", frame.name));
-            overlay(&frame, &detections)
+            // Detections are sorted by score, best first.
+            let best = FrameDetections {
+                frame: detections.frame.clone(),
+                detections: detections.detections.iter().take(args.overlay_top).cloned().collect(),
+            };
+            overlay(&frame, &best)
                 .save(&png_path)
                 .with_context(|| format!("writing the overlay {}", png_path.display()))?;
         }
