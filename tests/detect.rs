@@ -179,6 +179,9 @@ fn the_cli_names_bad_inputs() {
         ),
         (vec!["detect", SAMPLE, "--models", models.to_str().unwrap(), "--categories", "sofa"], "sofa".into()),
         (vec!["detect", SAMPLE, "--models", models.to_str().unwrap(), "--nms-iou", "2"], "IoU".into()),
+        (vec!["detect", SAMPLE, "--models", models.to_str().unwrap(), "--step", "0"], "--step".into()),
+        // Two frames named alike would overwrite each other's detections file.
+        (vec!["detect", SAMPLE, SAMPLE, "--models", models.to_str().unwrap()], "same name".into()),
     ];
     for (args, needle) in cases {
         let mut full = vec!["--cpu"];

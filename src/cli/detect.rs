@@ -91,6 +91,19 @@ fn frame_dirs(args: &[PathBuf]) -> anyhow::Result<Vec<PathBuf>> {
         }
         frames.extend(found);
     }
+    // One output file per frame name: two frames with the same directory name would overwrite each other.
+    let mut seen = std::collections::HashMap::new();
+    for dir in &frames {
+        let name = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        if let Some(first) = seen.insert(name.clone(), dir) {
+            bail!(
+                "frames {} and {} have the same name '{name}', so they would share the output {name}.json: \
+                 rename one of them",
+                first.display(),
+                dir.display()
+            );
+        }
+    }
     Ok(frames)
 }
 
