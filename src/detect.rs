@@ -62,19 +62,52 @@ impl DetectOptions {
     }
 }
 
-/// Scores of `hypotheses` for one model (`w·φ + bias`), with the model's feature path.
-pub fn score_hypotheses(
-    scene: &FeatureScene,
+/// The fast-path engines of one frame: the per-yaw lattices depend on the scene, the layout and the
+/// subdivisions only, so models that share them (all shipped models do) share one engine instead of
+/// binning every point of every yaw again.
+pub struct FastEngines<'a> {
+    engines: Vec<FastEngine<'a>>,
+}
+
+impl<'a> FastEngines<'a> {
+    pub fn new() -> Self {
+        FastEngines { engines: Vec::new() }
+    }
+
+    /// The engine of `model` on `scene`, built on first use.
+    pub fn get(&mut self, scene: &'a FeatureScene, model: &Model) -> &FastEngine<'a> {
+        let options = model.features.fast_options();
+        let same =
+            |e: &FastEngine| std::ptr::eq(e.scene(), scene) && *e.layout() == model.layout && e.options() == options;
+        let index = match self.engines.iter().position(same) {
+            Some(index) => index,
+            None => {
+                self.engines.push(FastEngine::new(scene, &model.layout, options));
+                self.engines.len() - 1
+            }
+        };
+        &self.engines[index]
+    }
+}
+
+impl Default for FastEngines<'_> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Scores of `hypotheses` for one model (`w·φ + bias`), with the model's feature path; fast-path engines
+/// come from (and go into) `engines`.
+pub fn score_hypotheses<'a>(
+    scene: &'a FeatureScene,
     model: &Model,
     hypotheses: &[Hypothesis],
     backend: Backend,
+    engines: &mut FastEngines<'a>,
 ) -> Result<Vec<f32>> {
     let weights = std::slice::from_ref(&model.weights);
     let scores = match model.features.path {
-        FeaturePath::Fast => {
-            let engine = FastEngine::new(scene, &model.layout, model.features.fast_options());
-            crate::gpu::fast::fast_scores(backend, &engine, hypotheses, weights)
-        }
+        FeaturePath::Fast => crate::gpu::fast::fast_scores(backend, engines.get(scene, model), hypotheses, weights),
         FeaturePath::Exact => backend.scores(scene, &model.layout, hypotheses, weights)?.0,
     };
     Ok(scores.into_iter().map(|s| s + model.bias).collect())
@@ -108,12 +141,13 @@ pub fn detect_preprocessed(
             .or_insert_with(|| FeatureScene::new(pre.clone(), &default_yaws(), model.window.step));
     }
     let mut candidates = Vec::new();
+    let mut engines = FastEngines::new();
     for model in models {
         let scene = &scenes[&model.window.step.to_bits()];
         let window =
             sliding_window(scene, &WindowOptions { sizes: model.sizes(), min_points: model.window.min_points });
         let hypotheses = &window.hypotheses;
-        let scores = score_hypotheses(scene, model, hypotheses, backend)?;
+        let scores = score_hypotheses(scene, model, hypotheses, backend, &mut engines)?;
         let threshold = options.min_score.unwrap_or(model.threshold);
         let mut order: Vec<usize> = (0..hypotheses.len()).filter(|&n| scores[n] >= threshold).collect();
         let by_score = |a: &usize, b: &usize| scores[*b].total_cmp(&scores[*a]).then(a.cmp(b));
