@@ -1,15 +1,18 @@
 #!/usr/bin/env bash
 # Reproduces the shipped models (assets/models/) and the README's AP tables on synthetic data.
 #
-#   bash assets/reproduce-models.sh models    # train set, the ten shipped models, test set, AP@0.25
+#   bash assets/reproduce-models.sh models    # data, the ten shipped models, calibration, test AP@0.25
 #   bash assets/reproduce-models.sh ablation  # the paper's Table 1 ablation (5 categories x 5 feature sets)
 #
 # WORK (default /tmp/cog-gpu-repro) receives the data sets, models, detections and logs; nothing in the
-# checkout is changed (copy WORK/models/*.json to assets/models/ to ship new models).
-# Data (all 320x240): training set seed 1000 (400 frames, all room types); test set seed 2000 (80 frames,
-# all room types); ablation test set: 30 bedrooms (seed 3001), 40 bathrooms (3002), 15 offices (3003), so
-# that the ablation's five categories have enough instances.
-# Timings in the README were measured with this script on a 2-core machine.
+# checkout is changed (copy WORK/models/models/*.json to assets/models/ to ship new models).
+# Data (all 320x240, seeds never shared between sets):
+#   train        1000 frames, seed 1000, synth's default room mix;
+#   calibration    40 frames, seed 1500, default mix (held out: fits each model's score calibration);
+#   test          200 frames: 80 of the default mix (seed 2000), 40 bathrooms (2001), 40 bedrooms (2002),
+#                 40 living rooms (2003), so that the rarer categories have more test boxes;
+#   ablation-test: 30 bedrooms (seed 3001), 40 bathrooms (3002), 15 offices (3003).
+# Timings in the README were measured with this script on the 2-core machine.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 WORK=${WORK:-/tmp/cog-gpu-repro}
@@ -19,8 +22,28 @@ export NODEVICE_SELECT=1 RUST_LOG=${RUST_LOG:-info}
 
 cargo build --release --locked
 mkdir -p "$WORK"
-[ -d "$WORK/train" ] || "$BIN" synth --out "$WORK/train" --frames 400 --seed 1000 --width 320 --height 240
-[ -d "$WORK/test" ] || "$BIN" synth --out "$WORK/test" --frames 80 --seed 2000 --width 320 --height 240
+# synth_set DIR ROOMS FRAMES SEED [PREFIX]: a synthetic set of ROOMS (a --rooms list, or "mixed": synth's
+# default mix in SUN RGB-D's proportions), frames renamed PREFIX-N when PREFIX is given (as
+
+# frame names must be unique in a data set, one detections file per name).
+synth_set() {
+    local dir=$1 rooms=$2 frames=$3 seed=$4 prefix=${5:-}
+    [ -d "$dir" ] && return 0
+    local room_args=()
+    [ "$rooms" = mixed ] || room_args=(--rooms "$rooms")
+    "$BIN" synth --out "$dir.partial" --frames "$frames" --seed "$seed" --width 320 --height 240 "${room_args[@]}"
+    if [ -n "$prefix" ]; then
+        for frame in "$dir.partial"/synth-*; do mv "$frame" "${frame/synth-/$prefix-}"; done
+    fi
+    mv "$dir.partial" "$dir"
+}
+all_rooms=mixed
+synth_set "$WORK/train" "$all_rooms" 1000 1000
+synth_set "$WORK/calibration" "$all_rooms" 40 1500 calib
+synth_set "$WORK/test/mixed" "$all_rooms" 80 2000 mixed
+synth_set "$WORK/test/bathroom" bathroom 40 2001 bathroom
+synth_set "$WORK/test/bedroom" bedroom 40 2002 bedroom
+synth_set "$WORK/test/living_room" living_room 40 2003 living
 if [ ! -d "$WORK/ablation-test" ]; then
     for room_frames_seed in bedroom:30:3001 bathroom:40:3002 office:15:3003; do
         IFS=: read -r room frames seed <<< "$room_frames_seed"
@@ -31,11 +54,11 @@ if [ ! -d "$WORK/ablation-test" ]; then
     done
 fi
 
-# train_and_eval NAME CATEGORIES TEST DETECT_ARGS TRAIN_ARGS...: trains each category into WORK/NAME/,
-# detects on WORK/TEST (with the extra detect arguments DETECT_ARGS, space-separated) and writes
-# WORK/NAME/ap.txt, ap.json and precision-recall plots.
+# train_and_eval NAME CATEGORIES TEST CALIBRATE TRAIN_ARGS...: trains each category into WORK/NAME/models/;
+# when CALIBRATE is "yes", detects on WORK/calibration and fits the models' calibrations; then detects on
+# WORK/TEST and writes WORK/NAME/ap.txt, ap.json, diagnosis.txt and precision-recall plots.
 train_and_eval() {
-    local name=$1 categories=$2 test=$3 detect_args=$4
+    local name=$1 categories=$2 test=$3 calibrate=$4
     shift 4
     local dir="$WORK/$name"
     mkdir -p "$dir/models"
@@ -49,36 +72,40 @@ train_and_eval() {
             echo "$name $category $((SECONDS - started)) s" >> "$dir/times.txt"
         fi
     done
+    if [ "$calibrate" = yes ]; then
+        local started=$SECONDS
+        "$BIN" detect "$WORK/calibration" --models "$dir/models" --out "$dir/calibration-detections" \
+            --min-score -3 --no-overlay > /dev/null
+        "$BIN" calibrate --data "$WORK/calibration" --detections "$dir/calibration-detections" \
+            --models "$dir/models" | tee "$dir/calibration.txt"
+        echo "$name calibrate $((SECONDS - started)) s" >> "$dir/times.txt"
+    fi
     local started=$SECONDS
-    # shellcheck disable=SC2086 # DETECT_ARGS is a list of words
-    "$BIN" detect "$WORK/$test" --models "$dir/models" --out "$dir/detections" --min-score -2 --no-overlay \
-        $detect_args
+    "$BIN" detect "$WORK/$test" --models "$dir/models" --out "$dir/detections" --min-score -3 --no-overlay \
+        > /dev/null
     echo "$name detect $((SECONDS - started)) s" >> "$dir/times.txt"
     "$BIN" eval --data "$WORK/$test" --detections "$dir/detections" --categories "$categories" \
         --plots "$dir/pr" | tee "$dir/ap.txt"
     "$BIN" eval --data "$WORK/$test" --detections "$dir/detections" --categories "$categories" --json \
         > "$dir/ap.json"
+    "$BIN" eval --data "$WORK/$test" --detections "$dir/detections" --categories "$categories" --diagnose \
+        --models "$dir/models" | tee "$dir/diagnosis.txt"
 }
 
 case "$mode" in
     models)
-        # `train`'s defaults are the shipped models' settings (30 instances, 8 negative frames, at most 18
-        # iterations, a full pass every 6), except that the shipped bed and chair were trained with
-        # --full-every 4 (a solver schedule: both stop on the same rule). AP is measured with a 0.2 m
-        # detection step (the README says why).
-        train_and_eval models bed,chair,sofa,table,desk,toilet,bathtub,dresser,nightstand,bookshelf test "--step 0.2"
+        # `train`'s defaults are the shipped models' settings; detection uses the models' own step (0.2 m).
+        train_and_eval models bed,chair,sofa,table,desk,toilet,bathtub,dresser,nightstand,bookshelf test yes
         ;;
     ablation)
         five=bed,bathtub,nightstand,chair,toilet
-        # Small training runs (12 instances, 3 negative frames, 0.3 m training step, at most 8 cutting-plane
-        # iterations) and a 0.2 m detection step: 25 models and 5 evaluations in about 40 minutes.
-        small=(--positives 12 --negatives 3 --full-every 4 --max-iterations 8 --step 0.3)
-        test=(ablation-test "--step 0.2")
-        train_and_eval ablation-geom "$five" "${test[@]}" "${small[@]}" --groups geom --no-expand
-        train_and_eval ablation-cog "$five" "${test[@]}" "${small[@]}" --groups cog --no-expand
-        train_and_eval ablation-geom-cog "$five" "${test[@]}" "${small[@]}" --groups geom,cog --no-expand
-        train_and_eval ablation-geom-cog-view "$five" "${test[@]}" "${small[@]}" --groups geom,cog,view --no-expand
-        train_and_eval ablation-expanded "$five" "${test[@]}" "${small[@]}" --groups geom,cog,view
+        # Smaller training runs (30 instances, 15 negative frames, 0.3 m training step, 2 full passes).
+        small=(--positives 30 --negatives 15 --max-full-passes 2 --step 0.3)
+        train_and_eval ablation-geom "$five" ablation-test no "${small[@]}" --groups geom --no-expand
+        train_and_eval ablation-cog "$five" ablation-test no "${small[@]}" --groups cog --no-expand
+        train_and_eval ablation-geom-cog "$five" ablation-test no "${small[@]}" --groups geom,cog --no-expand
+        train_and_eval ablation-geom-cog-view "$five" ablation-test no "${small[@]}" --groups geom,cog,view --no-expand
+        train_and_eval ablation-expanded "$five" ablation-test no "${small[@]}" --groups geom,cog,view
         ;;
     *)
         echo "usage: bash assets/reproduce-models.sh [models|ablation]" >&2

@@ -9,7 +9,8 @@
 //! hypotheses scoring at least the model's threshold (all, or the best [`DetectOptions::candidates`]) go
 //! through 3D NMS
 //! ([`crate::nms`], IoU [`DetectOptions::nms_iou`]) and at most [`DetectOptions::max_per_category`] are
-//! reported, sorted by score over all categories.
+//! reported; models with a calibration report calibrated probabilities ([`calibrate`]), and all
+//! detections are sorted by score over all categories.
 
 use std::collections::BTreeMap;
 
@@ -162,7 +163,51 @@ pub fn detect_preprocessed(
     }
     let nms =
         NmsOptions { iou_threshold: options.nms_iou, max_detections: Some(options.max_per_category), top_k: None };
-    Ok(FrameDetections { frame: name.to_string(), detections: nms_detections(&candidates, &nms) })
+    let mut detections = nms_detections(&candidates, &nms);
+    calibrate(&mut detections, models);
+    Ok(FrameDetections { frame: name.to_string(), detections })
+}
+
+/// Replaces each detection's raw score by its model's calibrated probability (keeping the raw score in
+/// `raw_score`) where the model has a calibration, then sorts all detections by score, best first (a
+/// stable sort: ties keep their order). The calibration is monotone, so the order within a category and
+/// the NMS result are unchanged.
+pub fn calibrate(detections: &mut [Detection], models: &[Model]) {
+    for d in detections.iter_mut() {
+        if let Some(calibration) = models.iter().find(|m| m.category == d.category).and_then(|m| m.calibration.as_ref())
+        {
+            d.raw_score = Some(d.score);
+            d.score = calibration.probability(d.score);
+        }
+    }
+    detections.sort_by(|a, b| b.score.total_cmp(&a.score));
+}
+
+/// 3D IoU above which a lower-scoring detection of another category is taken for the same piece of
+/// furniture by [`overlay_selection`].
+pub const CROSS_CATEGORY_IOU: f32 = 0.4;
+
+/// The detections an overlay draws: in score order over all categories (calibrated scores compare across
+/// categories), each skipped when it overlaps an already chosen detection **of another category** with
+/// 3D IoU ≥ [`CROSS_CATEGORY_IOU`] (one object is not drawn as two categories; same-category overlaps were
+/// settled by NMS), until `count` are chosen.
+pub fn overlay_selection(detections: &[Detection], count: usize) -> Vec<Detection> {
+    let mut order: Vec<&Detection> = detections.iter().collect();
+    order.sort_by(|a, b| b.score.total_cmp(&a.score));
+    let mut chosen: Vec<Detection> = Vec::new();
+    for d in order {
+        if chosen.len() >= count {
+            break;
+        }
+        let cuboid = d.cuboid();
+        let clash = chosen
+            .iter()
+            .any(|c| c.category != d.category && crate::geometry::iou_3d(&c.cuboid(), &cuboid) >= CROSS_CATEGORY_IOU);
+        if !clash {
+            chosen.push(d.clone());
+        }
+    }
+    chosen
 }
 
 /// The RGB image with each detection's cuboid projected in its category's colour (front face thick) and a

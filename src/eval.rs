@@ -32,7 +32,12 @@ pub struct Detection {
     pub size: [f32; 3],
     /// Radians, the width axis' angle from +x, counter-clockwise seen from above.
     pub yaw: f32,
+    /// The ranking score: the calibrated probability of a true positive when the model has a
+    /// calibration, else the raw score.
     pub score: f32,
+    /// The model's raw score `w·φ + bias`, when `score` is calibrated.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub raw_score: Option<f32>,
 }
 
 impl Detection {
@@ -47,6 +52,7 @@ impl Detection {
             size: cuboid.size.to_array(),
             yaw: cuboid.yaw,
             score,
+            raw_score: None,
         }
     }
 }
@@ -65,7 +71,7 @@ impl FrameDetections {
         let parsed: FrameDetections =
             serde_json::from_str(&text).map_err(|e| Error::invalid(path, format!("not a detections file: {e}")))?;
         for (i, d) in parsed.detections.iter().enumerate() {
-            let finite = d.centre.iter().chain(&d.size).chain([&d.yaw, &d.score]).all(|v| v.is_finite());
+            let finite = d.centre.iter().chain(&d.size).chain([&d.yaw, &d.score]).chain(&d.raw_score).all(|v| v.is_finite());
             if !finite {
                 return Err(Error::invalid(path, format!("detections[{i}] has a non-finite number")));
             }

@@ -6,6 +6,7 @@
 //! kernels with their CPU twins) → later stages (features, learning, layout, cascade, evaluation).
 //! `synth` writes frames in the same layout the `frame` module reads.
 
+pub mod calibration;
 pub mod category;
 pub mod detect;
 pub mod draw;

@@ -32,6 +32,8 @@ enum Command {
     Eval(cli::eval::Args),
     /// Detect objects with trained models: per frame a detections JSON and an overlay picture.
     Detect(cli::detect::Args),
+    /// Fit each model's score calibration (raw score -> probability of a true positive) on held-out frames.
+    Calibrate(cli::calibrate::Args),
     /// Train one category's detector (structural SVM) on annotated frames and write a model file.
     Train(cli::train::Args),
 }
@@ -48,6 +50,7 @@ fn main() {
         Command::Eval(args) => cli::eval::run(args, &options),
         Command::Train(args) => cli::train::run(args, &options),
         Command::Detect(args) => cli::detect::run(args, &options),
+        Command::Calibrate(args) => cli::calibrate::run(args, &options),
     };
     if let Err(err) = result {
         eprintln!("error: {err:#}");

@@ -11,12 +11,15 @@
 //!   "features": {"path": "fast", "subdivisions": 2},
 //!   "bias": 0.0, "threshold": 0.0,
 //!   "weights": [layout.dim() numbers, in the order of `features::layout`],
-//!   "training": {free-form provenance: data, C, ε, iterations, seconds, ...}
+//!   "training": {free-form provenance: data, C, ε, iterations, seconds, ...},
+//!   "calibration": {"a": 2.1, "b": -1.3, "detections": 5210, "true_positives": 212, "iou": 0.25,
+//!                   "data": "...", "frames": 150}   (optional, written by `cog-gpu calibrate`)
 //! }
 //! ```
 //!
-//! The score of a hypothesis is `weights · φ + bias`; detection drops hypotheses scoring below
-//! `threshold`. The structural SVM puts the "no object" answer at score 0 and asks true boxes to score ≥ 1
+//! The raw score of a hypothesis is `weights · φ + bias`; detection drops hypotheses whose raw score is
+//! below `threshold`. With a `calibration` ([`crate::calibration`]), a detection's reported `score` is
+//! the calibrated probability `σ(a·raw + b)` and `raw_score` keeps the raw one. The structural SVM puts the "no object" answer at score 0 and asks true boxes to score ≥ 1
 //! and wrong ones ≤ −1 (up to slack), so the default threshold 0 reports exactly the boxes the model
 //! prefers to "no object". Evaluation wants the whole precision–recall curve: run `detect --min-score -1`
 //! (or lower) for it.
@@ -31,6 +34,7 @@ use std::path::Path;
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
+use crate::calibration::Calibration;
 use crate::category::{normalise_name, CATEGORIES};
 use crate::error::{Error, Result};
 use crate::features::fast::FastOptions;
@@ -97,6 +101,10 @@ pub struct Model {
     pub weights: Vec<f32>,
     #[serde(default)]
     pub training: serde_json::Value,
+    /// Raw score → probability of a true positive, fitted on held-out frames by `cog-gpu calibrate`
+    /// ([`crate::calibration`]); `null` until then (detections then report the raw score).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub calibration: Option<Calibration>,
 }
 
 fn default_threshold() -> f32 {
@@ -127,6 +135,7 @@ impl Model {
             threshold: DEFAULT_THRESHOLD,
             weights,
             training,
+            calibration: None,
         };
         model.check().map_err(Error::Input)?;
         Ok(model)
@@ -189,6 +198,9 @@ impl Model {
         }
         if !self.bias.is_finite() || self.threshold.is_nan() {
             return Err("bias must be finite and threshold a number".into());
+        }
+        if let Some(calibration) = &self.calibration {
+            calibration.validate()?;
         }
         Ok(())
     }

@@ -67,8 +67,8 @@ fn small_oracle() -> DetectorOracle {
         min_points: 50,
         engine: FeatureEngine::Fast(FastOptions::default()),
     };
-    let positive = TrainingExample::new("chair".into(), &pre, Some(chairs[0]), &chairs[1..], &settings);
-    let negative = TrainingExample::new("none".into(), &pre, None, &[], &settings);
+    let positive = TrainingExample::new("chair".into(), &pre, Some(chairs[0]), &chairs[1..]);
+    let negative = TrainingExample::new("none".into(), &pre, None, &[]);
     DetectorOracle::new(settings, vec![positive, negative]).unwrap()
 }
 
@@ -79,27 +79,28 @@ fn loss_augmented_inference_finds_the_maximum_over_all_answers() {
     // Deterministic weights of both signs.
     let w: Vec<f32> = (0..layout.dim()).map(|n| (((n * 2654435761) % 1000) as f32 / 1000.0 - 0.45) * 0.3).collect();
     for (i, ex) in oracle.examples.iter().enumerate() {
-        let hyps = &ex.hypotheses.hypotheses;
+        let window = ex.window(&oracle.settings);
+        let hyps = &window.hypotheses.hypotheses;
         assert!(hyps.len() > 10);
         // Independent maximisation: features of every hypothesis, dot products, the loss from geometry.
-        let features = FastEngine::new(&ex.scene, &layout, FastOptions::default()).features(hyps);
+        let features = FastEngine::new(&window.scene, &layout, FastOptions::default()).features(hyps);
         let mut best = if ex.truth.is_some() { 1.0f64 } else { 0.0 }; // "no object"
         for (h, row) in hyps.iter().zip(features.chunks(layout.dim())) {
             let score: f64 = row.iter().zip(&w).map(|(&a, &b)| a as f64 * b as f64).sum();
-            let loss = structured_loss(ex.truth.as_ref(), Some(&h.cuboid(&ex.scene))) as f64;
+            let loss = structured_loss(ex.truth.as_ref(), Some(&h.cuboid(&window.scene))) as f64;
             best = best.max(loss + score);
         }
         let (answer, loss) = oracle.loss_augmented_argmax(i, &w).unwrap();
         let value = match answer {
             Answer::NoObject => loss as f64,
             Answer::GroundTruth => {
-                let truth = ex.truth_hypothesis().unwrap();
-                let row = FastEngine::new(&ex.scene, &layout, FastOptions::default()).features(&[truth]);
+                let truth = window.truth_hypothesis(ex.truth.as_ref().unwrap());
+                let row = FastEngine::new(&window.scene, &layout, FastOptions::default()).features(&[truth]);
                 assert_eq!(loss, 0.0);
                 row.iter().zip(&w).map(|(&a, &b)| a as f64 * b as f64).sum()
             }
             Answer::Hypothesis(n) => {
-                let expected = structured_loss(ex.truth.as_ref(), Some(&hyps[n].cuboid(&ex.scene)));
+                let expected = structured_loss(ex.truth.as_ref(), Some(&hyps[n].cuboid(&window.scene)));
                 assert!((loss - expected).abs() < 1e-6, "loss {loss} vs {expected}");
                 let row = &features[n * layout.dim()..(n + 1) * layout.dim()];
                 loss as f64 + row.iter().zip(&w).map(|(&a, &b)| a as f64 * b as f64).sum::<f64>()
@@ -107,6 +108,54 @@ fn loss_augmented_inference_finds_the_maximum_over_all_answers() {
         };
         assert!(value >= best - 1e-3 * (1.0 + best.abs()), "example {i}: oracle {value} < brute force {best}");
     }
+}
+
+/// The cached pass: after a full pass at w, the candidates of every example hold its window's argmax, so a
+/// cached pass at the same w gives the same answer, and its value equals the brute-force maximum over the
+/// cached features (dot products only).
+#[test]
+fn cached_pass_answers_like_the_full_pass_at_the_same_weights() {
+    let oracle = small_oracle();
+    let dim = oracle.settings.layout.dim();
+    let w: Vec<f64> = (0..dim).map(|n| (((n * 40503) % 997) as f64 / 997.0 - 0.5) * 0.2).collect();
+    let examples: Vec<usize> = (0..oracle.examples.len()).collect();
+    let full = oracle.most_violated_batch(&examples, &w).unwrap();
+    assert!(oracle.last_pass_was_full());
+    let cached = oracle.most_violated_batch(&examples, &w).unwrap();
+    assert!(!oracle.last_pass_was_full(), "the second batch call must be a cached pass");
+    for (a, b) in full.iter().zip(&cached) {
+        assert_eq!(a.loss, b.loss);
+        assert_eq!(a.features, b.features);
+    }
+}
+
+/// 1-slack training on the small problem: the cutting-plane loop stops with the mean violation ≤ ε, and
+/// the reported objective is the 1-slack primal recomputed here from the final w and the examples'
+/// brute-force most violated outputs.
+#[test]
+fn one_slack_training_converges_and_reports_its_objective() {
+    use cog_gpu::learn::{CuttingPlane, OneSlack, SeparationOracle, SsvmOptions};
+    let mut oracle = small_oracle();
+    oracle.max_full_passes = 3;
+    let options =
+        SsvmOptions { c: 1.0, epsilon: 0.01, max_iterations: 200, quiet: true, ..SsvmOptions::default() };
+    let mut solver = CuttingPlane::new(options).unwrap();
+    let trained = cog_gpu::learn::detector::train_detector(&oracle, &mut solver).unwrap();
+    assert!(trained.solution.converged, "{:?}", trained.solution.history.last());
+    assert!(trained.solution.max_violation <= 0.01 + 1e-9);
+    let w = &trained.solution.w;
+    // Independent 1-slack primal at w: ½‖w‖² + C·max(0, mean_i (Δ_i − wᵀψ_i)) over full-window answers.
+    let one = OneSlack::new(&oracle).unwrap();
+    oracle.force_full_pass();
+    let answer = one.most_violated(0, w).unwrap();
+    let truth = one.ground_truth_features(0).unwrap();
+    let margin: f64 = truth.iter().zip(&answer.features).zip(w).map(|((t, f), wk)| wk * (*t as f64 - *f as f64)).sum();
+    let primal = 0.5 * w.iter().map(|v| v * v).sum::<f64>() + (answer.loss - margin).max(0.0);
+    if trained.verified {
+        let last = trained.solution.primal;
+        assert!((primal - last).abs() <= 1e-3 * (1.0 + last.abs()), "recomputed {primal} vs reported {last}");
+    }
+    assert!(w.iter().any(|v| *v != 0.0));
 }
 
 /// A tiny synthetic bedroom dataset written by `cog-gpu synth`.
@@ -148,8 +197,11 @@ fn train_args<'a>(data: &'a str, out: &'a str, iterations: &'a str) -> Vec<&'a s
         "0.4",
         "--max-iterations",
         iterations,
+        // Every iteration a full pass: a resumed run starts with one, so the straight run must too.
         "--full-every",
         "1",
+        "--max-full-passes",
+        "100",
     ]
 }
 

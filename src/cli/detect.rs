@@ -12,7 +12,7 @@ use std::time::Instant;
 
 use anyhow::{bail, Context};
 use cog_gpu::category::normalise_name;
-use cog_gpu::detect::{detect_frame, overlay, DetectOptions};
+use cog_gpu::detect::{detect_frame, overlay, overlay_selection, DetectOptions};
 use cog_gpu::eval::FrameDetections;
 use cog_gpu::features::Backend;
 use cog_gpu::frame::{is_frame_dir, DepthSource, Frame};
@@ -41,7 +41,8 @@ pub struct Args {
     /// Detections kept per category and frame.
     #[arg(long, default_value_t = 20)]
     pub max_per_category: usize,
-    /// Drop detections scoring below this (overrides the models' thresholds).
+    /// Drop detections whose raw score (w·φ + bias, before calibration) is below this (overrides the
+    /// models' thresholds).
     #[arg(long, allow_hyphen_values = true)]
     pub min_score: Option<f32>,
     /// Overrides every model's sliding-window centre step (metres; the models' own is 0.1): coarser is
@@ -157,10 +158,10 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         detections.write(&json_path)?;
         if !args.no_overlay {
             let png_path = args.out.join(format!("{}.png", frame.name));
-            // Detections are sorted by score, best first.
+            // The best detections over all categories, one category per object.
             let best = FrameDetections {
                 frame: detections.frame.clone(),
-                detections: detections.detections.iter().take(args.overlay_top).cloned().collect(),
+                detections: overlay_selection(&detections.detections, args.overlay_top),
             };
             overlay(&frame, &best)
                 .save(&png_path)

@@ -1,6 +1,7 @@
 //! Subcommands of the `cog-gpu` binary.
 
 pub mod bench;
+pub mod calibrate;
 pub mod detect;
 pub mod eval;
 pub mod info;

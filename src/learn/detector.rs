@@ -1,29 +1,41 @@
 //! The detector's half of the structural SVM (paper §3.4): training examples made from annotated frames
-//! and loss-augmented inference over the sliding window as a [`SeparationOracle`].
+//! and loss-augmented inference over the sliding window as a [`SeparationOracle`], and the training loop
+//! that alternates cheap passes over cached candidates with full passes over the window
+//! ([`train_detector`]).
 //!
 //! # Examples (choices where the paper is terse)
 //! * One example per annotated instance of the category; in a frame with several instances, each copy has
 //!   the points inside the **other** instances' cuboids removed (§3.4, after Vedaldi & Zisserman).
 //! * Frames without the category give "no object" examples (y = 0): their ground truth has φ = 0, and
 //!   every cuboid answer costs loss 1, so they teach the detector what is not the category. The paper
-//!   trains on positive images only; a few negatives keep scores of other furniture low, which matters
-//!   for AP over whole images.
+//!   trains on positive images only; negatives from many frames are what make scores comparable across
+//!   frames (a box in a frame without the category must score below 0), which AP over a test set needs.
 //! * The output space of an example is the sliding window of the category's sizes on the example's frame
 //!   (centre step [`TrainingSettings::step`], coarser than detection's to keep training within its
-//!   budget; the ground truth itself is always a candidate, so the margin is enforced on it exactly), plus
-//!   "no object" (φ = 0, loss 1 when the example has an instance, 0 otherwise), plus the ground truth.
+//!   budget), plus "no object" (φ = 0, loss 1 when the example has an instance, 0 otherwise), plus the
+//!   ground truth itself (loss 0), so the margin is enforced on it exactly.
 //! * The ground truth's features are those of its cuboid at the nearest of the 16 hypothesis yaws (the
-//!   feature engine bins points per yaw); its loss is 0.
+//!   feature engine bins points per yaw).
 //! * Loss (eq. 5): `1 − IoU·(1 + cos Δθ)/2` ([`structured_loss`]). Hypotheses whose footprints cannot
 //!   overlap the truth's have loss 1 without an IoU computation.
+//!
+//! # What is cached per example (memory against time)
+//! An example keeps its preprocessed points (other instances removed, ~2 MB at 320×240) and, after every
+//! full pass, its [`DetectorOracle::candidate_count`] candidates: their **feature vectors**, losses and
+//! window indices. A cached pass is then only `candidates × dim` multiply-adds per example (≈ 1 ms),
+//! independent of the frame. The per-yaw grids, the sliding window, its losses and the fast path's
+//! lattices and tables do not depend on w either, but they take 30–60 MB per example at 320×240; for
+//! hundreds of examples that does not fit in memory, so a full pass rebuilds them (≈ 10 % of its time;
+//! the rest is scoring every hypothesis, which depends on w).
 
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::Mutex;
 
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::{Constraint, SeparationOracle};
+use super::one_slack::{OneSlack, PassSummary};
+use super::{Constraint, CuttingPlane, SeparationOracle, Solution};
 use crate::error::{Error, Result};
 use crate::features::cpu;
 use crate::features::fast::{FastEngine, FastOptions};
@@ -58,34 +70,40 @@ pub struct TrainingExample {
     /// Frame name and instance, for messages.
     pub name: String,
     pub truth: Option<Cuboid>,
+    /// The frame's points without those inside the other instances of the category.
+    pub pre: Preprocessed,
+}
+
+/// The parts of an example that do not depend on w, rebuilt by every full pass (see the module doc).
+pub struct ExampleWindow {
     pub scene: FeatureScene,
     pub hypotheses: HypothesisSet,
-    /// `Δ(truth, h)` of every hypothesis (independent of w, so computed once).
+    /// `Δ(truth, h)` of every hypothesis.
     pub losses: Vec<f32>,
 }
 
 impl TrainingExample {
-    /// Builds the example: removes the points inside `others`, builds the yaw grids and the sliding
-    /// window, and the losses.
-    pub fn new(
-        name: String,
-        pre: &Preprocessed,
-        truth: Option<Cuboid>,
-        others: &[Cuboid],
-        settings: &TrainingSettings,
-    ) -> TrainingExample {
-        let pre = without_points_in(pre, others);
-        let scene = FeatureScene::new(pre, &default_yaws(), settings.step);
-        let hypotheses =
-            sliding_window(&scene, &WindowOptions { sizes: settings.sizes.clone(), min_points: settings.min_points });
-        let losses =
-            hypotheses.hypotheses.par_iter().map(|h| hypothesis_loss(truth.as_ref(), &h.cuboid(&scene))).collect();
-        TrainingExample { name, truth, scene, hypotheses, losses }
+    /// Builds the example: removes the points inside `others`.
+    pub fn new(name: String, pre: &Preprocessed, truth: Option<Cuboid>, others: &[Cuboid]) -> TrainingExample {
+        TrainingExample { name, truth, pre: without_points_in(pre, others) }
     }
 
-    /// The ground truth as a hypothesis of the nearest yaw.
-    pub fn truth_hypothesis(&self) -> Option<Hypothesis> {
-        self.truth.map(|t| Hypothesis::from_cuboid(&self.scene, nearest_yaw_index(t.yaw), &t))
+    /// The example's yaw grids, sliding window and losses under `settings`.
+    pub fn window(&self, settings: &TrainingSettings) -> ExampleWindow {
+        let scene = FeatureScene::new(self.pre.clone(), &default_yaws(), settings.step);
+        let hypotheses =
+            sliding_window(&scene, &WindowOptions { sizes: settings.sizes.clone(), min_points: settings.min_points });
+        let truth = self.truth;
+        let losses =
+            hypotheses.hypotheses.par_iter().map(|h| hypothesis_loss(truth.as_ref(), &h.cuboid(&scene))).collect();
+        ExampleWindow { scene, hypotheses, losses }
+    }
+}
+
+impl ExampleWindow {
+    /// The ground truth `truth` as a hypothesis of the nearest yaw.
+    pub fn truth_hypothesis(&self, truth: &Cuboid) -> Hypothesis {
+        Hypothesis::from_cuboid(&self.scene, nearest_yaw_index(truth.yaw), truth)
     }
 }
 
@@ -123,18 +141,77 @@ pub fn without_points_in(pre: &Preprocessed, cuboids: &[Cuboid]) -> Preprocessed
     }
 }
 
+/// Features (row-major) and fused scores of hypotheses with the settings' engine on one scene.
+enum Scorer<'a> {
+    Exact(&'a FeatureScene, Layout),
+    Fast(FastEngine<'a>),
+}
+
+impl<'a> Scorer<'a> {
+    fn new(settings: &TrainingSettings, scene: &'a FeatureScene) -> Scorer<'a> {
+        match settings.engine {
+            FeatureEngine::Exact => Scorer::Exact(scene, settings.layout),
+            FeatureEngine::Fast(options) => Scorer::Fast(FastEngine::new(scene, &settings.layout, options)),
+        }
+    }
+
+    fn features(&self, hypotheses: &[Hypothesis]) -> Vec<f32> {
+        match self {
+            Scorer::Exact(scene, layout) => cpu::features(scene, layout, hypotheses).0,
+            Scorer::Fast(engine) => engine.features(hypotheses),
+        }
+    }
+
+    fn scores(&self, hypotheses: &[Hypothesis], w: &[f32]) -> Vec<f32> {
+        let weights = vec![w.to_vec()];
+        match self {
+            Scorer::Exact(scene, layout) => cpu::scores(scene, layout, hypotheses, &weights).0,
+            Scorer::Fast(engine) => engine.scores(hypotheses, &weights),
+        }
+    }
+}
+
+/// The answer of loss-augmented inference.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Answer {
+    /// Hypothesis index into the example's sliding window ([`TrainingExample::window`]).
+    Hypothesis(usize),
+    NoObject,
+    GroundTruth,
+}
+
+/// An example's cached candidates (see the module doc): window indices, losses and feature rows.
+#[derive(Clone, Debug, Default)]
+struct Candidates {
+    indices: Vec<u32>,
+    losses: Vec<f32>,
+    /// `indices.len() × dim`, row-major.
+    features: Vec<f32>,
+}
+
+/// Deterministic pseudo-random tie-break key of a hypothesis index (a 32-bit integer hash): among
+/// candidates of equal value (all loss-1 hypotheses at w = 0) the cache then holds a spread-out random
+/// sample of the window instead of its first hypotheses.
+fn tie_key(n: u32) -> u32 {
+    let mut x = n.wrapping_mul(0x9E37_79B9) ^ 0x85EB_CA6B;
+    x ^= x >> 16;
+    x = x.wrapping_mul(0x7FEB_352D);
+    x ^= x >> 15;
+    x
+}
+
 /// Loss-augmented inference over training examples.
 ///
 /// # Candidate cache
-/// A full pass scores every hypothesis of every example (most of training's time). Each full pass also
-/// keeps, per example, the [`DetectorOracle::candidate_count`] hypotheses of largest `Δ + w·φ`; a cached
-/// pass maximises over those candidates only (plus the ground truth and "no object"), ~100× cheaper.
-/// Batch calls ([`SeparationOracle::most_violated_batch`], one per cutting-plane iteration) are full
-/// passes every [`DetectorOracle::full_every`] calls and cached in between. Convergence must only be
-/// accepted after a full pass: `cog-gpu train` checks [`DetectorOracle::last_pass_was_full`] and, after a
-/// cached pass found nothing, forces a full one ([`DetectorOracle::force_full_pass`]) and continues —
-/// so the stopping rule holds over the whole output space. (A resumed run starts with a full pass, so it
-/// can differ from an uninterrupted one in which a cached iteration ran there — not in its stopping rule.)
+/// A full pass scores every hypothesis of every example (most of training's time) and keeps, per
+/// example, the [`DetectorOracle::candidate_count`] hypotheses of largest `Δ + w·φ` (ties broken by a
+/// fixed hash of the index) — plus, for a positive example, the quarter of that count with the smallest
+/// loss (the boxes nearest the truth, which teach localisation) — with their feature vectors. A cached
+/// pass maximises over those candidates only (plus the ground truth and "no object"): dot products, no
+/// feature work. The first batch call is always a full pass; later ones are cached unless
+/// [`DetectorOracle::force_full_pass`] was called or a periodic full pass is due
+/// ([`DetectorOracle::full_every`]); at most [`DetectorOracle::max_full_passes`] full passes run.
+/// [`train_detector`] accepts convergence only after a full pass found no violation (or says so).
 pub struct DetectorOracle {
     pub settings: TrainingSettings,
     pub examples: Vec<TrainingExample>,
@@ -142,12 +219,18 @@ pub struct DetectorOracle {
     truth_features: Vec<Vec<f32>>,
     /// Hypotheses kept per example by a full pass.
     pub candidate_count: usize,
-    /// A full pass every this many batch calls (1: always full).
+    /// A periodic full pass every this many batch calls (0: only when forced).
     pub full_every: usize,
+    /// Most full passes (the first included).
+    pub max_full_passes: usize,
     cached: AtomicBool,
     force_full: AtomicBool,
     batch_calls: AtomicUsize,
-    candidates: Mutex<Vec<Vec<u32>>>,
+    full_passes: AtomicUsize,
+    /// Hypotheses scored by full passes, and their wall time in microseconds.
+    scored_hypotheses: AtomicU64,
+    full_pass_micros: AtomicU64,
+    candidates: Mutex<Vec<Candidates>>,
 }
 
 impl DetectorOracle {
@@ -158,21 +241,29 @@ impl DetectorOracle {
         let dim = settings.layout.dim();
         let truth_features = examples
             .par_iter()
-            .map(|ex| match ex.truth_hypothesis() {
-                Some(h) => features_of(&settings, &ex.scene, &[h]),
+            .map(|ex| match &ex.truth {
+                Some(truth) => {
+                    let scene = FeatureScene::new(ex.pre.clone(), &default_yaws(), settings.step);
+                    let hypothesis = Hypothesis::from_cuboid(&scene, nearest_yaw_index(truth.yaw), truth);
+                    Scorer::new(&settings, &scene).features(&[hypothesis])
+                }
                 None => vec![0.0; dim],
             })
             .collect();
-        let candidates = Mutex::new(vec![Vec::new(); examples.len()]);
+        let candidates = Mutex::new(vec![Candidates::default(); examples.len()]);
         Ok(DetectorOracle {
             settings,
             examples,
             truth_features,
-            candidate_count: 300,
-            full_every: 1,
+            candidate_count: 100,
+            full_every: 0,
+            max_full_passes: 4,
             cached: AtomicBool::new(false),
             force_full: AtomicBool::new(false),
             batch_calls: AtomicUsize::new(0),
+            full_passes: AtomicUsize::new(0),
+            scored_hypotheses: AtomicU64::new(0),
+            full_pass_micros: AtomicU64::new(0),
             candidates,
         })
     }
@@ -182,88 +273,112 @@ impl DetectorOracle {
         !self.cached.load(Ordering::SeqCst)
     }
 
-    /// Makes the next batch call a full pass.
+    /// Makes the next batch call a full pass (if [`DetectorOracle::max_full_passes`] allows).
     pub fn force_full_pass(&self) {
         self.force_full.store(true, Ordering::SeqCst);
     }
 
-    /// Scores of the hypotheses `subset` (indices into example `i`'s sliding window) at weights `w`.
-    pub fn scores(&self, example: usize, subset: &[u32], w: &[f32]) -> Vec<f32> {
-        let ex = &self.examples[example];
-        let weights = vec![w.to_vec()];
-        let hypotheses: Vec<Hypothesis> = subset.iter().map(|&n| ex.hypotheses.hypotheses[n as usize]).collect();
-        match self.settings.engine {
-            FeatureEngine::Exact => cpu::scores(&ex.scene, &self.settings.layout, &hypotheses, &weights).0,
-            FeatureEngine::Fast(options) => {
-                FastEngine::new(&ex.scene, &self.settings.layout, options).scores(&hypotheses, &weights)
-            }
-        }
+    /// Full passes run so far.
+    pub fn full_passes(&self) -> usize {
+        self.full_passes.load(Ordering::SeqCst)
     }
-}
 
-/// Features of `hypotheses` (row-major) with the settings' engine.
-fn features_of(settings: &TrainingSettings, scene: &FeatureScene, hypotheses: &[Hypothesis]) -> Vec<f32> {
-    match settings.engine {
-        FeatureEngine::Exact => cpu::features(scene, &settings.layout, hypotheses).0,
-        FeatureEngine::Fast(options) => FastEngine::new(scene, &settings.layout, options).features(hypotheses),
+    /// Hypotheses scored by full passes, and the passes' wall time in seconds.
+    pub fn inference_throughput(&self) -> (u64, f64) {
+        (self.scored_hypotheses.load(Ordering::SeqCst), self.full_pass_micros.load(Ordering::SeqCst) as f64 * 1e-6)
     }
-}
 
-/// The answer of loss-augmented inference.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Answer {
-    /// Hypothesis index into the example's sliding window.
-    Hypothesis(usize),
-    NoObject,
-    GroundTruth,
-}
+    fn lock_candidates(&self) -> Result<std::sync::MutexGuard<'_, Vec<Candidates>>> {
+        self.candidates.lock().map_err(|_| Error::Input("candidate cache poisoned".into()))
+    }
 
-impl DetectorOracle {
-    /// `argmax Δ + w·φ` over the example's answers, with its loss.
-    pub fn loss_augmented_argmax(&self, example: usize, w: &[f32]) -> Result<(Answer, f32)> {
+    /// `argmax Δ + w·φ` over the example's answers (the whole window on a full pass, the cached candidates
+    /// otherwise), with its loss and features.
+    fn argmax(&self, example: usize, w: &[f32], full: bool) -> Result<(Answer, f32, Vec<f32>)> {
         let ex = &self.examples[example];
-        let cached = self.cached.load(Ordering::SeqCst);
-        let subset: Vec<u32> = if cached {
-            self.candidates.lock().map_err(|_| Error::Input("candidate cache poisoned".into()))?[example].clone()
-        } else {
-            (0..ex.hypotheses.hypotheses.len() as u32).collect()
-        };
-        let scores = self.scores(example, &subset, w);
-        if !cached {
-            self.keep_candidates(example, &scores)?;
+        let dim = self.settings.layout.dim();
+        if full {
+            self.refresh_candidates(example, w)?;
         }
+        let cache = self.lock_candidates()?;
+        let candidates = &cache[example];
         let no_object_loss = if ex.truth.is_some() { 1.0 } else { 0.0 };
-        let mut best = (Answer::NoObject, no_object_loss, no_object_loss);
+        // (answer, loss, value, candidate row)
+        let mut best = (Answer::NoObject, no_object_loss, no_object_loss, None);
         if ex.truth.is_some() {
-            let truth_score: f32 = self.truth_features[example].iter().zip(w).map(|(a, b)| a * b).sum();
+            let truth_score = dot(&self.truth_features[example], w);
             if truth_score > best.2 {
-                best = (Answer::GroundTruth, 0.0, truth_score);
+                best = (Answer::GroundTruth, 0.0, truth_score, None);
             }
         }
-        for (&n, &score) in subset.iter().zip(&scores) {
-            let loss = ex.losses[n as usize];
-            let value = loss + score;
+        for (row, (&n, &loss)) in candidates.indices.iter().zip(&candidates.losses).enumerate() {
+            let value = loss + dot(&candidates.features[row * dim..(row + 1) * dim], w);
             if value > best.2 {
-                best = (Answer::Hypothesis(n as usize), loss, value);
+                best = (Answer::Hypothesis(n as usize), loss, value, Some(row));
             }
         }
-        Ok((best.0, best.1))
+        let features = match (best.0, best.3) {
+            (Answer::GroundTruth, _) => self.truth_features[example].clone(),
+            (Answer::Hypothesis(_), Some(row)) => candidates.features[row * dim..(row + 1) * dim].to_vec(),
+            _ => vec![0.0; dim],
+        };
+        Ok((best.0, best.1, features))
     }
 
-    /// Remembers the [`DetectorOracle::candidate_count`] hypotheses of largest `Δ + w·φ` of a full pass.
-    fn keep_candidates(&self, example: usize, scores: &[f32]) -> Result<()> {
-        let losses = &self.examples[example].losses;
-        let value = |n: usize| losses[n] + scores[n];
-        let mut order: Vec<u32> = (0..scores.len() as u32).collect();
-        let keep = self.candidate_count.min(order.len());
+    /// A full pass over one example: scores its whole window at `w` and replaces its cached candidates.
+    fn refresh_candidates(&self, example: usize, w: &[f32]) -> Result<()> {
+        let ex = &self.examples[example];
+        let window = ex.window(&self.settings);
+        let scorer = Scorer::new(&self.settings, &window.scene);
+        let hypotheses = &window.hypotheses.hypotheses;
+        // At w = 0 (the first pass of a fresh run) every score is 0: no need to compute them.
+        let scores = if w.iter().all(|&v| v == 0.0) {
+            vec![0.0; hypotheses.len()]
+        } else {
+            self.scored_hypotheses.fetch_add(hypotheses.len() as u64, Ordering::SeqCst);
+            scorer.scores(hypotheses, w)
+        };
+        let value = |n: u32| window.losses[n as usize] + scores[n as usize];
+        let mut order: Vec<u32> = (0..hypotheses.len() as u32).collect();
+        let keep = self.candidate_count.max(1).min(order.len());
+        let by_value = |a: &u32, b: &u32| value(*b).total_cmp(&value(*a)).then(tie_key(*a).cmp(&tie_key(*b)));
         if keep < order.len() {
-            order.select_nth_unstable_by(keep, |&a, &b| value(b as usize).total_cmp(&value(a as usize)));
+            order.select_nth_unstable_by(keep, by_value);
             order.truncate(keep);
         }
+        if ex.truth.is_some() {
+            // The boxes nearest the truth (smallest loss), a quarter of the count, if not already in.
+            let mut nearest: Vec<u32> = (0..hypotheses.len() as u32).filter(|&n| window.losses[n as usize] < 1.0).collect();
+            let extra = (self.candidate_count / 4).min(nearest.len());
+            if extra > 0 && extra < nearest.len() {
+                let by_loss = |a: &u32, b: &u32| {
+                    window.losses[*a as usize].total_cmp(&window.losses[*b as usize]).then(a.cmp(b))
+                };
+                nearest.select_nth_unstable_by(extra, by_loss);
+                nearest.truncate(extra);
+            }
+            order.extend(nearest);
+        }
         order.sort_unstable();
-        self.candidates.lock().map_err(|_| Error::Input("candidate cache poisoned".into()))?[example] = order;
+        order.dedup();
+        let chosen: Vec<Hypothesis> = order.iter().map(|&n| hypotheses[n as usize]).collect();
+        let features = scorer.features(&chosen);
+        let losses = order.iter().map(|&n| window.losses[n as usize]).collect();
+        self.lock_candidates()?[example] = Candidates { indices: order, losses, features };
         Ok(())
     }
+
+    /// `argmax Δ + w·φ` over the example's answers, with its loss: a full pass over the window when the
+    /// example has no candidates yet or the oracle is not in a cached pass.
+    pub fn loss_augmented_argmax(&self, example: usize, w: &[f32]) -> Result<(Answer, f32)> {
+        let full = !self.cached.load(Ordering::SeqCst) || self.lock_candidates()?[example].indices.is_empty();
+        let (answer, loss, _) = self.argmax(example, w, full)?;
+        Ok((answer, loss))
+    }
+}
+
+fn dot(a: &[f32], b: &[f32]) -> f32 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
 impl SeparationOracle for DetectorOracle {
@@ -281,22 +396,85 @@ impl SeparationOracle for DetectorOracle {
 
     fn most_violated_batch(&self, examples: &[usize], w: &[f64]) -> Result<Vec<Constraint>> {
         let call = self.batch_calls.fetch_add(1, Ordering::SeqCst);
-        let full = self.force_full.swap(false, Ordering::SeqCst) || call.is_multiple_of(self.full_every.max(1));
+        let forced = self.force_full.swap(false, Ordering::SeqCst);
+        let periodic = self.full_every > 0 && call > 0 && call.is_multiple_of(self.full_every);
+        let first = self.full_passes() == 0;
+        let full = first || ((forced || periodic) && self.full_passes() < self.max_full_passes.max(1));
         self.cached.store(!full, Ordering::SeqCst);
-        examples.par_iter().map(|&example| self.most_violated(example, w)).collect()
+        let started = std::time::Instant::now();
+        let w32: Vec<f32> = w.iter().map(|&v| v as f32).collect();
+        let answers = examples
+            .par_iter()
+            .map(|&example| {
+                let (_, loss, features) = self.argmax(example, &w32, full)?;
+                Ok(Constraint { loss: loss as f64, features })
+            })
+            .collect::<Result<Vec<_>>>()?;
+        if full {
+            self.full_passes.fetch_add(1, Ordering::SeqCst);
+            if w.iter().any(|&v| v != 0.0) {
+                self.full_pass_micros.fetch_add(started.elapsed().as_micros() as u64, Ordering::SeqCst);
+            }
+            log::info!(
+                "full pass {} over {} examples in {:.1} s",
+                self.full_passes(),
+                examples.len(),
+                started.elapsed().as_secs_f64()
+            );
+        }
+        Ok(answers)
     }
 
     fn most_violated(&self, example: usize, w: &[f64]) -> Result<Constraint> {
         let w32: Vec<f32> = w.iter().map(|&v| v as f32).collect();
-        let (answer, loss) = self.loss_augmented_argmax(example, &w32)?;
-        let ex = &self.examples[example];
-        let features = match answer {
-            Answer::NoObject => vec![0.0; self.dim()],
-            Answer::GroundTruth => self.truth_features[example].clone(),
-            Answer::Hypothesis(n) => features_of(&self.settings, &ex.scene, &[ex.hypotheses.hypotheses[n]]),
-        };
+        let full = !self.cached.load(Ordering::SeqCst) || self.lock_candidates()?[example].indices.is_empty();
+        let (_, loss, features) = self.argmax(example, &w32, full)?;
         Ok(Constraint { loss: loss as f64, features })
     }
+}
+
+/// The outcome of [`train_detector`].
+#[derive(Clone, Debug)]
+pub struct DetectorSolution {
+    pub solution: Solution,
+    /// Converged, and the last pass that found no violation was a full pass over every window.
+    pub verified: bool,
+    pub full_passes: usize,
+    /// Per-example figures of the last pass.
+    pub last_pass: PassSummary,
+    /// Hypotheses per second of the full passes' loss-augmented inference (windows rebuilt included).
+    pub inference_hypotheses_per_second: f64,
+}
+
+/// Trains the detector with the 1-slack cutting-plane algorithm ([`super::one_slack`]) over the oracle's
+/// examples: cached passes until no cached candidate is violated by more than ε, then a full pass to
+/// check (and refresh the candidates), until a full pass finds nothing (verified convergence), the
+/// iteration cap, or [`DetectorOracle::max_full_passes`].
+pub fn train_detector(oracle: &DetectorOracle, solver: &mut CuttingPlane) -> Result<DetectorSolution> {
+    let one_slack = OneSlack::new(oracle)?;
+    let (solution, verified) = loop {
+        let solution = solver.train(&one_slack)?;
+        if !solution.converged {
+            break (solution, false);
+        }
+        if oracle.last_pass_was_full() {
+            break (solution, true);
+        }
+        if oracle.full_passes() >= oracle.max_full_passes.max(1) {
+            log::info!("converged on the cached candidates; the full-pass budget is spent, so not verified");
+            break (solution, false);
+        }
+        log::info!("no violation among the cached candidates: checking the whole sliding window");
+        oracle.force_full_pass();
+    };
+    let (scored, seconds) = oracle.inference_throughput();
+    Ok(DetectorSolution {
+        solution,
+        verified,
+        full_passes: oracle.full_passes(),
+        last_pass: one_slack.last_pass(),
+        inference_hypotheses_per_second: if seconds > 0.0 { scored as f64 / seconds } else { 0.0 },
+    })
 }
 
 /// How many examples to take from a dataset.
@@ -323,12 +501,11 @@ pub fn spread(total: usize, count: usize) -> Vec<usize> {
 
 /// The training examples of `category` from frame directories: reads the annotations of every frame,
 /// picks the instances and negative frames ([`ExampleLimits`]), preprocesses the frames they come from
-/// (in parallel) and builds the examples. `settings.sizes` must already be set.
+/// (in parallel) and builds the examples.
 pub fn collect_examples(
     frames: &[std::path::PathBuf],
     category: &str,
     limits: ExampleLimits,
-    settings: &TrainingSettings,
 ) -> Result<Vec<TrainingExample>> {
     let annotations = read_all_annotations(frames)?;
     let mut positives = Vec::new(); // (frame, instance)
@@ -367,7 +544,7 @@ pub fn collect_examples(
     }
     Ok(jobs
         .into_par_iter()
-        .map(|(name, f, truth, others)| TrainingExample::new(name, pre_of(f), truth, &others, settings))
+        .map(|(name, f, truth, others)| TrainingExample::new(name, pre_of(f), truth, &others))
         .collect())
 }
 

@@ -27,10 +27,12 @@
 
 pub mod checkpoint;
 pub mod detector;
+pub mod one_slack;
 pub mod qp;
 pub mod ssvm;
 
 pub use checkpoint::{Checkpoint, WorkingConstraint};
+pub use one_slack::{OneSlack, PassSummary};
 pub use ssvm::{train, CuttingPlane, IterationReport, Solution, SsvmOptions};
 
 use crate::error::{Error, Result};

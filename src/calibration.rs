@@ -1,0 +1,179 @@
+//! Score calibration: the structural SVM ranks hypotheses **within** one frame (and against "no object"
+//! at 0); AP over a test set and a person reading the overlay rank detections **across** frames and
+//! categories. Each model therefore carries a calibration fitted on held-out frames that maps its raw
+//! score `s = w·φ + bias` to the probability that a detection with that score is a true positive:
+//!
+//! ```text
+//! p(s) = 1 / (1 + exp(−(a·s + b))),   a > 0
+//! ```
+//!
+//! (Platt scaling). Choices:
+//! * **Labels**: the detections of held-out frames (the output of `detect`, after NMS), matched with the
+//!   SUN RGB-D benchmark's rules ([`crate::eval`]): sorted by raw score over all frames, a detection is a
+//!   true positive when its best-overlapping ground-truth box of the category has 3D IoU ≥ the threshold
+//!   (0.25) and is not yet taken. So `p` estimates exactly the precision that AP integrates.
+//! * **Fit**: maximum likelihood by Newton's method on `(a, b)` with a weak Gaussian prior
+//!   (`λ = 10⁻³` on both) so that separable data stays finite. **Monotone by construction**: if the fit
+//!   gives `a ≤ a_min` (`10⁻³`), `a` is set to `a_min` and only `b` is fitted, so a higher raw score never
+//!   gets a lower probability and the within-category order (hence the AP) is unchanged.
+//! * At least one true and one false positive are needed; otherwise the fit is an error naming the
+//!   category.
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+use crate::eval::{Detection, ScoredBox};
+use crate::frame::Object;
+use crate::geometry::iou_3d;
+
+/// Smallest slope: keeps `p` strictly increasing in the raw score.
+pub const MIN_SLOPE: f64 = 1e-3;
+/// Weight of the Gaussian prior on `(a, b)`.
+const PRIOR: f64 = 1e-3;
+
+/// A fitted calibration and where it came from (stored in the model file).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Calibration {
+    /// Slope on the raw score (> 0).
+    pub a: f64,
+    /// Offset.
+    pub b: f64,
+    /// Detections and true positives the fit saw, and the IoU that defined a true positive.
+    pub detections: usize,
+    pub true_positives: usize,
+    pub iou: f32,
+    /// Free-form provenance (data directory, frames).
+    #[serde(default)]
+    pub data: String,
+    #[serde(default)]
+    pub frames: usize,
+}
+
+impl Calibration {
+    /// The calibrated probability of a raw score.
+    pub fn probability(&self, raw: f32) -> f32 {
+        sigmoid(self.a * f64::from(raw) + self.b) as f32
+    }
+
+    /// Checks the stored numbers (finite, slope positive).
+    pub fn validate(&self) -> std::result::Result<(), String> {
+        if !(self.a.is_finite() && self.b.is_finite()) {
+            return Err(format!("calibration has a non-finite coefficient (a = {}, b = {})", self.a, self.b));
+        }
+        if self.a <= 0.0 {
+            return Err(format!("calibration slope a = {} must be > 0 (a calibration must be monotone)", self.a));
+        }
+        Ok(())
+    }
+}
+
+fn sigmoid(x: f64) -> f64 {
+    if x >= 0.0 {
+        1.0 / (1.0 + (-x).exp())
+    } else {
+        let e = x.exp();
+        e / (1.0 + e)
+    }
+}
+
+/// Fits `p(s) = σ(a·s + b)` to `(score, is true positive)` pairs (see the module doc). Returns `(a, b)`.
+pub fn fit_logistic(samples: &[(f32, bool)]) -> Result<(f64, f64)> {
+    let positives = samples.iter().filter(|s| s.1).count();
+    if positives == 0 || positives == samples.len() {
+        return Err(Error::Input(format!(
+            "calibration needs true and false positives; got {positives} true of {} detections",
+            samples.len()
+        )));
+    }
+    if samples.iter().any(|s| !s.0.is_finite()) {
+        return Err(Error::Input("calibration: a detection score is not finite".into()));
+    }
+    let (a, b) = newton(samples, None);
+    if a > MIN_SLOPE {
+        return Ok((a, b));
+    }
+    Ok((MIN_SLOPE, newton(samples, Some(MIN_SLOPE)).1))
+}
+
+/// Newton's method on the penalised negative log-likelihood; `fixed_a` fits `b` alone.
+fn newton(samples: &[(f32, bool)], fixed_a: Option<f64>) -> (f64, f64) {
+    let (mut a, mut b) = (fixed_a.unwrap_or(1.0), 0.0f64);
+    for _ in 0..100 {
+        // Gradient and Hessian of Σ −log-likelihood + PRIOR/2 (a² + b²).
+        let (mut ga, mut gb, mut haa, mut hab, mut hbb) = (PRIOR * a, PRIOR * b, PRIOR, 0.0, PRIOR);
+        for &(s, y) in samples {
+            let s = f64::from(s);
+            let p = sigmoid(a * s + b);
+            let r = p - if y { 1.0 } else { 0.0 };
+            let w = (p * (1.0 - p)).max(1e-12);
+            ga += r * s;
+            gb += r;
+            haa += w * s * s;
+            hab += w * s;
+            hbb += w;
+        }
+        let (da, db) = if fixed_a.is_some() {
+            (0.0, gb / hbb)
+        } else {
+            let det = haa * hbb - hab * hab;
+            if det.abs() < 1e-300 {
+                break;
+            }
+            ((hbb * ga - hab * gb) / det, (haa * gb - hab * ga) / det)
+        };
+        a -= da;
+        b -= db;
+        if da.abs() < 1e-10 * (1.0 + a.abs()) && db.abs() < 1e-10 * (1.0 + b.abs()) {
+            break;
+        }
+    }
+    (a, b)
+}
+
+/// Labels the detections of one category over several frames with the benchmark's matching rules:
+/// returns `(raw score, true positive)` per detection, in descending score order (ties in input order).
+/// `detections[f]` and `truth[f]` are frame `f`'s detections and annotated objects (any categories; only
+/// `category` is used). The raw score is [`Detection::raw_score`] when present, else `score`.
+pub fn label_detections(
+    detections: &[Vec<Detection>],
+    truth: &[Vec<Object>],
+    category: &str,
+    iou_threshold: f32,
+) -> Vec<(f32, bool)> {
+    let boxes: Vec<ScoredBox> = detections
+        .iter()
+        .enumerate()
+        .flat_map(|(image, dets)| {
+            dets.iter().filter(|d| d.category == category).map(move |d| ScoredBox {
+                image,
+                score: d.raw_score.unwrap_or(d.score),
+                cuboid: d.cuboid(),
+            })
+        })
+        .collect();
+    let mut order: Vec<usize> = (0..boxes.len()).collect();
+    order.sort_by(|&x, &y| boxes[y].score.total_cmp(&boxes[x].score));
+    let mut taken: Vec<Vec<bool>> = truth.iter().map(|objects| vec![false; objects.len()]).collect();
+    order
+        .into_iter()
+        .map(|k| {
+            let d = &boxes[k];
+            let objects = truth.get(d.image).map(Vec::as_slice).unwrap_or(&[]);
+            let mut best: Option<(usize, f32)> = None;
+            for (g, object) in objects.iter().enumerate().filter(|(_, o)| o.category == category) {
+                let iou = iou_3d(&d.cuboid, &object.cuboid);
+                if best.is_none_or(|(_, b)| iou > b) {
+                    best = Some((g, iou));
+                }
+            }
+            let hit = match best {
+                Some((g, iou)) if iou >= iou_threshold && !taken[d.image][g] => {
+                    taken[d.image][g] = true;
+                    true
+                }
+                _ => false,
+            };
+            (d.score, hit)
+        })
+        .collect()
+}

@@ -1,0 +1,116 @@
+//! `cog-gpu calibrate --data DIR --detections DIR [--models assets/models] [--out DIR] [--iou 0.25]
+//! [--categories a,b,...]`: fits each model's score calibration ([`cog_gpu::calibration`]) on held-out
+//! frames and writes it into the model files.
+//!
+//! The detections are those of `cog-gpu detect --min-score -3` (or lower) on the held-out frames, with
+//! the same models: the fit needs the low-scoring false positives too. Files whose detections already
+//! carry a `raw_score` (calibrated models) are fitted on the raw score. Frames used here must not be
+//! training or test frames. Choices: `--out` defaults to the models directory itself (the models are
+//! rewritten in place, through a temporary file); a category with no true or no false positive among
+//! the detections is an error naming it, since no calibration can be fitted.
+
+use std::path::PathBuf;
+
+use anyhow::{bail, Context};
+use cog_gpu::calibration::{fit_logistic, label_detections, Calibration};
+use cog_gpu::category::normalise_name;
+use cog_gpu::eval::{Detection, FrameDetections};
+use cog_gpu::frame::{read_annotations, Dataset};
+use cog_gpu::model::read_models_dir;
+
+use super::GlobalOptions;
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// Held-out frames (ground truth in annotation3Dfinal/index.json).
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Detections of those frames: one `<frame name>.json` per frame, from `cog-gpu detect --min-score -3`.
+    #[arg(long)]
+    pub detections: PathBuf,
+    /// Models to calibrate (`<category>.json`).
+    #[arg(long, default_value = "assets/models")]
+    pub models: PathBuf,
+    /// Where to write the calibrated models; default: over the models themselves.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// 3D IoU that makes a detection a true positive.
+    #[arg(long, default_value_t = 0.25)]
+    pub iou: f32,
+    /// Only these categories (comma-separated); default: every model in --models.
+    #[arg(long, value_delimiter = ',')]
+    pub categories: Vec<String>,
+}
+
+pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
+    if !(args.iou > 0.0 && args.iou <= 1.0) {
+        bail!("--iou must be in (0, 1], got {}", args.iou);
+    }
+    let categories: Vec<String> = args.categories.iter().map(|c| normalise_name(c).0).collect();
+    let mut models = read_models_dir(&args.models, (!categories.is_empty()).then_some(categories.as_slice()))?;
+    let dataset = Dataset::open(&args.data)?;
+    if dataset.is_empty() {
+        bail!("{}: no frame directories", args.data.display());
+    }
+    if !args.detections.is_dir() {
+        bail!("{}: detections directory not found", args.detections.display());
+    }
+    let mut truth = Vec::new();
+    let mut detections: Vec<Vec<Detection>> = Vec::new();
+    let mut missing = 0;
+    for dir in &dataset.frames {
+        let name = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        truth.push(read_annotations(dir)?.0);
+        let path = args.detections.join(format!("{name}.json"));
+        if path.is_file() {
+            detections.push(FrameDetections::read(&path)?.detections);
+        } else {
+            missing += 1;
+            detections.push(Vec::new());
+        }
+    }
+    if missing == dataset.len() {
+        bail!(
+            "{}: no detections file for any of the {} frames of {} (run cog-gpu detect on them first)",
+            args.detections.display(),
+            dataset.len(),
+            args.data.display()
+        );
+    }
+    if missing > 0 {
+        log::warn!("{missing} of {} frames have no detections file; counted as frames without detections", dataset.len());
+    }
+    let out_dir = args.out.clone().unwrap_or_else(|| args.models.clone());
+    std::fs::create_dir_all(&out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
+    println!("{:<12} {:>10} {:>6} {:>9} {:>9} {:>8} {:>8}", "category", "detections", "TP", "a", "b", "p(0)", "p(1)");
+    for model in &mut models {
+        let samples = label_detections(&detections, &truth, &model.category, args.iou);
+        let (a, b) = fit_logistic(&samples).with_context(|| {
+            format!("calibrating {} on the detections in {}", model.category, args.detections.display())
+        })?;
+        let calibration = Calibration {
+            a,
+            b,
+            detections: samples.len(),
+            true_positives: samples.iter().filter(|s| s.1).count(),
+            iou: args.iou,
+            data: args.data.display().to_string(),
+            frames: dataset.len(),
+        };
+        println!(
+            "{:<12} {:>10} {:>6} {:>9.4} {:>9.4} {:>8.4} {:>8.4}",
+            model.category,
+            calibration.detections,
+            calibration.true_positives,
+            a,
+            b,
+            calibration.probability(0.0),
+            calibration.probability(1.0)
+        );
+        model.calibration = Some(calibration);
+        let path = out_dir.join(format!("{}.json", model.category));
+        model.write(&path)?;
+    }
+    println!("wrote {} calibrated model(s) to {}", models.len(), out_dir.display());
+    Ok(())
+}
