@@ -8,6 +8,7 @@
 
 pub mod category;
 pub mod detect;
+pub mod diagnose;
 pub mod draw;
 pub mod error;
 pub mod eval;
