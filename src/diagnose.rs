@@ -75,11 +75,7 @@ pub fn best_window_ious(scene: &FeatureScene, hypotheses: &[Hypothesis], truths:
 /// distinct `model.window.step` (shared by the models with that step) with [`default_yaws`], and
 /// [`sliding_window`] with the model's sizes and `min_points`. Categories without a model, or without
 /// ground truth in the frame, are absent from the result; no scene is built when no model has ground truth.
-pub fn frame_window_best_ious(
-    pre: &Preprocessed,
-    models: &[Model],
-    objects: &[Object],
-) -> BTreeMap<String, Vec<f32>> {
+pub fn frame_window_best_ious(pre: &Preprocessed, models: &[Model], objects: &[Object]) -> BTreeMap<String, Vec<f32>> {
     let truths_of = |category: &str| -> Vec<Cuboid> {
         objects.iter().filter(|o| o.category == category).map(|o| o.cuboid).collect()
     };
@@ -221,9 +217,8 @@ pub fn rank_average_precision(
 ) -> PrecisionRecall {
     let mut ranked = in_frame_ranks(detections, category);
     // Stable: equal (rank, score) pairs keep image order (two detections of one image never share a rank).
-    ranked.sort_by(|a, b| {
-        a.1.cmp(&b.1).then_with(|| detections[b.0][b.2].score.total_cmp(&detections[a.0][a.2].score))
-    });
+    ranked
+        .sort_by(|a, b| a.1.cmp(&b.1).then_with(|| detections[b.0][b.2].score.total_cmp(&detections[a.0][a.2].score)));
     let boxes: Vec<ScoredBox> = ranked
         .iter()
         .map(|&(image, _, i)| ScoredBox { image, score: 0.0, cuboid: detections[image][i].cuboid() })

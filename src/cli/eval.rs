@@ -25,10 +25,10 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
 use cog_gpu::category::{CATEGORIES, LARGE_CATEGORIES};
-use cog_gpu::draw::category_colour;
 use cog_gpu::diagnose::{
     diagnose_categories, frame_window_best_ious, overlay_precision, CategoryDiagnosis, OverlayPrecision,
 };
+use cog_gpu::draw::category_colour;
 use cog_gpu::eval::{evaluate_categories, mean_ap, CategoryEvaluation, Detection, FrameDetections};
 use cog_gpu::features::Preprocessed;
 use cog_gpu::frame::{read_annotations, Dataset, DepthSource, Frame, Object};
