@@ -202,7 +202,7 @@ fn window_recall_on_a_synthetic_frame() {
     let layout = Layout::new([1, 1, 1], false, Groups::GEOM).unwrap();
     let model = Model::new(
         &category,
-        layout.clone(),
+        layout,
         sizes,
         WindowSettings { step, min_points },
         FeatureSettings { path: FeaturePath::Fast, subdivisions: 2 },
@@ -321,7 +321,7 @@ fn cli_window_recall_with_models() {
     let layout = Layout::new([1, 1, 1], false, Groups::GEOM).unwrap();
     let model = Model::new(
         &category,
-        layout.clone(),
+        layout,
         SizeQuantiles {
             widths: vec![0.5, 0.8, 1.1, 1.4, 1.8],
             depths: vec![0.5, 1.0, 2.0],
