@@ -9,6 +9,7 @@
 pub mod calibration;
 pub mod category;
 pub mod detect;
+pub mod diagnose;
 pub mod draw;
 pub mod error;
 pub mod eval;

@@ -15,15 +15,24 @@
 //! * Plots are written only when `--plots DIR` is given (one `<category>.png` per category with ground
 //!   truth); nothing is written next to the inputs unasked.
 //! * APs in the JSON are fractions in [0, 1]; the table prints percentages.
+//! * `--diagnose [--models DIR] [--step S]` replaces the AP report with the diagnosis of
+//!   [`cog_gpu::diagnose`] (window recall only with `--models`: frames with ground truth of a category that
+//!   has a model are read, preprocessed and windowed as `detect` does; evaluated categories without a model
+//!   get no window numbers and a warning). `--models` and `--step` need `--diagnose`.
 
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
 use cog_gpu::category::{CATEGORIES, LARGE_CATEGORIES};
+use cog_gpu::diagnose::{
+    diagnose_categories, frame_window_best_ious, overlay_precision, CategoryDiagnosis, OverlayPrecision,
+};
 use cog_gpu::draw::category_colour;
 use cog_gpu::eval::{evaluate_categories, mean_ap, CategoryEvaluation, Detection, FrameDetections};
-use cog_gpu::frame::{read_annotations, Dataset, Object};
+use cog_gpu::features::Preprocessed;
+use cog_gpu::frame::{read_annotations, Dataset, DepthSource, Frame, Object};
+use cog_gpu::model::{read_models_dir, Model};
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -54,6 +63,24 @@ pub struct Args {
     /// Write a precision-recall PNG per category into this directory.
     #[arg(long)]
     pub plots: Option<PathBuf>,
+    /// Print a diagnosis of where AP is lost (window recall ceiling, in-frame ranking, rank AP, overlay
+    /// precision) instead of the AP report.
+    #[arg(long)]
+    pub diagnose: bool,
+    /// With --diagnose: models directory (`<category>.json`) whose sliding windows give the window recall
+    /// ceiling (reads and preprocesses every frame with ground truth of a modelled category).
+    #[arg(long, requires = "diagnose")]
+    pub models: Option<PathBuf>,
+    /// With --diagnose --models: overrides every model's window step (metres), as `detect --step`.
+    #[arg(long, requires = "models")]
+    pub step: Option<f32>,
+}
+
+/// The `--diagnose --json` document.
+#[derive(Serialize)]
+struct DiagnosisReport {
+    diagnosis: BTreeMap<String, CategoryDiagnosis>,
+    overlay_precision: OverlayPrecision,
 }
 
 /// The `--json` document.
@@ -132,6 +159,10 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         bail!("--iou must be in (0, 1], got {}", args.iou);
     }
     let categories = categories(&args.categories)?;
+    let models = match &args.models {
+        Some(dir) => Some(diagnosis_models(dir, args.step, &categories)?),
+        None => None,
+    };
     let mut dataset = Dataset::open(&args.data)?;
     if let Some(split) = &args.split {
         dataset = dataset.with_split(split)?;
@@ -194,6 +225,31 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     let missing = per_frame.iter().filter(|(_, d)| d.is_none()).count();
     let (truth, detections): (Vec<Vec<Object>>, Vec<Vec<Detection>>) =
         per_frame.into_iter().map(|(t, d)| (t, d.unwrap_or_default())).unzip();
+    if args.diagnose {
+        let window = match &models {
+            Some(models) => Some(window_recall(&dataset.frames, &truth, models)?),
+            None => None,
+        };
+        let diagnosis = diagnose_categories(&truth, &detections, &categories, args.iou, window.as_ref());
+        let overlay = overlay_precision(&truth, &detections, &categories, args.iou);
+        if missing > 0 {
+            log::warn!(
+                "{missing} of {} frames have no detections file in {}; counted as no detections",
+                names.len(),
+                args.detections.display()
+            );
+        }
+        if args.json {
+            let report = DiagnosisReport {
+                diagnosis: diagnosis.iter().map(|d| (d.category.clone(), d.clone())).collect(),
+                overlay_precision: overlay,
+            };
+            println!("{}", serde_json::to_string_pretty(&report)?);
+        } else {
+            print_diagnosis(&args, &diagnosis, &overlay, names.len(), missing);
+        }
+        return Ok(());
+    }
     let results = evaluate_categories(&truth, &detections, &categories, args.iou);
     let map = mean_ap(results.iter().map(|r| &r.pr.ap));
 
@@ -264,4 +320,112 @@ fn plot_colour(category: &str) -> cog_gpu::draw::Colour {
     } else {
         c
     }
+}
+
+/// The models of `dir` for the evaluated categories (with `step` overriding their window step); a warning
+/// names the evaluated categories without a model.
+fn diagnosis_models(dir: &Path, step: Option<f32>, categories: &[String]) -> anyhow::Result<Vec<Model>> {
+    if let Some(step) = step {
+        if !(step.is_finite() && (0.01..=1.0).contains(&step)) {
+            bail!("--step must be between 0.01 and 1 metre, got {step}");
+        }
+    }
+    let mut models = read_models_dir(dir, None).with_context(|| format!("--models {}", dir.display()))?;
+    models.retain(|m| categories.contains(&m.category));
+    if models.is_empty() {
+        bail!("--models {}: no model for any evaluated category ({})", dir.display(), categories.join(", "));
+    }
+    let without: Vec<&str> =
+        categories.iter().filter(|c| !models.iter().any(|m| &m.category == *c)).map(String::as_str).collect();
+    if !without.is_empty() {
+        log::warn!("--models {}: no model for {}; no window recall for them", dir.display(), without.join(", "));
+    }
+    if let Some(step) = step {
+        for model in &mut models {
+            model.window.step = step;
+        }
+    }
+    Ok(models)
+}
+
+/// The best window IoU of every ground-truth box of each modelled category, over the frames (in frame
+/// order), reading only the frames with ground truth of a modelled category.
+fn window_recall(
+    frames: &[PathBuf],
+    truth: &[Vec<Object>],
+    models: &[Model],
+) -> anyhow::Result<BTreeMap<String, Vec<f32>>> {
+    let needed: Vec<usize> = (0..frames.len())
+        .filter(|&i| truth[i].iter().any(|o| models.iter().any(|m| m.category == o.category)))
+        .collect();
+    let bar = progress(needed.len(), "frames windowed")?;
+    let per_frame: Vec<BTreeMap<String, Vec<f32>>> = needed
+        .par_iter()
+        .map(|&i| -> anyhow::Result<_> {
+            let dir = &frames[i];
+            let frame = Frame::read(dir, DepthSource::Raw)?;
+            let pre = Preprocessed::from_frame(&frame).with_context(|| format!("{}: preprocessing", dir.display()))?;
+            let best = frame_window_best_ious(&pre, models, &truth[i]);
+            bar.inc(1);
+            Ok(best)
+        })
+        .collect::<anyhow::Result<_>>()?;
+    bar.finish_and_clear();
+    let mut all: BTreeMap<String, Vec<f32>> = models.iter().map(|m| (m.category.clone(), Vec::new())).collect();
+    for frame in per_frame {
+        for (category, best) in frame {
+            all.entry(category).or_default().extend(best);
+        }
+    }
+    // A modelled category without any ground truth has no window numbers.
+    all.retain(|_, best| !best.is_empty());
+    Ok(all)
+}
+
+fn print_diagnosis(
+    args: &Args,
+    diagnosis: &[CategoryDiagnosis],
+    overlay: &OverlayPrecision,
+    frames: usize,
+    missing: usize,
+) {
+    println!(
+        "{frames} frames from {}, detections from {} ({missing} frames without a file), 3D IoU ≥ {}",
+        args.data.display(),
+        args.detections.display(),
+        args.iou
+    );
+    match &args.models {
+        Some(dir) => println!(
+            "window recall: hypotheses of the models in {}{}",
+            dir.display(),
+            args.step.map(|s| format!(" at step {s} m")).unwrap_or_default()
+        ),
+        None => println!("window recall: - (give --models DIR)"),
+    }
+    println!(
+        "{:<12} {:>6} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>7} {:>7}",
+        "category", "#GT", "win≥.25", "win≥.50", "winIoU", "#frames", "#w/dets", "best=TP", "AP", "rankAP"
+    );
+    for d in diagnosis {
+        println!(
+            "{:<12} {:>6} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>7} {:>7}",
+            d.category,
+            d.gt_boxes,
+            percent(d.window_recall_25),
+            percent(d.window_recall_50),
+            percent(d.window_mean_best_iou),
+            d.frames_with_category,
+            d.frames_with_detections,
+            percent(d.best_is_tp),
+            percent(d.ap),
+            percent(d.rank_ap)
+        );
+    }
+    println!(
+        "overlay precision (per frame the top k detections, k = its ground-truth boxes): {}/{} = {}",
+        overlay.true_positives,
+        overlay.shown,
+        percent(overlay.precision)
+    );
 }

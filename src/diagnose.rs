@@ -1,0 +1,366 @@
+//! Diagnosis of where a detector loses average precision (`cog-gpu eval --diagnose`).
+//!
+//! Four numbers, each isolating one stage of the pipeline:
+//!
+//! 1. **Window recall ceiling** ([`best_window_ious`], [`frame_window_best_ious`], [`WindowRecall`]): for
+//!    each ground-truth box, the largest 3D IoU ([`crate::geometry::iou_3d`]) of any hypothesis the model's
+//!    sliding window enumerates on that frame — exactly the hypotheses [`crate::detect`] scores (same
+//!    scene step, sizes and `min_points`). A box no hypothesis overlaps by the evaluation's IoU cannot be
+//!    found whatever the weights are.
+//! 2. **In-frame ranking** ([`in_frame_ranking`]): over the frames that contain the category and have at
+//!    least one detection of it, how often the frame's best-scoring detection of the category is correct
+//!    (IoU ≥ the threshold with some ground-truth box of the category in that frame). It asks whether the
+//!    scores order the hypotheses of one frame well.
+//! 3. **Cross-frame ranking** ([`rank_average_precision`]): the AP when each detection's score is replaced
+//!    by its rank within its frame and category. Comparing it with the AP tells whether the raw scores
+//!    are comparable between frames: if the rank AP is higher, the scores of different frames are on
+//!    different scales (calibration loses AP).
+//! 4. **Overlay precision** ([`overlay_precision`]): in each frame, the best k detections (k = the frame's
+//!    number of ground-truth boxes of the evaluated categories) over all evaluated categories, as a
+//!    picture showing "as many boxes as there are objects" would draw them; the fraction of them that are
+//!    correct.
+//!
+//! Detections are read through [`Detection::score`] only, so other fields a detections file may carry do
+//! not change the diagnosis.
+
+use std::collections::BTreeMap;
+
+use serde::Serialize;
+
+use crate::eval::{average_precision, Detection, PrecisionRecall, ScoredBox};
+use crate::features::hypotheses::{default_yaws, sliding_window, WindowOptions};
+use crate::features::{FeatureScene, Hypothesis, Preprocessed};
+use crate::frame::Object;
+use crate::geometry::{iou_3d, Cuboid};
+use crate::model::Model;
+
+// ---------------------------------------------------------------------------------------------------------
+// 1. Window recall ceiling
+
+/// For each of `truths`, the largest 3D IoU over `hypotheses` (of `scene`); 0 when none overlaps.
+///
+/// For speed, a hypothesis is skipped for a box when their footprints cannot overlap: the distance between
+/// their centres on the ground plane exceeds the sum of their footprints' circumscribed radii (half
+/// diagonals); and when it cannot beat the box's best so far: the IoU of two boxes is at most
+/// `min(volume) / max(volume)`. Both tests are exact bounds, so the result equals the brute-force maximum.
+pub fn best_window_ious(scene: &FeatureScene, hypotheses: &[Hypothesis], truths: &[Cuboid]) -> Vec<f32> {
+    let mut best = vec![0.0f32; truths.len()];
+    if truths.is_empty() {
+        return best;
+    }
+    let radius = |c: &Cuboid| 0.5 * (c.size.x * c.size.x + c.size.y * c.size.y).sqrt();
+    let truth_radius: Vec<f32> = truths.iter().map(radius).collect();
+    let truth_volume: Vec<f32> = truths.iter().map(Cuboid::volume).collect();
+    for hypothesis in hypotheses {
+        let cuboid = hypothesis.cuboid(scene);
+        let (r, v) = (radius(&cuboid), cuboid.volume());
+        for (g, truth) in truths.iter().enumerate() {
+            let reach = r + truth_radius[g];
+            if cuboid.centre.truncate().distance_squared(truth.centre.truncate()) > reach * reach {
+                continue;
+            }
+            if v.min(truth_volume[g]) / v.max(truth_volume[g]) <= best[g] {
+                continue;
+            }
+            best[g] = best[g].max(iou_3d(&cuboid, truth));
+        }
+    }
+    best
+}
+
+/// The window recall of one preprocessed frame: for each model whose category has ground truth in
+/// `objects`, the best window IoU ([`best_window_ious`]) of each of those boxes, in `objects` order.
+///
+/// The window is the one [`crate::detect::detect_preprocessed`] enumerates: one [`FeatureScene`] per
+/// distinct `model.window.step` (shared by the models with that step) with [`default_yaws`], and
+/// [`sliding_window`] with the model's sizes and `min_points`. Categories without a model, or without
+/// ground truth in the frame, are absent from the result; no scene is built when no model has ground truth.
+pub fn frame_window_best_ious(pre: &Preprocessed, models: &[Model], objects: &[Object]) -> BTreeMap<String, Vec<f32>> {
+    let truths_of = |category: &str| -> Vec<Cuboid> {
+        objects.iter().filter(|o| o.category == category).map(|o| o.cuboid).collect()
+    };
+    let wanted: Vec<&Model> = models.iter().filter(|m| objects.iter().any(|o| o.category == m.category)).collect();
+    let mut scenes: BTreeMap<u32, FeatureScene> = BTreeMap::new();
+    for model in &wanted {
+        scenes
+            .entry(model.window.step.to_bits())
+            .or_insert_with(|| FeatureScene::new(pre.clone(), &default_yaws(), model.window.step));
+    }
+    let mut out = BTreeMap::new();
+    for model in wanted {
+        let scene = &scenes[&model.window.step.to_bits()];
+        let window =
+            sliding_window(scene, &WindowOptions { sizes: model.sizes(), min_points: model.window.min_points });
+        let truths = truths_of(&model.category);
+        out.insert(model.category.clone(), best_window_ious(scene, &window.hypotheses, &truths));
+    }
+    out
+}
+
+/// Summary of the best window IoUs of one category's ground-truth boxes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct WindowRecall {
+    /// Number of ground-truth boxes.
+    pub boxes: usize,
+    /// Fraction of boxes whose best window IoU is ≥ 0.25; `None` without boxes.
+    pub recall_25: Option<f32>,
+    /// Fraction of boxes whose best window IoU is ≥ 0.5; `None` without boxes.
+    pub recall_50: Option<f32>,
+    /// Mean of the best window IoUs; `None` without boxes.
+    pub mean_best_iou: Option<f32>,
+}
+
+impl WindowRecall {
+    pub fn from_best_ious(best: &[f32]) -> WindowRecall {
+        let n = best.len();
+        let fraction = |t: f32| (n > 0).then(|| best.iter().filter(|&&v| v >= t).count() as f32 / n as f32);
+        WindowRecall {
+            boxes: n,
+            recall_25: fraction(0.25),
+            recall_50: fraction(0.5),
+            mean_best_iou: (n > 0).then(|| (best.iter().map(|&v| v as f64).sum::<f64>() / n as f64) as f32),
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------------------
+// 2. In-frame ranking
+
+/// The in-frame ranking of one category.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct InFrameRanking {
+    /// Frames with at least one ground-truth box of the category.
+    pub frames_with_category: usize,
+    /// Of those, the frames with at least one detection of the category.
+    pub frames_with_detections: usize,
+    /// Of those, the frames whose best-scoring detection of the category is a true positive.
+    pub best_is_true_positive: usize,
+}
+
+impl InFrameRanking {
+    /// `best_is_true_positive / frames_with_detections`; `None` when no frame qualifies.
+    pub fn fraction(&self) -> Option<f32> {
+        (self.frames_with_detections > 0)
+            .then(|| self.best_is_true_positive as f32 / self.frames_with_detections as f32)
+    }
+}
+
+/// The index of the best-scoring detection of `category` in `detections`: highest score, the first in the
+/// list among equal scores.
+fn best_of(detections: &[Detection], category: &str) -> Option<usize> {
+    let mut best: Option<usize> = None;
+    for (i, d) in detections.iter().enumerate().filter(|(_, d)| d.category == category) {
+        if best.is_none_or(|b| d.score > detections[b].score) {
+            best = Some(i);
+        }
+    }
+    best
+}
+
+/// In-frame ranking of `category`: `truth[i]` and `detections[i]` are image `i`'s objects and detections
+/// (of any category; a missing `detections[i]` counts as none). Only frames with ground truth of the
+/// category and at least one detection of it count; the frame's best detection of the category (ties: the
+/// first in its file) is a true positive when its 3D IoU with some ground-truth box of the category in the
+/// frame is ≥ `iou_threshold` (one detection per frame, so no matching is involved).
+pub fn in_frame_ranking(
+    truth: &[Vec<Object>],
+    detections: &[Vec<Detection>],
+    category: &str,
+    iou_threshold: f32,
+) -> InFrameRanking {
+    let mut out = InFrameRanking::default();
+    for (image, objects) in truth.iter().enumerate() {
+        let truths: Vec<Cuboid> = objects.iter().filter(|o| o.category == category).map(|o| o.cuboid).collect();
+        if truths.is_empty() {
+            continue;
+        }
+        out.frames_with_category += 1;
+        let dets = detections.get(image).map(Vec::as_slice).unwrap_or(&[]);
+        let Some(best) = best_of(dets, category) else { continue };
+        out.frames_with_detections += 1;
+        let cuboid = dets[best].cuboid();
+        if truths.iter().any(|t| iou_3d(&cuboid, t) >= iou_threshold) {
+            out.best_is_true_positive += 1;
+        }
+    }
+    out
+}
+
+// ---------------------------------------------------------------------------------------------------------
+// 3. Cross-frame ranking
+
+/// The detections of `category` in every image, with their rank within the image: 0 for the highest
+/// score, ties broken by the order in the image's list. Returned as (image, rank, index in the image's
+/// list).
+fn in_frame_ranks(detections: &[Vec<Detection>], category: &str) -> Vec<(usize, usize, usize)> {
+    let mut out = Vec::new();
+    for (image, dets) in detections.iter().enumerate() {
+        let mut order: Vec<usize> = (0..dets.len()).filter(|&i| dets[i].category == category).collect();
+        // Stable: equal scores keep the list order.
+        order.sort_by(|&a, &b| dets[b].score.total_cmp(&dets[a].score));
+        out.extend(order.into_iter().enumerate().map(|(rank, i)| (image, rank, i)));
+    }
+    out
+}
+
+/// The "rank AP" of `category`: the AP ([`average_precision`], same matching rules) of the detections
+/// ordered by their rank within their frame instead of their score. Order: rank ascending (every frame's
+/// best detection first, then every frame's second, ...); between frames at the same rank, the original
+/// score descending; then image order and list order. Scores are not rewritten into f32 keys (which would
+/// lose ties or precision): the boxes are handed to [`average_precision`] already in this order, all with
+/// the same score, and its stable sort keeps that order.
+pub fn rank_average_precision(
+    truth: &[Vec<Object>],
+    detections: &[Vec<Detection>],
+    category: &str,
+    iou_threshold: f32,
+) -> PrecisionRecall {
+    let mut ranked = in_frame_ranks(detections, category);
+    // Stable: equal (rank, score) pairs keep image order (two detections of one image never share a rank).
+    ranked
+        .sort_by(|a, b| a.1.cmp(&b.1).then_with(|| detections[b.0][b.2].score.total_cmp(&detections[a.0][a.2].score)));
+    let boxes: Vec<ScoredBox> = ranked
+        .iter()
+        .map(|&(image, _, i)| ScoredBox { image, score: 0.0, cuboid: detections[image][i].cuboid() })
+        .collect();
+    average_precision(&boxes, &ground_truth(truth, category), iou_threshold)
+}
+
+/// The category's ground-truth cuboids of each image.
+fn ground_truth(truth: &[Vec<Object>], category: &str) -> Vec<Vec<Cuboid>> {
+    truth.iter().map(|objects| objects.iter().filter(|o| o.category == category).map(|o| o.cuboid).collect()).collect()
+}
+
+// ---------------------------------------------------------------------------------------------------------
+// 4. Overlay precision
+
+/// The overlay precision over all evaluated categories.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct OverlayPrecision {
+    /// Shown detections that are true positives.
+    pub true_positives: usize,
+    /// Detections shown: per frame `min(k, detections of the evaluated categories)`.
+    pub shown: usize,
+    /// `true_positives / shown`; `None` when nothing is shown.
+    pub precision: Option<f32>,
+}
+
+/// Overlay precision: in each image, k = its number of ground-truth boxes of `categories`; the image's
+/// detections of `categories` are sorted by score (highest first, ties in list order, all categories
+/// together) and the first k are "shown". They are matched greedily in that order: a shown detection takes,
+/// among the not yet matched ground-truth boxes of its own category in the image, the one with the highest
+/// 3D IoU, and is a true positive (and marks that box matched) when that IoU is ≥ `iou_threshold`. (Unlike
+/// the benchmark's AP rule, a detection whose best box is taken may still match a second, free box.)
+pub fn overlay_precision(
+    truth: &[Vec<Object>],
+    detections: &[Vec<Detection>],
+    categories: &[String],
+    iou_threshold: f32,
+) -> OverlayPrecision {
+    let evaluated = |category: &str| categories.iter().any(|c| c == category);
+    let mut out = OverlayPrecision::default();
+    for (image, objects) in truth.iter().enumerate() {
+        let truths: Vec<&Object> = objects.iter().filter(|o| evaluated(&o.category)).collect();
+        let k = truths.len();
+        let dets = detections.get(image).map(Vec::as_slice).unwrap_or(&[]);
+        let mut order: Vec<&Detection> = dets.iter().filter(|d| evaluated(&d.category)).collect();
+        order.sort_by(|a, b| b.score.total_cmp(&a.score));
+        order.truncate(k);
+        let mut matched = vec![false; k];
+        for d in &order {
+            out.shown += 1;
+            let cuboid = d.cuboid();
+            let best = truths
+                .iter()
+                .enumerate()
+                .filter(|(g, t)| !matched[*g] && t.category == d.category)
+                .map(|(g, t)| (g, iou_3d(&cuboid, &t.cuboid)))
+                .fold(None, |best: Option<(usize, f32)>, (g, iou)| match best {
+                    Some((_, b)) if b >= iou => best,
+                    _ => Some((g, iou)),
+                });
+            if let Some((g, iou)) = best {
+                if iou >= iou_threshold {
+                    matched[g] = true;
+                    out.true_positives += 1;
+                }
+            }
+        }
+    }
+    out.precision = (out.shown > 0).then(|| out.true_positives as f32 / out.shown as f32);
+    out
+}
+
+// ---------------------------------------------------------------------------------------------------------
+// All together
+
+/// The diagnosis of one category, as printed by `cog-gpu eval --diagnose --json`. Fractions are in
+/// [0, 1]; `None` (JSON `null`) where undefined.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct CategoryDiagnosis {
+    #[serde(skip)]
+    pub category: String,
+    /// Ground-truth boxes of the category in the evaluated frames.
+    pub gt_boxes: usize,
+    /// Window recall at IoU 0.25 (`None` without a model for the category or without ground truth).
+    pub window_recall_25: Option<f32>,
+    /// Window recall at IoU 0.5.
+    pub window_recall_50: Option<f32>,
+    /// Mean best window IoU.
+    pub window_mean_best_iou: Option<f32>,
+    /// Frames with ground truth of the category.
+    pub frames_with_category: usize,
+    /// Of those, frames with at least one detection of the category.
+    pub frames_with_detections: usize,
+    /// Fraction of `frames_with_detections` whose best detection is a true positive.
+    pub best_is_tp: Option<f32>,
+    /// The benchmark AP ([`average_precision`] on the scores).
+    pub ap: Option<f32>,
+    /// The AP of the in-frame ranks ([`rank_average_precision`]).
+    pub rank_ap: Option<f32>,
+}
+
+/// Diagnoses each of `categories` (numbers 2 and 3 of the module doc, and number 1 from `window`: the best
+/// window IoUs of every ground-truth box of a category, over all frames; a category absent from `window`,
+/// or all of them when `window` is `None`, has no window numbers).
+pub fn diagnose_categories(
+    truth: &[Vec<Object>],
+    detections: &[Vec<Detection>],
+    categories: &[String],
+    iou_threshold: f32,
+    window: Option<&BTreeMap<String, Vec<f32>>>,
+) -> Vec<CategoryDiagnosis> {
+    categories
+        .iter()
+        .map(|category| {
+            let ground_truth = ground_truth(truth, category);
+            let scored: Vec<ScoredBox> = detections
+                .iter()
+                .enumerate()
+                .flat_map(|(image, dets)| {
+                    dets.iter().filter(|d| &d.category == category).map(move |d| ScoredBox {
+                        image,
+                        score: d.score,
+                        cuboid: d.cuboid(),
+                    })
+                })
+                .collect();
+            let pr = average_precision(&scored, &ground_truth, iou_threshold);
+            let ranking = in_frame_ranking(truth, detections, category, iou_threshold);
+            let rank = rank_average_precision(truth, detections, category, iou_threshold);
+            let recall = window.and_then(|w| w.get(category)).map(|best| WindowRecall::from_best_ious(best));
+            CategoryDiagnosis {
+                category: category.clone(),
+                gt_boxes: pr.positives,
+                window_recall_25: recall.and_then(|r| r.recall_25),
+                window_recall_50: recall.and_then(|r| r.recall_50),
+                window_mean_best_iou: recall.and_then(|r| r.mean_best_iou),
+                frames_with_category: ranking.frames_with_category,
+                frames_with_detections: ranking.frames_with_detections,
+                best_is_tp: ranking.fraction(),
+                ap: pr.ap,
+                rank_ap: rank.ap,
+            }
+        })
+        .collect()
+}

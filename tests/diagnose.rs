@@ -1,0 +1,369 @@
+//! `cog_gpu::diagnose` against hand-computed numbers, the window recall on a synthetic frame, and
+//! `cog-gpu eval --diagnose` end to end.
+
+use std::path::Path;
+use std::process::Command;
+
+use cog_gpu::diagnose::{
+    best_window_ious, diagnose_categories, frame_window_best_ious, in_frame_ranking, overlay_precision,
+    rank_average_precision, WindowRecall,
+};
+use cog_gpu::eval::{Detection, FrameDetections};
+use cog_gpu::features::hypotheses::{default_yaws, sliding_window, WindowOptions};
+use cog_gpu::features::{FeatureScene, Groups, Layout, Preprocessed, SizeQuantiles};
+use cog_gpu::frame::{Frame, Object};
+use cog_gpu::geometry::{iou_3d, Cuboid};
+use cog_gpu::model::{FeaturePath, FeatureSettings, Model, WindowSettings};
+use cog_gpu::synth::{self, SynthOptions};
+use glam::Vec3;
+use serde_json::Value;
+
+fn unit_box(x: f32, y: f32) -> Cuboid {
+    Cuboid::new(Vec3::new(x, y, 0.5), Vec3::ONE, 0.0)
+}
+
+fn object(category: &str, cuboid: Cuboid) -> Object {
+    Object { category: category.into(), label: None, cuboid }
+}
+
+fn det(category: &str, cuboid: Cuboid, score: f32) -> Detection {
+    Detection::new(category, &cuboid, score)
+}
+
+fn close(a: Option<f32>, b: f32) -> bool {
+    a.is_some_and(|a| (a - b).abs() < 1e-5)
+}
+
+const FAR: f32 = 20.0;
+
+#[test]
+fn in_frame_best_is_true_positive() {
+    // f0: a bed at x = 0; two bed detections with the same score 0.9, the exact one listed first: ties go
+    //     to the first in the list → best is the exact box → TP.
+    // f1: a bed at x = 0; the best bed detection (0.8) is far away → FP (the exact one at 0.7 is not the
+    //     best and does not count).
+    // f2: a bed at x = 0 and only a chair detection on it → no bed detection, the frame is left out of
+    //     frames_with_detections.
+    // The detections list is one shorter than the frames (f2 has none at all would be the same).
+    let truth = vec![
+        vec![object("bed", unit_box(0.0, 3.0))],
+        vec![object("bed", unit_box(0.0, 3.0))],
+        vec![object("bed", unit_box(0.0, 3.0)), object("chair", unit_box(0.0, 6.0))],
+    ];
+    let detections = vec![
+        vec![det("bed", unit_box(0.0, 3.0), 0.9), det("bed", unit_box(FAR, 3.0), 0.9)],
+        vec![det("bed", unit_box(FAR, 3.0), 0.8), det("bed", unit_box(0.0, 3.0), 0.7)],
+        vec![det("chair", unit_box(0.0, 3.0), 0.95)],
+    ];
+    let bed = in_frame_ranking(&truth, &detections, "bed", 0.25);
+    assert_eq!((bed.frames_with_category, bed.frames_with_detections, bed.best_is_true_positive), (3, 2, 1));
+    assert!(close(bed.fraction(), 0.5));
+
+    // Reversing f0's tie makes its best the far box: 0 of 2.
+    let mut swapped = detections.clone();
+    swapped[0].reverse();
+    assert_eq!(in_frame_ranking(&truth, &swapped, "bed", 0.25).best_is_true_positive, 0);
+
+    // The chair of f2 has its detection 3 m off → FP; a missing detections entry counts as none.
+    let chair = in_frame_ranking(&truth, &detections[..2], "chair", 0.25);
+    assert_eq!((chair.frames_with_category, chair.frames_with_detections), (1, 0));
+    assert_eq!(chair.fraction(), None);
+
+    // The IoU threshold: a best detection shifted by half a width (IoU 1/3) is a TP at 0.25, not at 0.5.
+    let shifted = vec![vec![det("bed", unit_box(0.5, 3.0), 0.9)]];
+    assert_eq!(in_frame_ranking(&truth[..1], &shifted, "bed", 0.25).best_is_true_positive, 1);
+    assert_eq!(in_frame_ranking(&truth[..1], &shifted, "bed", 0.5).best_is_true_positive, 0);
+}
+
+#[test]
+fn rank_ap_differs_from_ap_as_computed_by_hand() {
+    // Frame A: a bed; detections TP 0.9, FP 0.8 (far). Frame B: a bed; detection TP 0.3.
+    let truth = vec![vec![object("bed", unit_box(0.0, 3.0))], vec![object("bed", unit_box(0.0, 3.0))], vec![]];
+    let mut detections = vec![
+        vec![det("bed", unit_box(0.0, 3.0), 0.9), det("bed", unit_box(FAR, 3.0), 0.8)],
+        vec![det("bed", unit_box(0.0, 3.0), 0.3)],
+        vec![],
+    ];
+    let categories = vec!["bed".to_string()];
+    // Score order: A-TP, A-FP, B-TP → precision 1, 1/2, 2/3; recall 1/2, 1/2, 1; envelope 1, 2/3, 2/3 →
+    // AP = 1/2·1 + 1/2·2/3 = 5/6.
+    // Rank order: rank 0: A-TP (0.9), B-TP (0.3); rank 1: A-FP → precision 1, 1, 2/3; recall 1/2, 1, 1 →
+    // rank AP = 1.
+    let d = &diagnose_categories(&truth, &detections, &categories, 0.25, None)[0];
+    assert!(close(d.ap, 5.0 / 6.0), "{d:?}");
+    assert!(close(d.rank_ap, 1.0), "{d:?}");
+    assert!(close(rank_average_precision(&truth, &detections, "bed", 0.25).ap, 1.0));
+
+    // Frame C (no ground truth) gets a FP bed at 0.95: rank 0 as well. At equal rank, higher original score
+    // first: C-FP (0.95), A-TP (0.9), B-TP (0.3), then A-FP → precision 0, 1/2, 2/3, 1/2; recall 0, 1/2, 1,
+    // 1; envelope 2/3, 2/3, 2/3, 1/2 → rank AP = 1/2·2/3 + 1/2·2/3 = 2/3. (Ascending scores would give
+    // B-TP, A-TP, C-FP, A-FP → rank AP 1: the tie-break matters.)
+    // Score order: C-FP, A-TP, A-FP, B-TP → precision 0, 1/2, 1/3, 1/2; recall 0, 1/2, 1/2, 1; envelope
+    // 1/2 throughout → AP = 1/2.
+    detections[2].push(det("bed", unit_box(0.0, 3.0), 0.95));
+    let d = &diagnose_categories(&truth, &detections, &categories, 0.25, None)[0];
+    assert!(close(d.ap, 0.5), "{d:?}");
+    assert!(close(d.rank_ap, 2.0 / 3.0), "{d:?}");
+    let pr = rank_average_precision(&truth, &detections, "bed", 0.25);
+    assert_eq!(pr.true_positive, [false, true, true, false]);
+
+    // No ground truth: no rank AP.
+    assert_eq!(rank_average_precision(&truth, &detections, "chair", 0.25).ap, None);
+}
+
+#[test]
+fn overlay_precision_by_hand() {
+    let categories = vec!["bed".to_string(), "chair".to_string()];
+    let truth = vec![
+        // f0: k = 2.
+        vec![
+            object("bed", unit_box(0.0, 3.0)),
+            object("chair", unit_box(0.0, 6.0)),
+            object("sofa", unit_box(9.0, 9.0)),
+        ],
+        // f1: two overlapping beds, k = 2.
+        vec![object("bed", unit_box(0.0, 3.0)), object("bed", unit_box(0.5, 3.0))],
+        // f2: k = 1, no detections.
+        vec![object("chair", unit_box(0.0, 6.0))],
+        // f3: k = 0.
+        vec![],
+    ];
+    let detections = vec![
+        // The sofa is not evaluated (ignored, even though it scores best); top 2: bed 0.9 (TP), its
+        // duplicate 0.8 (FP: no free bed left); the exact chair at 0.7 is the third, not shown.
+        vec![
+            det("sofa", unit_box(9.0, 9.0), 0.99),
+            det("bed", unit_box(0.0, 3.0), 0.9),
+            det("bed", unit_box(0.0, 3.0), 0.8),
+            det("chair", unit_box(0.0, 6.0), 0.7),
+        ],
+        // Bed at x = 0 (0.9) takes the bed at x = 0 (IoU 1); bed at x = 0.1 (0.8): its best box is taken,
+        // the free one at x = 0.5 overlaps it by 0.6/1.4 = 0.43 ≥ 0.25 → TP as well.
+        vec![det("bed", unit_box(0.0, 3.0), 0.9), det("bed", unit_box(0.1, 3.0), 0.8)],
+        vec![],
+        vec![det("bed", unit_box(0.0, 3.0), 0.9)],
+    ];
+    // Shown 2 + 2 + 0 + 0 = 4, true positives 1 + 2 = 3.
+    let o = overlay_precision(&truth, &detections, &categories, 0.25);
+    assert_eq!((o.true_positives, o.shown), (3, 4));
+    assert!(close(o.precision, 0.75));
+    // At IoU 0.5 the second bed of f1 misses (0.43): 2 of 4.
+    let o = overlay_precision(&truth, &detections, &categories, 0.5);
+    assert_eq!((o.true_positives, o.shown), (2, 4));
+    // A detection of another category on the box does not count: a chair on f1's bed.
+    let chair_on_bed = vec![vec![], vec![det("chair", unit_box(0.0, 3.0), 0.9)]];
+    let o = overlay_precision(&truth, &chair_on_bed, &categories, 0.25);
+    assert_eq!((o.true_positives, o.shown, o.precision), (0, 1, Some(0.0)));
+    let none = overlay_precision(&truth, &[], &categories, 0.25);
+    assert_eq!((none.shown, none.precision), (0, None));
+}
+
+#[test]
+fn window_recall_summary() {
+    let r = WindowRecall::from_best_ious(&[0.1, 0.3, 0.6, 1.0]);
+    assert_eq!(r.boxes, 4);
+    assert!(close(r.recall_25, 0.75) && close(r.recall_50, 0.5) && close(r.mean_best_iou, 0.5));
+    assert_eq!(WindowRecall::from_best_ious(&[]), WindowRecall::default());
+}
+
+#[test]
+fn window_recall_on_a_synthetic_frame() {
+    let frame = synth::generate_frame(5, 0, &SynthOptions::small(160, 120)).unwrap().frame;
+    assert!(!frame.objects.is_empty());
+    let pre = Preprocessed::from_frame(&frame).unwrap();
+    let step = 0.25;
+    let scene = FeatureScene::new(pre.clone(), &default_yaws(), step);
+    let sizes = SizeQuantiles {
+        widths: vec![0.5, 0.8, 1.1, 1.4, 1.8],
+        depths: vec![0.5, 1.0, 2.0],
+        heights: vec![0.4, 0.8, 1.6],
+    };
+    let min_points = 20;
+    let window = sliding_window(&scene, &WindowOptions { sizes: sizes.sizes(), min_points });
+    let hypotheses = &window.hypotheses;
+    assert!(hypotheses.len() > 10, "{} hypotheses", hypotheses.len());
+
+    // Two ground-truth boxes equal to window hypotheses get IoU 1; the frame's own boxes get the brute-force
+    // maximum (the culling is exact), in [0, 1].
+    let picked = [hypotheses[0].cuboid(&scene), hypotheses[hypotheses.len() / 2].cuboid(&scene)];
+    let truths: Vec<Cuboid> = picked.iter().copied().chain(frame.objects.iter().map(|o| o.cuboid)).collect();
+    let best = best_window_ious(&scene, hypotheses, &truths);
+    assert_eq!(best.len(), truths.len());
+    assert!(best[0] > 1.0 - 1e-5 && best[1] > 1.0 - 1e-5, "{best:?}");
+    for (g, truth) in truths.iter().enumerate() {
+        let brute = hypotheses.iter().map(|h| iou_3d(&h.cuboid(&scene), truth)).fold(0.0f32, f32::max);
+        assert!((0.0..=1.0).contains(&best[g]), "{best:?}");
+        assert_eq!(best[g], brute, "box {g}");
+    }
+
+    // The per-frame function with a model: the same hypotheses (its step, sizes, min_points), the frame's
+    // boxes of the model's category; other categories absent.
+    let category = frame.objects[0].category.clone();
+    let layout = Layout::new([1, 1, 1], false, Groups::GEOM).unwrap();
+    let model = Model::new(
+        &category,
+        layout,
+        sizes,
+        WindowSettings { step, min_points },
+        FeatureSettings { path: FeaturePath::Fast, subdivisions: 2 },
+        vec![0.0; layout.dim()],
+        serde_json::Value::Null,
+    )
+    .unwrap();
+    let per_frame = frame_window_best_ious(&pre, std::slice::from_ref(&model), &frame.objects);
+    assert_eq!(per_frame.keys().collect::<Vec<_>>(), [&category]);
+    let own: Vec<Cuboid> = frame.objects.iter().filter(|o| o.category == category).map(|o| o.cuboid).collect();
+    assert_eq!(per_frame[&category], best_window_ious(&scene, hypotheses, &own));
+    // Without ground truth of the model's category nothing is computed.
+    let others: Vec<Object> = frame.objects.iter().filter(|o| o.category != category).cloned().collect();
+    assert!(frame_window_best_ious(&pre, &[model], &others).is_empty());
+}
+
+fn write_frame(root: &Path, name: &str, objects: Vec<Object>) {
+    let frame = Frame {
+        name: name.into(),
+        rgb: image::RgbImage::from_pixel(8, 6, image::Rgb([90, 120, 150])),
+        depth_mm: vec![2000; 48],
+        k: [[10.0, 0.0, 4.5], [0.0, 10.0, 3.5], [0.0, 0.0, 1.0]],
+        extrinsics: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        scene: None,
+        objects,
+        layout: None,
+    };
+    frame.write(root.join(name)).unwrap();
+}
+
+#[test]
+fn cli_diagnose_json_and_table() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (data, dets) = (tmp.path().join("data"), tmp.path().join("dets"));
+    std::fs::create_dir_all(&dets).unwrap();
+    // The rank-AP case of `rank_ap_differs_from_ap_as_computed_by_hand` (AP 5/6, rank AP 1) as files.
+    write_frame(&data, "a", vec![object("bed", unit_box(0.0, 3.0))]);
+    write_frame(&data, "b", vec![object("bed", unit_box(0.0, 3.0))]);
+    let write = |frame: &str, detections: Vec<Detection>| {
+        FrameDetections { frame: frame.into(), detections }.write(&dets.join(format!("{frame}.json"))).unwrap();
+    };
+    write("a", vec![det("bed", unit_box(0.0, 3.0), 0.9), det("bed", unit_box(FAR, 3.0), 0.8)]);
+    write("b", vec![det("bed", unit_box(0.0, 3.0), 0.3)]);
+    let run = |extra: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_cog-gpu"))
+            .args(["eval", "--data", data.to_str().unwrap(), "--detections", dets.to_str().unwrap(), "--diagnose"])
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+
+    let out = run(&["--json"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let report: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let diagnosis = report["diagnosis"].as_object().unwrap();
+    assert_eq!(diagnosis.len(), 10, "the ten large categories");
+    let bed = diagnosis["bed"].as_object().unwrap();
+    let keys = [
+        "gt_boxes",
+        "window_recall_25",
+        "window_recall_50",
+        "window_mean_best_iou",
+        "frames_with_category",
+        "frames_with_detections",
+        "best_is_tp",
+        "ap",
+        "rank_ap",
+    ];
+    let mut expected: Vec<&str> = keys.to_vec();
+    expected.sort();
+    assert_eq!(bed.keys().map(String::as_str).collect::<Vec<_>>(), expected);
+    assert_eq!(bed["gt_boxes"], 2);
+    assert!(bed["window_recall_25"].is_null(), "no --models: no window recall");
+    assert_eq!((bed["frames_with_category"].as_u64(), bed["frames_with_detections"].as_u64()), (Some(2), Some(2)));
+    let num = |v: &Value| v.as_f64().unwrap();
+    assert!((num(&bed["best_is_tp"]) - 1.0).abs() < 1e-6);
+    assert!((num(&bed["ap"]) - 5.0 / 6.0).abs() < 1e-5);
+    assert!((num(&bed["rank_ap"]) - 1.0).abs() < 1e-6);
+    assert!(diagnosis["sofa"]["ap"].is_null() && diagnosis["sofa"]["best_is_tp"].is_null());
+    // Overlay: one box per frame, a's best (TP) and b's (TP).
+    let overlay = &report["overlay_precision"];
+    assert_eq!((overlay["true_positives"].as_u64(), overlay["shown"].as_u64()), (Some(2), Some(2)));
+    assert!((num(&overlay["precision"]) - 1.0).abs() < 1e-6);
+
+    let out = run(&[]);
+    assert!(out.status.success());
+    let table = String::from_utf8_lossy(&out.stdout);
+    let bed_line = table.lines().find(|l| l.starts_with("bed ")).expect("a bed row");
+    assert_eq!(
+        bed_line.split_whitespace().collect::<Vec<_>>(),
+        ["bed", "2", "-", "-", "-", "2", "2", "100.0", "83.3", "100.0"]
+    );
+    assert!(table.contains("2/2 = 100.0"), "{table}");
+
+    // Flags: --models needs --diagnose; a missing models directory is named.
+    let plain = Command::new(env!("CARGO_BIN_EXE_cog-gpu"))
+        .args(["eval", "--data", data.to_str().unwrap(), "--detections", dets.to_str().unwrap(), "--models", "x"])
+        .output()
+        .unwrap();
+    assert!(!plain.status.success());
+    let out = run(&["--models", tmp.path().join("no-models").to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no-models"), "{}", String::from_utf8_lossy(&out.stderr));
+}
+
+#[test]
+fn cli_window_recall_with_models() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (data, dets, models) = (tmp.path().join("data"), tmp.path().join("dets"), tmp.path().join("models"));
+    std::fs::create_dir_all(&dets).unwrap();
+    std::fs::create_dir_all(&models).unwrap();
+    let synthetic = synth::generate_frame(5, 0, &SynthOptions::small(160, 120)).unwrap();
+    let frame_dir = data.join(&synthetic.frame.name);
+    synthetic.write(&frame_dir, None).unwrap();
+    let category = synthetic.frame.objects[0].category.clone();
+    let layout = Layout::new([1, 1, 1], false, Groups::GEOM).unwrap();
+    let model = Model::new(
+        &category,
+        layout,
+        SizeQuantiles {
+            widths: vec![0.5, 0.8, 1.1, 1.4, 1.8],
+            depths: vec![0.5, 1.0, 2.0],
+            heights: vec![0.4, 0.8, 1.6],
+        },
+        WindowSettings { step: 0.1, min_points: 20 },
+        FeatureSettings { path: FeaturePath::Fast, subdivisions: 2 },
+        vec![0.0; layout.dim()],
+        serde_json::Value::Null,
+    )
+    .unwrap();
+    model.write(&models.join(format!("{category}.json"))).unwrap();
+
+    let out = Command::new(env!("CARGO_BIN_EXE_cog-gpu"))
+        .args(["eval", "--data", data.to_str().unwrap(), "--detections", dets.to_str().unwrap()])
+        .args(["--diagnose", "--json", "--categories", &category, "--models", models.to_str().unwrap()])
+        .args(["--step", "0.3"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let report: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let entry = &report["diagnosis"][&category];
+
+    // The same computation in the library, on the frame as read back, at the --step override.
+    let frame = Frame::read(&frame_dir, Default::default()).unwrap();
+    let pre = Preprocessed::from_frame(&frame).unwrap();
+    let mut stepped = model.clone();
+    stepped.window.step = 0.3;
+    let best = frame_window_best_ious(&pre, &[stepped], &frame.objects);
+    let expected = WindowRecall::from_best_ious(&best[&category]);
+    assert_eq!(entry["gt_boxes"].as_u64(), Some(expected.boxes as u64));
+    for (key, value) in [
+        ("window_recall_25", expected.recall_25),
+        ("window_recall_50", expected.recall_50),
+        ("window_mean_best_iou", expected.mean_best_iou),
+    ] {
+        let got = entry[key].as_f64().unwrap_or_else(|| panic!("{key} is {}", entry[key]));
+        assert!((0.0..=1.0).contains(&got));
+        assert!((got - value.unwrap() as f64).abs() < 1e-6, "{key}: {got} vs {value:?}");
+    }
+    // No detection files: no detections, no AP beyond 0, overlay shows nothing.
+    assert_eq!(entry["frames_with_detections"], 0);
+    assert_eq!(report["overlay_precision"]["shown"], 0);
+    assert!(report["overlay_precision"]["precision"].is_null());
+}
