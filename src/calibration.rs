@@ -12,7 +12,7 @@
 //!   SUN RGB-D benchmark's rules ([`crate::eval`]): sorted by raw score over all frames, a detection is a
 //!   true positive when its best-overlapping ground-truth box of the category has 3D IoU ≥ the threshold
 //!   (0.25) and is not yet taken. So `p` estimates exactly the precision that AP integrates.
-//! * **Fit**: maximum likelihood by Newton's method on `(a, b)` with a weak Gaussian prior
+//! * **Fit**: maximum likelihood by damped Newton's method on `(a, b)` with a weak Gaussian prior
 //!   (`λ = 10⁻³` on both) so that separable data stays finite. **Monotone by construction**: if the fit
 //!   gives `a ≤ a_min` (`10⁻³`), `a` is set to `a_min` and only `b` is fitted, so a higher raw score never
 //!   gets a lower probability and the within-category order (hence the AP) is unchanged.
@@ -95,10 +95,24 @@ pub fn fit_logistic(samples: &[(f32, bool)]) -> Result<(f64, f64)> {
     Ok((MIN_SLOPE, newton(samples, Some(MIN_SLOPE)).1))
 }
 
-/// Newton's method on the penalised negative log-likelihood; `fixed_a` fits `b` alone.
+/// The penalised negative log-likelihood of `(a, b)`.
+fn objective(samples: &[(f32, bool)], a: f64, b: f64) -> f64 {
+    let mut total = 0.5 * PRIOR * (a * a + b * b);
+    for &(s, y) in samples {
+        let z = a * f64::from(s) + b;
+        // −log σ(z) = log(1 + e^{−z}); −log(1 − σ(z)) = log(1 + e^{z}); computed without overflow.
+        let t = if y { -z } else { z };
+        total += if t > 0.0 { t + (-t).exp().ln_1p() } else { t.exp().ln_1p() };
+    }
+    total
+}
+
+/// Damped Newton's method on the penalised negative log-likelihood (the step is halved until the
+/// objective decreases, so it cannot diverge); `fixed_a` fits `b` alone.
 fn newton(samples: &[(f32, bool)], fixed_a: Option<f64>) -> (f64, f64) {
     let (mut a, mut b) = (fixed_a.unwrap_or(1.0), 0.0f64);
-    for _ in 0..100 {
+    let mut current = objective(samples, a, b);
+    for _ in 0..200 {
         // Gradient and Hessian of Σ −log-likelihood + PRIOR/2 (a² + b²).
         let (mut ga, mut gb, mut haa, mut hab, mut hbb) = (PRIOR * a, PRIOR * b, PRIOR, 0.0, PRIOR);
         for &(s, y) in samples {
@@ -121,9 +135,19 @@ fn newton(samples: &[(f32, bool)], fixed_a: Option<f64>) -> (f64, f64) {
             }
             ((hbb * ga - hab * gb) / det, (haa * gb - hab * ga) / det)
         };
-        a -= da;
-        b -= db;
-        if da.abs() < 1e-10 * (1.0 + a.abs()) && db.abs() < 1e-10 * (1.0 + b.abs()) {
+        let mut step = 1.0;
+        let mut improved = false;
+        for _ in 0..40 {
+            let (na, nb) = (a - step * da, b - step * db);
+            let value = objective(samples, na, nb);
+            if value <= current {
+                (a, b, current, improved) = (na, nb, value, true);
+                break;
+            }
+            step *= 0.5;
+        }
+        let small = (step * da).abs() < 1e-10 * (1.0 + a.abs()) && (step * db).abs() < 1e-10 * (1.0 + b.abs());
+        if !improved || small {
             break;
         }
     }

@@ -16,9 +16,9 @@
 //!    are comparable between frames: if the rank AP is higher, the scores of different frames are on
 //!    different scales (calibration loses AP).
 //! 4. **Overlay precision** ([`overlay_precision`]): in each frame, the best k detections (k = the frame's
-//!    number of ground-truth boxes of the evaluated categories) over all evaluated categories, as a
-//!    picture showing "as many boxes as there are objects" would draw them; the fraction of them that are
-//!    correct.
+//!    number of ground-truth boxes of the evaluated categories) over all evaluated categories, chosen exactly
+//!    as the overlay picture chooses them ([`crate::detect::overlay_selection`]: by score, skipping a box
+//!    that overlaps a better one of another category); the fraction of them that are correct.
 //!
 //! Detections are read through [`Detection::score`] only, so other fields a detections file may carry do
 //! not change the diagnosis.
@@ -27,6 +27,7 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
+use crate::detect::overlay_selection;
 use crate::eval::{average_precision, Detection, PrecisionRecall, ScoredBox};
 use crate::features::hypotheses::{default_yaws, sliding_window, WindowOptions};
 use crate::features::{FeatureScene, Hypothesis, Preprocessed};
@@ -245,9 +246,10 @@ pub struct OverlayPrecision {
     pub precision: Option<f32>,
 }
 
-/// Overlay precision: in each image, k = its number of ground-truth boxes of `categories`; the image's
-/// detections of `categories` are sorted by score (highest first, ties in list order, all categories
-/// together) and the first k are "shown". They are matched greedily in that order: a shown detection takes,
+/// Overlay precision: in each image, k = its number of ground-truth boxes of `categories`; of the image's
+/// detections of `categories`, the k that [`overlay_selection`] picks are "shown" (by score, highest first,
+/// ties in list order, all categories together, skipping a detection with 3D IoU ≥
+/// [`crate::detect::CROSS_CATEGORY_IOU`] with a better one of another category). They are matched greedily in that order: a shown detection takes,
 /// among the not yet matched ground-truth boxes of its own category in the image, the one with the highest
 /// 3D IoU, and is a true positive (and marks that box matched) when that IoU is ≥ `iou_threshold`. (Unlike
 /// the benchmark's AP rule, a detection whose best box is taken may still match a second, free box.)
@@ -263,9 +265,9 @@ pub fn overlay_precision(
         let truths: Vec<&Object> = objects.iter().filter(|o| evaluated(&o.category)).collect();
         let k = truths.len();
         let dets = detections.get(image).map(Vec::as_slice).unwrap_or(&[]);
-        let mut order: Vec<&Detection> = dets.iter().filter(|d| evaluated(&d.category)).collect();
-        order.sort_by(|a, b| b.score.total_cmp(&a.score));
-        order.truncate(k);
+        // Exactly what the overlay draws: the best k over the categories, one category per object.
+        let candidates: Vec<Detection> = dets.iter().filter(|d| evaluated(&d.category)).cloned().collect();
+        let order = overlay_selection(&candidates, k);
         let mut matched = vec![false; k];
         for d in &order {
             out.shown += 1;

@@ -71,7 +71,8 @@ impl FrameDetections {
         let parsed: FrameDetections =
             serde_json::from_str(&text).map_err(|e| Error::invalid(path, format!("not a detections file: {e}")))?;
         for (i, d) in parsed.detections.iter().enumerate() {
-            let finite = d.centre.iter().chain(&d.size).chain([&d.yaw, &d.score]).chain(&d.raw_score).all(|v| v.is_finite());
+            let finite =
+                d.centre.iter().chain(&d.size).chain([&d.yaw, &d.score]).chain(&d.raw_score).all(|v| v.is_finite());
             if !finite {
                 return Err(Error::invalid(path, format!("detections[{i}] has a non-finite number")));
             }

@@ -63,7 +63,8 @@ fn calibration_is_monotone_even_on_inverted_data() {
     let samples: Vec<(f32, bool)> = (0..1000).map(|k| (k as f32 / 100.0, k % 10 == 0 && k < 500)).collect();
     let (a, b) = fit_logistic(&samples).unwrap();
     assert_eq!(a, MIN_SLOPE);
-    let calibration = Calibration { a, b, detections: 1000, true_positives: 50, iou: 0.25, data: String::new(), frames: 1 };
+    let calibration =
+        Calibration { a, b, detections: 1000, true_positives: 50, iou: 0.25, data: String::new(), frames: 1 };
     let mut previous = -1.0;
     for k in -50..50 {
         let p = calibration.probability(k as f32 * 0.3);
@@ -84,11 +85,7 @@ fn calibration_needs_both_outcomes() {
 }
 
 fn object(category: &str, centre: [f32; 3], size: [f32; 3]) -> Object {
-    Object {
-        category: category.into(),
-        label: None,
-        cuboid: Cuboid::new(Vec3::from(centre), Vec3::from(size), 0.0),
-    }
+    Object { category: category.into(), label: None, cuboid: Cuboid::new(Vec3::from(centre), Vec3::from(size), 0.0) }
 }
 
 fn detection(category: &str, centre: [f32; 3], size: [f32; 3], score: f32) -> Detection {
@@ -104,9 +101,9 @@ fn labels_follow_the_benchmark_matching() {
     ];
     let detections = vec![
         vec![
-            detection("bed", [0.0, 2.0, 0.5], [2.0, 1.5, 1.0], 0.5),  // exact: TP
-            detection("bed", [0.1, 2.0, 0.5], [2.0, 1.5, 1.0], 0.9),  // IoU 0.9: TP, taken first (higher)
-            detection("bed", [5.0, 2.0, 0.5], [2.0, 1.5, 1.0], 0.7),  // far away: FP
+            detection("bed", [0.0, 2.0, 0.5], [2.0, 1.5, 1.0], 0.5), // exact: TP
+            detection("bed", [0.1, 2.0, 0.5], [2.0, 1.5, 1.0], 0.9), // IoU 0.9: TP, taken first (higher)
+            detection("bed", [5.0, 2.0, 0.5], [2.0, 1.5, 1.0], 0.7), // far away: FP
             detection("chair", [0.0, 2.0, 0.5], [2.0, 1.5, 1.0], 2.0), // another category: ignored
         ],
         vec![detection("bed", [1.0, 2.0, 0.4], [0.5, 0.5, 0.8], 0.8)], // frame without a bed: FP
@@ -118,7 +115,8 @@ fn labels_follow_the_benchmark_matching() {
 
 fn tiny_model(category: &str) -> Model {
     let layout = Layout::new([3, 3, 3], false, cog_gpu::features::Groups::ALL).unwrap();
-    let boxes: Vec<Cuboid> = (0..5).map(|k| Cuboid::new(Vec3::ZERO, Vec3::new(1.0 + 0.1 * k as f32, 1.0, 1.0), 0.0)).collect();
+    let boxes: Vec<Cuboid> =
+        (0..5).map(|k| Cuboid::new(Vec3::ZERO, Vec3::new(1.0 + 0.1 * k as f32, 1.0, 1.0), 0.0)).collect();
     Model::new(
         category,
         layout,
@@ -136,8 +134,15 @@ fn models_store_and_check_their_calibration() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("bed.json");
     let mut model = tiny_model("bed");
-    model.calibration =
-        Some(Calibration { a: 1.5, b: -0.5, detections: 10, true_positives: 3, iou: 0.25, data: "d".into(), frames: 2 });
+    model.calibration = Some(Calibration {
+        a: 1.5,
+        b: -0.5,
+        detections: 10,
+        true_positives: 3,
+        iou: 0.25,
+        data: "d".into(),
+        frames: 2,
+    });
     model.write(&path).unwrap();
     let back = Model::read(&path).unwrap();
     assert_eq!(back.calibration, model.calibration);
@@ -155,8 +160,15 @@ fn models_store_and_check_their_calibration() {
 #[test]
 fn detection_reports_calibrated_scores_and_keeps_the_raw_ones() {
     let mut bed = tiny_model("bed");
-    bed.calibration =
-        Some(Calibration { a: 2.0, b: 0.0, detections: 1, true_positives: 1, iou: 0.25, data: String::new(), frames: 1 });
+    bed.calibration = Some(Calibration {
+        a: 2.0,
+        b: 0.0,
+        detections: 1,
+        true_positives: 1,
+        iou: 0.25,
+        data: String::new(),
+        frames: 1,
+    });
     let chair = tiny_model("chair"); // uncalibrated: raw scores stay
     let mut detections = vec![
         detection("chair", [0.0, 3.0, 0.4], [0.5, 0.5, 0.8], 0.6),
@@ -178,7 +190,7 @@ fn overlay_draws_one_category_per_object() {
     let detections = vec![
         detection("bed", [0.0, 2.0, 0.5], [2.0, 1.5, 1.0], 0.9),
         detection("sofa", [0.05, 2.0, 0.5], [2.0, 1.5, 1.0], 0.8), // same furniture, other category: skipped
-        detection("bed", [0.3, 2.0, 0.5], [2.0, 1.5, 1.0], 0.7),  // same category: NMS's business, kept
+        detection("bed", [0.3, 2.0, 0.5], [2.0, 1.5, 1.0], 0.7),   // same category: NMS's business, kept
         detection("nightstand", [1.4, 1.6, 0.3], [0.5, 0.4, 0.6], 0.6), // beside the bed (IoU < 0.4): kept
         detection("chair", [4.0, 2.0, 0.4], [0.5, 0.5, 0.8], 0.5),
     ];

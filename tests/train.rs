@@ -115,6 +115,7 @@ fn loss_augmented_inference_finds_the_maximum_over_all_answers() {
 /// cached features (dot products only).
 #[test]
 fn cached_pass_answers_like_the_full_pass_at_the_same_weights() {
+    use cog_gpu::learn::SeparationOracle;
     let oracle = small_oracle();
     let dim = oracle.settings.layout.dim();
     let w: Vec<f64> = (0..dim).map(|n| (((n * 40503) % 997) as f64 / 997.0 - 0.5) * 0.2).collect();
@@ -137,8 +138,7 @@ fn one_slack_training_converges_and_reports_its_objective() {
     use cog_gpu::learn::{CuttingPlane, OneSlack, SeparationOracle, SsvmOptions};
     let mut oracle = small_oracle();
     oracle.max_full_passes = 3;
-    let options =
-        SsvmOptions { c: 1.0, epsilon: 0.01, max_iterations: 200, quiet: true, ..SsvmOptions::default() };
+    let options = SsvmOptions { c: 1.0, epsilon: 0.01, max_iterations: 200, quiet: true, ..SsvmOptions::default() };
     let mut solver = CuttingPlane::new(options).unwrap();
     let trained = cog_gpu::learn::detector::train_detector(&oracle, &mut solver).unwrap();
     assert!(trained.solution.converged, "{:?}", trained.solution.history.last());

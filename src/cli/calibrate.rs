@@ -78,7 +78,10 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         );
     }
     if missing > 0 {
-        log::warn!("{missing} of {} frames have no detections file; counted as frames without detections", dataset.len());
+        log::warn!(
+            "{missing} of {} frames have no detections file; counted as frames without detections",
+            dataset.len()
+        );
     }
     let out_dir = args.out.clone().unwrap_or_else(|| args.models.clone());
     std::fs::create_dir_all(&out_dir).with_context(|| format!("creating {}", out_dir.display()))?;

@@ -33,8 +33,8 @@ use cog_gpu::features::hypotheses::DEFAULT_MIN_POINTS;
 use cog_gpu::features::{Groups, Layout, SizeQuantiles};
 use cog_gpu::frame::Dataset;
 use cog_gpu::learn::detector::{
-    collect_examples, instances_of, read_all_annotations, train_detector, DetectorOracle, ExampleLimits,
-    FeatureEngine, TrainingSettings,
+    collect_examples, instances_of, read_all_annotations, train_detector, DetectorOracle, ExampleLimits, FeatureEngine,
+    TrainingSettings,
 };
 use cog_gpu::learn::{CuttingPlane, SsvmOptions};
 use cog_gpu::model::{FeaturePath, FeatureSettings, Model, WindowSettings};

@@ -348,12 +348,12 @@ impl DetectorOracle {
         }
         if ex.truth.is_some() {
             // The boxes nearest the truth (smallest loss), a quarter of the count, if not already in.
-            let mut nearest: Vec<u32> = (0..hypotheses.len() as u32).filter(|&n| window.losses[n as usize] < 1.0).collect();
+            let mut nearest: Vec<u32> =
+                (0..hypotheses.len() as u32).filter(|&n| window.losses[n as usize] < 1.0).collect();
             let extra = (self.candidate_count / 4).min(nearest.len());
             if extra > 0 && extra < nearest.len() {
-                let by_loss = |a: &u32, b: &u32| {
-                    window.losses[*a as usize].total_cmp(&window.losses[*b as usize]).then(a.cmp(b))
-                };
+                let by_loss =
+                    |a: &u32, b: &u32| window.losses[*a as usize].total_cmp(&window.losses[*b as usize]).then(a.cmp(b));
                 nearest.select_nth_unstable_by(extra, by_loss);
                 nearest.truncate(extra);
             }
