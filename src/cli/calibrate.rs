@@ -7,7 +7,8 @@
 //! carry a `raw_score` (calibrated models) are fitted on the raw score. Frames used here must not be
 //! training or test frames. Choices: `--out` defaults to the models directory itself (the models are
 //! rewritten in place, through a temporary file); a category with no true or no false positive among
-//! the detections is an error naming it, since no calibration can be fitted.
+//! the detections is an error naming it, since no calibration can be fitted, and then no model is
+//! written (a models directory is never left half calibrated).
 
 use std::path::PathBuf;
 
@@ -85,32 +86,47 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     }
     let out_dir = args.out.clone().unwrap_or_else(|| args.models.clone());
     std::fs::create_dir_all(&out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
-    println!("{:<12} {:>10} {:>6} {:>9} {:>9} {:>8} {:>8}", "category", "detections", "TP", "a", "b", "p(0)", "p(1)");
+    // Fit every model first: a category that cannot be fitted stops the run before any file is written,
+    // so a models directory is never left half calibrated.
+    let mut failures = Vec::new();
     for model in &mut models {
         let samples = label_detections(&detections, &truth, &model.category, args.iou);
-        let (a, b) = fit_logistic(&samples).with_context(|| {
-            format!("calibrating {} on the detections in {}", model.category, args.detections.display())
-        })?;
-        let calibration = Calibration {
-            a,
-            b,
-            detections: samples.len(),
-            true_positives: samples.iter().filter(|s| s.1).count(),
-            iou: args.iou,
-            data: args.data.display().to_string(),
-            frames: dataset.len(),
-        };
+        match fit_logistic(&samples) {
+            Ok((a, b)) => {
+                model.calibration = Some(Calibration {
+                    a,
+                    b,
+                    detections: samples.len(),
+                    true_positives: samples.iter().filter(|s| s.1).count(),
+                    iou: args.iou,
+                    data: args.data.display().to_string(),
+                    frames: dataset.len(),
+                })
+            }
+            Err(err) => failures.push(format!("{}: {err}", model.category)),
+        }
+    }
+    if !failures.is_empty() {
+        bail!(
+            "cannot calibrate on the detections in {} (nothing written; add held-out frames that hold these \
+             categories):\n  {}",
+            args.detections.display(),
+            failures.join("\n  ")
+        );
+    }
+    println!("{:<12} {:>10} {:>6} {:>9} {:>9} {:>8} {:>8}", "category", "detections", "TP", "a", "b", "p(0)", "p(1)");
+    for model in &models {
+        let Some(calibration) = &model.calibration else { continue };
         println!(
             "{:<12} {:>10} {:>6} {:>9.4} {:>9.4} {:>8.4} {:>8.4}",
             model.category,
             calibration.detections,
             calibration.true_positives,
-            a,
-            b,
+            calibration.a,
+            calibration.b,
             calibration.probability(0.0),
             calibration.probability(1.0)
         );
-        model.calibration = Some(calibration);
         let path = out_dir.join(format!("{}.json", model.category));
         model.write(&path)?;
     }
