@@ -28,7 +28,7 @@ use std::collections::BTreeMap;
 use serde::Serialize;
 
 use crate::detect::overlay_selection;
-use crate::eval::{average_precision, Detection, PrecisionRecall, ScoredBox};
+use crate::eval::{average_precision, scored_boxes, Detection, PrecisionRecall, ScoredBox};
 use crate::features::hypotheses::{default_yaws, sliding_window, WindowOptions};
 use crate::features::{FeatureScene, Hypothesis, Preprocessed};
 use crate::frame::Object;
@@ -336,17 +336,7 @@ pub fn diagnose_categories(
         .iter()
         .map(|category| {
             let ground_truth = ground_truth(truth, category);
-            let scored: Vec<ScoredBox> = detections
-                .iter()
-                .enumerate()
-                .flat_map(|(image, dets)| {
-                    dets.iter().filter(|d| &d.category == category).map(move |d| ScoredBox {
-                        image,
-                        score: d.score,
-                        cuboid: d.cuboid(),
-                    })
-                })
-                .collect();
+            let scored = scored_boxes(detections, category);
             let pr = average_precision(&scored, &ground_truth, iou_threshold);
             let ranking = in_frame_ranking(truth, detections, category, iou_threshold);
             let rank = rank_average_precision(truth, detections, category, iou_threshold);

@@ -190,6 +190,22 @@ pub struct CategoryEvaluation {
     pub pr: PrecisionRecall,
 }
 
+/// The detections of `category` over all images as [`ScoredBox`]es (`detections[i]` are image `i`'s), in
+/// image order, then file order.
+pub fn scored_boxes(detections: &[Vec<Detection>], category: &str) -> Vec<ScoredBox> {
+    detections
+        .iter()
+        .enumerate()
+        .flat_map(|(image, dets)| {
+            dets.iter().filter(|d| d.category == category).map(move |d| ScoredBox {
+                image,
+                score: d.score,
+                cuboid: d.cuboid(),
+            })
+        })
+        .collect()
+}
+
 /// Evaluates each of `categories` over the same images: `truth[i]` holds the annotated objects of image
 /// `i` and `detections[i]` its detections (both of any category; the others are ignored). A missing
 /// `detections[i]` (shorter slice) counts as no detections.
@@ -206,17 +222,7 @@ pub fn evaluate_categories(
                 .iter()
                 .map(|objects| objects.iter().filter(|o| &o.category == category).map(|o| o.cuboid).collect())
                 .collect();
-            let scored: Vec<ScoredBox> = detections
-                .iter()
-                .enumerate()
-                .flat_map(|(image, dets)| {
-                    dets.iter().filter(|d| &d.category == category).map(move |d| ScoredBox {
-                        image,
-                        score: d.score,
-                        cuboid: d.cuboid(),
-                    })
-                })
-                .collect();
+            let scored = scored_boxes(detections, category);
             let pr = average_precision(&scored, &ground_truth, iou_threshold);
             CategoryEvaluation { category: category.clone(), ground_truth: pr.positives, detections: scored.len(), pr }
         })
