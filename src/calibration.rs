@@ -22,9 +22,9 @@
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
-use crate::eval::{Detection, ScoredBox};
+use crate::eval::{average_precision, Detection, ScoredBox};
 use crate::frame::Object;
-use crate::geometry::iou_3d;
+use crate::geometry::Cuboid;
 
 /// Smallest slope: keeps `p` strictly increasing in the raw score.
 pub const MIN_SLOPE: f64 = 1e-3;
@@ -175,29 +175,14 @@ pub fn label_detections(
             })
         })
         .collect();
-    let mut order: Vec<usize> = (0..boxes.len()).collect();
-    order.sort_by(|&x, &y| boxes[y].score.total_cmp(&boxes[x].score));
-    let mut taken: Vec<Vec<bool>> = truth.iter().map(|objects| vec![false; objects.len()]).collect();
-    order
-        .into_iter()
-        .map(|k| {
-            let d = &boxes[k];
-            let objects = truth.get(d.image).map(Vec::as_slice).unwrap_or(&[]);
-            let mut best: Option<(usize, f32)> = None;
-            for (g, object) in objects.iter().enumerate().filter(|(_, o)| o.category == category) {
-                let iou = iou_3d(&d.cuboid, &object.cuboid);
-                if best.is_none_or(|(_, b)| iou > b) {
-                    best = Some((g, iou));
-                }
-            }
-            let hit = match best {
-                Some((g, iou)) if iou >= iou_threshold && !taken[d.image][g] => {
-                    taken[d.image][g] = true;
-                    true
-                }
-                _ => false,
-            };
-            (d.score, hit)
-        })
-        .collect()
+    // The benchmark's matching (eval::average_precision) labels the boxes in its score order: a stable
+    // descending sort, which the scores are put in here too.
+    let ground_truth: Vec<Vec<Cuboid>> = truth
+        .iter()
+        .map(|objects| objects.iter().filter(|o| o.category == category).map(|o| o.cuboid).collect())
+        .collect();
+    let labels = average_precision(&boxes, &ground_truth, iou_threshold).true_positive;
+    let mut scores: Vec<f32> = boxes.iter().map(|b| b.score).collect();
+    scores.sort_by(|x, y| y.total_cmp(x));
+    scores.into_iter().zip(labels).collect()
 }

@@ -225,6 +225,13 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     let missing = per_frame.iter().filter(|(_, d)| d.is_none()).count();
     let (truth, detections): (Vec<Vec<Object>>, Vec<Vec<Detection>>) =
         per_frame.into_iter().map(|(t, d)| (t, d.unwrap_or_default())).unzip();
+    if missing > 0 {
+        log::warn!(
+            "{missing} of {} frames have no detections file in {}; counted as no detections",
+            names.len(),
+            args.detections.display()
+        );
+    }
     if args.diagnose {
         let window = match &models {
             Some(models) => Some(window_recall(&dataset.frames, &truth, models)?),
@@ -232,13 +239,6 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         };
         let diagnosis = diagnose_categories(&truth, &detections, &categories, args.iou, window.as_ref());
         let overlay = overlay_precision(&truth, &detections, &categories, args.iou);
-        if missing > 0 {
-            log::warn!(
-                "{missing} of {} frames have no detections file in {}; counted as no detections",
-                names.len(),
-                args.detections.display()
-            );
-        }
         if args.json {
             let report = DiagnosisReport {
                 diagnosis: diagnosis.iter().map(|d| (d.category.clone(), d.clone())).collect(),
@@ -255,13 +255,6 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
 
     if let Some(dir) = &args.plots {
         write_plots(dir, &results)?;
-    }
-    if missing > 0 {
-        log::warn!(
-            "{missing} of {} frames have no detections file in {}; counted as no detections",
-            names.len(),
-            args.detections.display()
-        );
     }
     if args.json {
         let report = Report {

@@ -230,7 +230,8 @@ pub struct DetectorOracle {
     /// Hypotheses scored by full passes, and their wall time in microseconds.
     scored_hypotheses: AtomicU64,
     full_pass_micros: AtomicU64,
-    candidates: Mutex<Vec<Candidates>>,
+    /// One lock per example, so that rayon's workers never wait on each other's examples.
+    candidates: Vec<Mutex<Candidates>>,
 }
 
 impl DetectorOracle {
@@ -250,7 +251,7 @@ impl DetectorOracle {
                 None => vec![0.0; dim],
             })
             .collect();
-        let candidates = Mutex::new(vec![Candidates::default(); examples.len()]);
+        let candidates = (0..examples.len()).map(|_| Mutex::new(Candidates::default())).collect();
         Ok(DetectorOracle {
             settings,
             examples,
@@ -288,8 +289,13 @@ impl DetectorOracle {
         (self.scored_hypotheses.load(Ordering::SeqCst), self.full_pass_micros.load(Ordering::SeqCst) as f64 * 1e-6)
     }
 
-    fn lock_candidates(&self) -> Result<std::sync::MutexGuard<'_, Vec<Candidates>>> {
-        self.candidates.lock().map_err(|_| Error::Input("candidate cache poisoned".into()))
+    fn lock_candidates(&self, example: usize) -> Result<std::sync::MutexGuard<'_, Candidates>> {
+        self.candidates[example].lock().map_err(|_| Error::Input("candidate cache poisoned".into()))
+    }
+
+    /// Whether example `example` needs a full pass now: outside a cached pass, or without candidates yet.
+    fn needs_full_pass(&self, example: usize) -> Result<bool> {
+        Ok(!self.cached.load(Ordering::SeqCst) || self.lock_candidates(example)?.indices.is_empty())
     }
 
     /// `argmax Δ + w·φ` over the example's answers (the whole window on a full pass, the cached candidates
@@ -300,8 +306,8 @@ impl DetectorOracle {
         if full {
             self.refresh_candidates(example, w)?;
         }
-        let cache = self.lock_candidates()?;
-        let candidates = &cache[example];
+        let cache = self.lock_candidates(example)?;
+        let candidates = &*cache;
         let no_object_loss = if ex.truth.is_some() { 1.0 } else { 0.0 };
         // (answer, loss, value, candidate row)
         let mut best = (Answer::NoObject, no_object_loss, no_object_loss, None);
@@ -364,14 +370,14 @@ impl DetectorOracle {
         let chosen: Vec<Hypothesis> = order.iter().map(|&n| hypotheses[n as usize]).collect();
         let features = scorer.features(&chosen);
         let losses = order.iter().map(|&n| window.losses[n as usize]).collect();
-        self.lock_candidates()?[example] = Candidates { indices: order, losses, features };
+        *self.lock_candidates(example)? = Candidates { indices: order, losses, features };
         Ok(())
     }
 
     /// `argmax Δ + w·φ` over the example's answers, with its loss: a full pass over the window when the
     /// example has no candidates yet or the oracle is not in a cached pass.
     pub fn loss_augmented_argmax(&self, example: usize, w: &[f32]) -> Result<(Answer, f32)> {
-        let full = !self.cached.load(Ordering::SeqCst) || self.lock_candidates()?[example].indices.is_empty();
+        let full = self.needs_full_pass(example)?;
         let (answer, loss, _) = self.argmax(example, w, full)?;
         Ok((answer, loss))
     }
@@ -427,7 +433,7 @@ impl SeparationOracle for DetectorOracle {
 
     fn most_violated(&self, example: usize, w: &[f64]) -> Result<Constraint> {
         let w32: Vec<f32> = w.iter().map(|&v| v as f32).collect();
-        let full = !self.cached.load(Ordering::SeqCst) || self.lock_candidates()?[example].indices.is_empty();
+        let full = self.needs_full_pass(example)?;
         let (_, loss, features) = self.argmax(example, &w32, full)?;
         Ok(Constraint { loss: loss as f64, features })
     }
