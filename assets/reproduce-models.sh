@@ -4,8 +4,10 @@
 #   bash assets/reproduce-models.sh models    # data, the ten shipped models, calibration, test AP@0.25
 #   bash assets/reproduce-models.sh ablation  # the paper's Table 1 ablation (5 categories x 5 feature sets)
 #
-# WORK (default /tmp/cog-gpu-repro) receives the data sets, models, detections and logs; nothing in the
-# checkout is changed (copy WORK/models/models/*.json to assets/models/ to ship new models).
+# BIN (default target/release/cog-gpu, built first) is the binary that runs: point it at a copy to keep
+# rebuilding the checkout while the script runs. WORK (default /tmp/cog-gpu-repro) receives the data
+# sets, models, detections and logs; nothing in the checkout is changed (copy WORK/models/models/*.json
+# to assets/models/ to ship new models).
 # Data (all 320x240, seeds never shared between sets):
 #   train        1000 frames, seed 1000, synth's default room mix;
 #   calibration    70 frames (held out: fits each model's score calibration): 40 of the default mix (seed
@@ -17,7 +19,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 WORK=${WORK:-/tmp/cog-gpu-repro}
-BIN=target/release/cog-gpu
+BIN=${BIN:-target/release/cog-gpu}
 mode=${1:-models}
 export NODEVICE_SELECT=1 RUST_LOG=${RUST_LOG:-info}
 

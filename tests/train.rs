@@ -10,7 +10,8 @@ use cog_gpu::features::{Groups, Layout, Preprocessed, SizeQuantiles};
 use cog_gpu::frame::{DepthSource, Frame};
 use cog_gpu::geometry::{structured_loss, Cuboid};
 use cog_gpu::learn::detector::{
-    nearest_yaw_index, without_points_in, Answer, DetectorOracle, FeatureEngine, TrainingExample, TrainingSettings,
+    nearest_yaw_index, without_points_in, Answer, DetectorOracle, FeatureEngine, PositiveTarget, TrainingExample,
+    TrainingSettings,
 };
 
 const FRAME: &str = "../shared/data/sunrgbd/kv1-b3dodata-img_0063";
@@ -56,6 +57,10 @@ fn other_instances_lose_exactly_their_points() {
 
 /// A small problem on the real frame: chair sizes, a coarse window, the 3×3×3 grid.
 fn small_oracle() -> DetectorOracle {
+    small_oracle_with(PositiveTarget::Exact)
+}
+
+fn small_oracle_with(target: PositiveTarget) -> DetectorOracle {
     let (frame, pre) = real_frame();
     let chairs: Vec<Cuboid> = frame.objects.iter().filter(|o| o.category == "chair").map(|o| o.cuboid).collect();
     assert!(!chairs.is_empty());
@@ -66,6 +71,7 @@ fn small_oracle() -> DetectorOracle {
         step: 0.3,
         min_points: 50,
         engine: FeatureEngine::Fast(FastOptions::default()),
+        target,
     };
     let positive = TrainingExample::new("chair".into(), &pre, Some(chairs[0]), &chairs[1..]);
     let negative = TrainingExample::new("none".into(), &pre, None, &[]);
@@ -104,6 +110,59 @@ fn loss_augmented_inference_finds_the_maximum_over_all_answers() {
                 assert!((loss - expected).abs() < 1e-6, "loss {loss} vs {expected}");
                 let row = &features[n * layout.dim()..(n + 1) * layout.dim()];
                 loss as f64 + row.iter().zip(&w).map(|(&a, &b)| a as f64 * b as f64).sum::<f64>()
+            }
+        };
+        assert!(value >= best - 1e-3 * (1.0 + best.abs()), "example {i}: oracle {value} < brute force {best}");
+    }
+}
+
+/// With the best-window target, the positive's output is the window's hypothesis of smallest loss and
+/// every loss is a regret against it: checked against losses recomputed from the geometry and a brute-force
+/// maximum over every hypothesis's features.
+#[test]
+fn best_window_target_inference_maximises_the_regret_augmented_score() {
+    let oracle = small_oracle_with(PositiveTarget::BestWindow);
+    let layout = oracle.settings.layout;
+    let w: Vec<f32> = (0..layout.dim()).map(|n| (((n * 2654435761) % 1000) as f32 / 1000.0 - 0.45) * 0.3).collect();
+    let dot = |row: &[f32]| row.iter().zip(&w).map(|(&a, &b)| a as f64 * b as f64).sum::<f64>();
+    for (i, ex) in oracle.examples.iter().enumerate() {
+        let window = ex.window(&oracle.settings);
+        let hyps = &window.hypotheses.hypotheses;
+        let features = FastEngine::new(&window.scene, &layout, FastOptions::default()).features(hyps);
+        let raw: Vec<f32> =
+            hyps.iter().map(|h| structured_loss(ex.truth.as_ref(), Some(&h.cuboid(&window.scene)))).collect();
+        // The target: the first hypothesis of smallest loss below 1 (positives only).
+        let target = ex.truth.and_then(|_| {
+            let m = raw.iter().copied().filter(|&l| l < 1.0).fold(f32::INFINITY, f32::min);
+            raw.iter().position(|&l| l == m)
+        });
+        assert_eq!(window.target, target, "example {i}");
+        assert_eq!(ex.truth.is_some(), target.is_some(), "the real frame's chair is reachable by the window");
+        let offset = target.map_or(0.0, |t| raw[t]);
+        let mut best = if ex.truth.is_some() { 1.0f64 } else { 0.0 };
+        for (n, row) in features.chunks(layout.dim()).enumerate() {
+            let regret = (raw[n] - offset).max(0.0);
+            assert!((window.losses[n] - regret).abs() < 1e-6, "example {i} hypothesis {n}");
+            best = best.max(regret as f64 + dot(row));
+        }
+        if let Some(t) = target {
+            assert_eq!(window.losses[t], 0.0);
+            let truth_row = &features[t * layout.dim()..(t + 1) * layout.dim()];
+            use cog_gpu::learn::SeparationOracle;
+            let stored = oracle.ground_truth_features(i).unwrap();
+            assert!(stored.iter().zip(truth_row).all(|(a, b)| (a - b).abs() <= 1e-6 * (1.0 + b.abs())));
+        }
+        let (answer, loss) = oracle.loss_augmented_argmax(i, &w).unwrap();
+        let value = match answer {
+            Answer::NoObject => loss as f64,
+            Answer::GroundTruth => {
+                let t = target.expect("only positives answer their target");
+                assert_eq!(loss, 0.0);
+                dot(&features[t * layout.dim()..(t + 1) * layout.dim()])
+            }
+            Answer::Hypothesis(n) => {
+                assert!((loss - window.losses[n]).abs() < 1e-6);
+                loss as f64 + dot(&features[n * layout.dim()..(n + 1) * layout.dim()])
             }
         };
         assert!(value >= best - 1e-3 * (1.0 + best.abs()), "example {i}: oracle {value} < brute force {best}");

@@ -45,8 +45,8 @@ pub struct Args {
     /// models' thresholds).
     #[arg(long, allow_hyphen_values = true)]
     pub min_score: Option<f32>,
-    /// Overrides every model's sliding-window centre step (metres; the models' own is 0.1): coarser is
-    /// faster (4× fewer hypotheses at 0.2) and places boxes less precisely.
+    /// Overrides every model's sliding-window centre step (metres; the shipped models' own is 0.2): finer
+    /// is slower (4× the hypotheses at 0.1) and places boxes more precisely.
     #[arg(long)]
     pub step: Option<f32>,
     /// Do not write the overlay pictures.

@@ -12,6 +12,11 @@
 //!   placed; `detect --step 0.1` still gives it);
 //! * sizes: quantiles of the training annotations of the category;
 //! * features: the fast path (`--features exact` for the exact one, much slower);
+//! * a positive's target output is the window's box nearest the annotation, other boxes' losses are
+//!   regrets against it (`--target best-window`; `exact` for the annotated cuboid, the paper's choice; see
+//!   `cog_gpu::learn::detector::PositiveTarget`);
+//! * C = 10 (`--c`): the 1-slack objective weighs the *mean* slack, and C = 1 left the models far from
+//!   fitting their training data (README, Training);
 //! * the 1-slack cutting-plane algorithm: one aggregated constraint per iteration, so the QP stays small
 //!   whatever the number of examples; ε (`--eps`, default 0.02) bounds the mean violation;
 //! * each full pass over the sliding windows keeps every example's `--candidates` (100) best hypotheses
@@ -34,7 +39,7 @@ use cog_gpu::features::{Groups, Layout, SizeQuantiles};
 use cog_gpu::frame::Dataset;
 use cog_gpu::learn::detector::{
     collect_examples, instances_of, read_all_annotations, train_detector, DetectorOracle, ExampleLimits, FeatureEngine,
-    TrainingSettings,
+    PositiveTarget, TrainingSettings,
 };
 use cog_gpu::learn::{CuttingPlane, SsvmOptions};
 use cog_gpu::model::{FeaturePath, FeatureSettings, Model, WindowSettings};
@@ -56,7 +61,7 @@ pub struct Args {
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Regularisation constant C of eq. 4.
-    #[arg(long = "c", default_value_t = 1.0)]
+    #[arg(long = "c", default_value_t = 10.0)]
     pub c: f64,
     /// Stop when the mean violation over the examples is at most this (loss units; 1-slack ε).
     #[arg(long = "eps", default_value_t = 0.02)]
@@ -106,6 +111,17 @@ pub struct Args {
     /// Drop constraints whose α stayed 0 for this many solves.
     #[arg(long, default_value_t = 10)]
     pub prune_after: u32,
+    /// A positive's output: the window's hypothesis nearest the annotation (best-window), or the
+    /// annotated cuboid itself (exact, the paper's choice).
+    #[arg(long, value_enum, default_value_t = TargetArg::BestWindow)]
+    pub target: TargetArg,
+}
+
+/// `--target` values.
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum TargetArg {
+    BestWindow,
+    Exact,
 }
 
 /// `--features` values.
@@ -172,8 +188,12 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         PathArg::Fast => FeatureEngine::Fast(FastOptions { subdivisions: args.subdivisions.max(1) }),
         PathArg::Exact => FeatureEngine::Exact,
     };
+    let target = match args.target {
+        TargetArg::BestWindow => PositiveTarget::BestWindow,
+        TargetArg::Exact => PositiveTarget::Exact,
+    };
     let settings =
-        TrainingSettings { layout, sizes: sizes.sizes(), step: args.step, min_points: args.min_points, engine };
+        TrainingSettings { layout, sizes: sizes.sizes(), step: args.step, min_points: args.min_points, engine, target };
     let limits = ExampleLimits { positives: args.positives, negatives: args.negatives };
     log::info!(
         "{category}: {} instances in {} frames; preparing up to {} positive and {} negative examples",

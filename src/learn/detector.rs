@@ -13,9 +13,12 @@
 //! * The output space of an example is the sliding window of the category's sizes on the example's frame
 //!   (centre step [`TrainingSettings::step`], coarser than detection's to keep training within its
 //!   budget), plus "no object" (φ = 0, loss 1 when the example has an instance, 0 otherwise), plus the
-//!   ground truth itself (loss 0), so the margin is enforced on it exactly.
-//! * The ground truth's features are those of its cuboid at the nearest of the 16 hypothesis yaws (the
-//!   feature engine bins points per yaw).
+//!   positive's target output (loss 0), so the margin is enforced on it exactly.
+//! * The target output ([`PositiveTarget`], default [`PositiveTarget::BestWindow`]) is the window's
+//!   hypothesis nearest the annotation, with every other hypothesis's loss taken as its regret against
+//!   it: the detector is taught to rank the boxes it can actually output, not the exact annotated cuboid
+//!   it never sees at test time. [`PositiveTarget::Exact`] (the paper's choice) uses the annotated cuboid
+//!   at the nearest of the 16 hypothesis yaws (the feature engine bins points per yaw).
 //! * Loss (eq. 5): `1 − IoU·(1 + cos Δθ)/2` ([`structured_loss`]). Hypotheses whose footprints cannot
 //!   overlap the truth's have loss 1 without an IoU computation.
 //!
@@ -62,6 +65,27 @@ pub struct TrainingSettings {
     pub step: f32,
     pub min_points: u32,
     pub engine: FeatureEngine,
+    /// What a positive example's ground-truth output is (see [`PositiveTarget`]).
+    pub target: PositiveTarget,
+}
+
+/// The output a positive example's margin is enforced for.
+///
+/// The annotated cuboid itself is not in the detector's output space: the window's centres lie on a
+/// grid, its sizes are a few quantiles and its yaws 16 angles. Features of the exact cuboid (voxels
+/// aligned with the object's faces) are then a pattern the detector never meets at test time, where
+/// every hypothesis is off by up to half a step; a model taught to put the exact cuboid first learns
+/// to rank a precisely aligned pattern above everything, and ranks the misaligned test-time windows
+/// near the object no better than clutter.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PositiveTarget {
+    /// The annotated cuboid at the nearest hypothesis yaw (the paper's choice).
+    Exact,
+    /// The window's hypothesis with the smallest loss to the annotation (the best output the detector
+    /// can give; the exact cuboid when no hypothesis overlaps it). Losses are then measured as regret
+    /// against it, `max(0, Δ(h) − Δ(h*))`, so that it has loss 0 and no hypothesis must beat it by more
+    /// than it is better. The default.
+    BestWindow,
 }
 
 /// One training example: a frame's preprocessed points (other instances removed) and its ground truth.
@@ -78,8 +102,10 @@ pub struct TrainingExample {
 pub struct ExampleWindow {
     pub scene: FeatureScene,
     pub hypotheses: HypothesisSet,
-    /// `Δ(truth, h)` of every hypothesis.
+    /// The loss of every hypothesis: `Δ(truth, h)`, or its regret against [`ExampleWindow::target`].
     pub losses: Vec<f32>,
+    /// With [`PositiveTarget::BestWindow`], the index of the hypothesis that is the positive's output.
+    pub target: Option<usize>,
 }
 
 impl TrainingExample {
@@ -94,9 +120,17 @@ impl TrainingExample {
         let hypotheses =
             sliding_window(&scene, &WindowOptions { sizes: settings.sizes.clone(), min_points: settings.min_points });
         let truth = self.truth;
-        let losses =
+        let mut losses: Vec<f32> =
             hypotheses.hypotheses.par_iter().map(|h| hypothesis_loss(truth.as_ref(), &h.cuboid(&scene))).collect();
-        ExampleWindow { scene, hypotheses, losses }
+        let target = match (truth, settings.target) {
+            (Some(_), PositiveTarget::BestWindow) => best_window_target(&losses),
+            _ => None,
+        };
+        if let Some(t) = target {
+            let offset = losses[t];
+            losses.iter_mut().for_each(|l| *l = (*l - offset).max(0.0));
+        }
+        ExampleWindow { scene, hypotheses, losses, target }
     }
 }
 
@@ -105,6 +139,17 @@ impl ExampleWindow {
     pub fn truth_hypothesis(&self, truth: &Cuboid) -> Hypothesis {
         Hypothesis::from_cuboid(&self.scene, nearest_yaw_index(truth.yaw), truth)
     }
+}
+
+/// The index of the smallest loss below 1 (the first of equals), if any: the hypothesis nearest the truth.
+pub fn best_window_target(losses: &[f32]) -> Option<usize> {
+    let mut best: Option<usize> = None;
+    for (n, &loss) in losses.iter().enumerate() {
+        if loss < 1.0 && best.is_none_or(|b| loss < losses[b]) {
+            best = Some(n);
+        }
+    }
+    best
 }
 
 /// The loss of answering `estimate` when the truth is `truth` (eq. 5 with the presence cases).
@@ -243,6 +288,14 @@ impl DetectorOracle {
         let truth_features = examples
             .par_iter()
             .map(|ex| match &ex.truth {
+                Some(truth) if settings.target == PositiveTarget::BestWindow => {
+                    let window = ex.window(&settings);
+                    let hypothesis = match window.target {
+                        Some(t) => window.hypotheses.hypotheses[t],
+                        None => window.truth_hypothesis(truth),
+                    };
+                    Scorer::new(&settings, &window.scene).features(&[hypothesis])
+                }
                 Some(truth) => {
                     let scene = FeatureScene::new(ex.pre.clone(), &default_yaws(), settings.step);
                     let hypothesis = Hypothesis::from_cuboid(&scene, nearest_yaw_index(truth.yaw), truth);
