@@ -19,6 +19,7 @@ use image::RgbImage;
 use crate::draw::{category_colour, contrasting, draw_cuboid_with, draw_label};
 use crate::error::{Error, Result};
 use crate::eval::{Detection, FrameDetections};
+use crate::features::budget;
 use crate::features::fast::FastEngine;
 use crate::features::hypotheses::{default_yaws, sliding_window, WindowOptions};
 use crate::features::{Backend, FeatureScene, Hypothesis, Preprocessed};
@@ -126,6 +127,24 @@ pub fn detect_frame(
     detect_preprocessed(&frame.name, pre, models, backend, options)
 }
 
+/// Checks the memory of every model's sliding window and fast-path tables on `pre` (see
+/// [`crate::features::budget`]) before any of them is built; each distinct setting is checked once.
+pub fn check_budget(pre: &Preprocessed, models: &[Model]) -> Result<()> {
+    let mut checked = Vec::new();
+    for model in models {
+        let key = (model.window.step.to_bits(), model.sizes().len(), model.features.path, model.layout.grid()[2]);
+        if checked.contains(&key) {
+            continue;
+        }
+        checked.push(key);
+        budget::check_window(pre, model.window.step, model.sizes().len())?;
+        if model.features.path == FeaturePath::Fast {
+            budget::check_fast(pre, model.window.step, &model.layout, model.features.subdivisions)?;
+        }
+    }
+    Ok(())
+}
+
 /// [`detect_frame`] on an already preprocessed frame.
 pub fn detect_preprocessed(
     name: &str,
@@ -134,6 +153,7 @@ pub fn detect_preprocessed(
     backend: Backend,
     options: &DetectOptions,
 ) -> Result<FrameDetections> {
+    check_budget(&pre, models)?;
     // One scene per distinct window step (the yaw grids' cell is the step).
     let mut scenes: BTreeMap<u32, FeatureScene> = BTreeMap::new();
     for model in models {
@@ -149,6 +169,12 @@ pub fn detect_preprocessed(
             sliding_window(scene, &WindowOptions { sizes: model.sizes(), min_points: model.window.min_points });
         let hypotheses = &window.hypotheses;
         let scores = score_hypotheses(scene, model, hypotheses, backend, &mut engines)?;
+        if let Some(n) = scores.iter().position(|s| !s.is_finite()) {
+            return Err(Error::Input(format!(
+                "frame '{name}': the '{}' model gives hypothesis {n} the score {} (weights or features out of range)",
+                model.category, scores[n]
+            )));
+        }
         let threshold = options.min_score.unwrap_or(model.threshold);
         let mut order: Vec<usize> = (0..hypotheses.len()).filter(|&n| scores[n] >= threshold).collect();
         let by_score = |a: &usize, b: &usize| scores[*b].total_cmp(&scores[*a]).then(a.cmp(b));

@@ -18,6 +18,7 @@ pub mod frame;
 pub mod geometry;
 pub mod gpu;
 pub mod learn;
+pub mod limits;
 pub mod model;
 pub mod nms;
 pub mod synth;

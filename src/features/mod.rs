@@ -5,6 +5,7 @@
 //! Flow: [`Preprocessed::from_frame`] → [`FeatureScene::new`] (per-yaw point grids shared by every
 //! hypothesis of a yaw) → [`sliding_window`] → [`cpu::features`] / [`cpu::scores`] or the GPU twins.
 
+pub mod budget;
 pub mod cpu;
 pub mod fast;
 pub mod hypotheses;

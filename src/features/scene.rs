@@ -81,26 +81,17 @@ impl YawGrid {
         let (sin64, cos64) = (yaw as f64).sin_cos();
         let (sin, cos) = (sin64 as f32, cos64 as f32);
         let inv_step = 1.0 / step;
-        let rotated: Vec<[f32; 2]> =
-            pre.points.par_iter().map(|p| [p.x * cos + p.y * sin, -p.x * sin + p.y * cos]).collect();
-        let (mut lo, mut hi) = ([f32::INFINITY; 2], [f32::NEG_INFINITY; 2]);
-        for r in &rotated {
-            for a in 0..2 {
-                lo[a] = lo[a].min(r[a]);
-                hi[a] = hi[a].max(r[a]);
-            }
-        }
-        if rotated.is_empty() {
-            (lo, hi) = ([0.0; 2], [0.0; 2]);
-        }
-        let origin = lo.map(|v| (v * inv_step).floor() * step);
-        let cells = [0, 1].map(|a| (((hi[a] - origin[a]) * inv_step).floor() as u32 + 1).max(1));
+        let rotated: Vec<[f32; 2]> = pre.points.par_iter().map(|p| rotate(p, sin, cos)).collect();
+        let (origin, cells) = grid_cells(extent(&rotated), step);
+        // `cells` fit in u32 for any scene that passed `features::budget` (whose limit is far below 2³²
+        // cells); index arithmetic is in usize so that no product can wrap.
+        let cells = cells.map(|c| c.min(u32::MAX as f64) as u32);
         let cell_of = |r: &[f32; 2]| -> usize {
             let c = [0, 1].map(|a| (((r[a] - origin[a]) * inv_step).floor().max(0.0) as u32).min(cells[a] - 1));
-            (c[1] * cells[0] + c[0]) as usize
+            c[1] as usize * cells[0] as usize + c[0] as usize
         };
         // Counting sort by cell keeps the cloud order inside each cell.
-        let cell_count = (cells[0] * cells[1]) as usize;
+        let cell_count = cells[0] as usize * cells[1] as usize;
         let mut cell_start = vec![0u32; cell_count + 1];
         let point_cells: Vec<usize> = rotated.iter().map(cell_of).collect();
         for &c in &point_cells {
@@ -157,14 +148,43 @@ impl YawGrid {
 
     /// Record range of the cells `s_cells.0..=s_cells.1` in row `row`.
     pub fn row_span(&self, row: u32, s_cells: (u32, u32)) -> std::ops::Range<usize> {
-        let base = row * self.cells[0];
-        self.cell_start[(base + s_cells.0) as usize] as usize..self.cell_start[(base + s_cells.1 + 1) as usize] as usize
+        let base = row as usize * self.cells[0] as usize;
+        self.cell_start[base + s_cells.0 as usize] as usize..self.cell_start[base + s_cells.1 as usize + 1] as usize
     }
 
     /// Upright coordinates of a rotated-frame point.
     pub fn to_upright(&self, q: Vec3) -> Vec3 {
         Vec3::new(q.x * self.cos - q.y * self.sin, q.x * self.sin + q.y * self.cos, q.z)
     }
+}
+
+/// Rotated-frame ground coordinates (s, t) of an upright point for a yaw with `sin θ`, `cos θ`.
+pub fn rotate(p: &Vec3, sin: f32, cos: f32) -> [f32; 2] {
+    [p.x * cos + p.y * sin, -p.x * sin + p.y * cos]
+}
+
+/// Component-wise minimum and maximum of ground coordinates (both 0 when there are none).
+pub fn extent(coordinates: &[[f32; 2]]) -> ([f32; 2], [f32; 2]) {
+    let (mut lo, mut hi) = ([f32::INFINITY; 2], [f32::NEG_INFINITY; 2]);
+    for r in coordinates {
+        for a in 0..2 {
+            lo[a] = lo[a].min(r[a]);
+            hi[a] = hi[a].max(r[a]);
+        }
+    }
+    if coordinates.is_empty() {
+        (lo, hi) = ([0.0; 2], [0.0; 2]);
+    }
+    (lo, hi)
+}
+
+/// The origin and the number of cells along s and t of a bucket grid of side `step` over the extent
+/// `(lo, hi)`. The counts are floats so that an absurd extent cannot overflow before it is checked.
+pub fn grid_cells((lo, hi): ([f32; 2], [f32; 2]), step: f32) -> ([f32; 2], [f64; 2]) {
+    let inv_step = 1.0 / step;
+    let origin = lo.map(|v| (v * inv_step).floor() * step);
+    let cells = [0, 1].map(|a| (((hi[a] - origin[a]) * inv_step).floor() as f64 + 1.0).max(1.0));
+    (origin, cells)
 }
 
 /// `C·R(θ)` where `R(θ)` takes rotated-frame coordinates to upright ones and `C` upright ones to the camera's
