@@ -67,7 +67,14 @@ pub struct FrameDetections {
 impl FrameDetections {
     /// Reads and checks a detections file: finite numbers, positive sizes.
     pub fn read(path: &Path) -> Result<FrameDetections> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let text = crate::frame::read_text(path)?;
+        if text.trim_start().starts_with('[') {
+            return Err(Error::invalid(
+                path,
+                "holds a JSON array; a detections file is one object {\"frame\": NAME, \"detections\": [...]} \
+                 (`detect --json` prints an array of them on stdout; the files are those in detect's --out)",
+            ));
+        }
         let parsed: FrameDetections =
             serde_json::from_str(&text).map_err(|e| Error::invalid(path, format!("not a detections file: {e}")))?;
         for (i, d) in parsed.detections.iter().enumerate() {

@@ -33,7 +33,10 @@ use serde_json::{json, Value};
 
 use crate::category::{normalise_name, STRUCTURE_NAMES};
 use crate::error::{Error, Result};
-use crate::geometry::Cuboid;
+use crate::geometry::{polygon_problem, Cuboid};
+use crate::limits::{
+    MAX_COORDINATE_M, MAX_FOCAL_PER_SIZE, MAX_OBJECT_SIZE_M, MAX_PIXELS, MIN_FOCAL_PER_SIZE, PRINCIPAL_POINT_MARGIN,
+};
 
 /// Depth beyond this many metres is clamped to it (the toolbox's convention).
 pub const MAX_DEPTH_M: f32 = 8.0;
@@ -255,8 +258,13 @@ impl Frame {
 // ---------------------------------------------------------------------------------------------------------
 // Reading
 
-fn read_text(path: &Path) -> Result<String> {
-    fs::read_to_string(path).map_err(|e| Error::io(path, e))
+/// Reads a UTF-8 text file; a leading byte-order mark (which Windows editors write) is dropped.
+pub(crate) fn read_text(path: &Path) -> Result<String> {
+    let text = fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    Ok(match text.strip_prefix('\u{feff}') {
+        Some(rest) => rest.to_string(),
+        None => text,
+    })
 }
 
 /// Parses whitespace-separated finite numbers; names the file and the offending token on error.
@@ -286,6 +294,46 @@ fn read_intrinsics(path: &Path) -> Result<[[f64; 3]; 3]> {
         return Err(Error::invalid(path, "K must be upper triangular with K[2][2] = 1"));
     }
     Ok(k)
+}
+
+/// Checks that K is plausible for a `width`×`height` image (see [`crate::limits`]): focal lengths within
+/// [`MIN_FOCAL_PER_SIZE`]…[`MAX_FOCAL_PER_SIZE`] × the larger side, the principal point within
+/// [`PRINCIPAL_POINT_MARGIN`] × the size of the image, and no skew (the toolbox's back-projection, and so
+/// every point cloud here, ignores it: a K with skew would silently give wrong points).
+pub fn check_intrinsics(path: &Path, k: &[[f64; 3]; 3], width: u32, height: u32) -> Result<()> {
+    let side = width.max(height) as f64;
+    let (lo, hi) = (MIN_FOCAL_PER_SIZE * side, MAX_FOCAL_PER_SIZE * side);
+    for (name, f) in [("fx", k[0][0]), ("fy", k[1][1])] {
+        if !(lo..=hi).contains(&f) {
+            return Err(Error::invalid(
+                path,
+                format!(
+                    "{name} = {f} is implausible for a {width}×{height} image (allowed {lo:.1} to {hi:.1} pixels: \
+                     {MIN_FOCAL_PER_SIZE} to {MAX_FOCAL_PER_SIZE} × the larger side)"
+                ),
+            ));
+        }
+    }
+    for (name, c, size) in [("cx", k[0][2], width as f64), ("cy", k[1][2], height as f64)] {
+        let margin = PRINCIPAL_POINT_MARGIN * size;
+        if !(-margin..=size + 1.0 + margin).contains(&c) {
+            return Err(Error::invalid(
+                path,
+                format!(
+                    "{name} = {c} lies far outside the {width}×{height} image (allowed {:.1} to {:.1})",
+                    -margin,
+                    size + 1.0 + margin
+                ),
+            ));
+        }
+    }
+    if k[0][1] != 0.0 {
+        return Err(Error::invalid(
+            path,
+            format!("K[0][1] (skew) = {} is not supported: the point cloud assumes square pixel axes", k[0][1]),
+        ));
+    }
+    Ok(())
 }
 
 /// The last file by name in `extrinsics/`.
@@ -337,12 +385,35 @@ fn single_image(dir: &Path, sub: &str) -> Result<PathBuf> {
     }
 }
 
+/// Decodes an image strictly: its size is checked against [`MAX_PIXELS`] before any pixel is decoded,
+/// and a JPEG must end with its end-of-image marker (the decoder fills a truncated JPEG with grey and
+/// reports no error).
 fn open_image(path: &Path) -> Result<image::DynamicImage> {
+    let image_error = |e| Error::Image { path: path.to_path_buf(), source: e };
     let reader = image::ImageReader::open(path)
         .map_err(|e| Error::io(path, e))?
         .with_guessed_format()
         .map_err(|e| Error::io(path, e))?;
-    reader.decode().map_err(|e| Error::Image { path: path.to_path_buf(), source: e })
+    let format = reader.format();
+    let decoder = reader.into_decoder().map_err(image_error)?;
+    let (w, h) = image::ImageDecoder::dimensions(&decoder);
+    if w == 0 || h == 0 || w as u64 * h as u64 > MAX_PIXELS {
+        return Err(Error::invalid(
+            path,
+            format!("the image is {w}×{h} pixels; cog-gpu reads images of 1 to {MAX_PIXELS} pixels"),
+        ));
+    }
+    if format == Some(image::ImageFormat::Jpeg) && !jpeg_is_complete(path)? {
+        return Err(Error::invalid(path, "truncated JPEG: the file ends before its end-of-image marker"));
+    }
+    image::DynamicImage::from_decoder(decoder).map_err(image_error)
+}
+
+/// Whether a JPEG file ends with the end-of-image marker `FF D9` (trailing zero padding allowed).
+fn jpeg_is_complete(path: &Path) -> Result<bool> {
+    let bytes = fs::read(path).map_err(|e| Error::io(path, e))?;
+    let end = bytes.iter().rposition(|&b| b != 0).map_or(0, |i| i + 1);
+    Ok(bytes[..end].ends_with(&[0xFF, 0xD9]))
 }
 
 /// Reads a depth PNG (16-bit grey, the toolbox's encoding) into decoded millimetres.
@@ -376,6 +447,19 @@ struct Polygon {
     zs: Vec<f64>,
     y_min: f64,
     y_max: f64,
+}
+
+impl Polygon {
+    /// Why the polygon cannot be used (corners beyond ±[`MAX_COORDINATE_M`], zero area, crossing edges,
+    /// see [`polygon_problem`]), or `None`.
+    fn problem(&self) -> Option<String> {
+        let coordinates = self.xs.iter().chain(&self.zs).chain([&self.y_min, &self.y_max]);
+        if coordinates.into_iter().any(|v| v.abs() > MAX_COORDINATE_M) {
+            return Some(format!("has a coordinate beyond ±{MAX_COORDINATE_M} m"));
+        }
+        let corners: Vec<Vec2> = self.xs.iter().zip(&self.zs).map(|(&x, &z)| Vec2::new(x as f32, z as f32)).collect();
+        polygon_problem(&corners).map(str::to_string)
+    }
 }
 
 fn number_array(path: &Path, v: &Value, what: &str) -> Result<Vec<f64>> {
@@ -445,9 +529,20 @@ pub fn read_objects(path: &Path) -> Result<Vec<Object>> {
             log::warn!("{}: {what} ('{name}') has {} corners, not 4; skipped", path.display(), poly.xs.len());
             continue;
         }
+        if let Some(problem) = poly.problem() {
+            log::warn!("{}: {what} ('{name}'): its footprint {problem}; skipped", path.display());
+            continue;
+        }
         let corners = [0, 1, 2, 3].map(|j| Vec2::new(poly.xs[j] as f32, poly.zs[j] as f32));
         match Cuboid::from_polygon(corners, -poly.y_max as f32, -poly.y_min as f32) {
-            Some(cuboid) => objects.push(Object { category, label, cuboid }),
+            Some(cuboid) if cuboid.size.max_element() <= MAX_OBJECT_SIZE_M => {
+                objects.push(Object { category, label, cuboid })
+            }
+            Some(cuboid) => log::warn!(
+                "{}: {what} ('{name}') is {:?} m, larger than {MAX_OBJECT_SIZE_M} m on a side; skipped",
+                path.display(),
+                cuboid.size.to_array()
+            ),
             None => log::warn!("{}: {what} ('{name}') is a degenerate box; skipped", path.display()),
         }
     }
@@ -465,6 +560,10 @@ pub fn read_layout(path: &Path) -> Result<Option<RoomLayout>> {
         if poly.xs.len() < 3 {
             return Err(Error::invalid(path, format!("room polygon has {} corners (needs ≥ 3)", poly.xs.len())));
         }
+        if let Some(problem) = poly.problem() {
+            log::warn!("{}: objects[{i}] (room): the room polygon {problem}; the layout is skipped", path.display());
+            return Ok(None);
+        }
         let corners = poly.xs.iter().zip(&poly.zs).map(|(&x, &z)| Vec2::new(x as f32, z as f32)).collect();
         return Ok(Some(RoomLayout { corners, floor: -poly.y_max as f32, ceiling: -poly.y_min as f32 }));
     }
@@ -476,7 +575,7 @@ pub fn read_layout(path: &Path) -> Result<Option<RoomLayout>> {
 /// Gives the same objects and layout as [`Frame::read`].
 pub fn read_annotations(dir: &Path) -> Result<(Vec<Object>, Option<RoomLayout>)> {
     if !dir.is_dir() {
-        return Err(Error::missing(dir, "frame directory"));
+        return Err(not_a_frame_dir(dir));
     }
     let objects_path = dir.join("annotation3Dfinal").join("index.json");
     let objects = if objects_path.is_file() { read_objects(&objects_path)? } else { Vec::new() };
@@ -485,9 +584,18 @@ pub fn read_annotations(dir: &Path) -> Result<(Vec<Object>, Option<RoomLayout>)>
     Ok((objects, layout))
 }
 
+/// The error for a frame path that is not a directory: a regular file, or nothing.
+fn not_a_frame_dir(dir: &Path) -> Error {
+    if dir.exists() {
+        Error::invalid(dir, "is a file, not a frame directory (intrinsics.txt, image/, depth/, extrinsics/)")
+    } else {
+        Error::missing(dir, "frame directory")
+    }
+}
+
 fn read_frame(dir: &Path, depth_source: DepthSource) -> Result<Frame> {
     if !dir.is_dir() {
-        return Err(Error::missing(dir, "frame directory"));
+        return Err(not_a_frame_dir(dir));
     }
     let name = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| dir.display().to_string());
     let rgb_path = single_image(dir, "image")?;
@@ -500,7 +608,9 @@ fn read_frame(dir: &Path, depth_source: DepthSource) -> Result<Frame> {
             format!("depth is {dw}×{dh} but the RGB image {} is {}×{}", rgb_path.display(), rgb.width(), rgb.height()),
         ));
     }
-    let k = read_intrinsics(&dir.join("intrinsics.txt"))?;
+    let k_path = dir.join("intrinsics.txt");
+    let k = read_intrinsics(&k_path)?;
+    check_intrinsics(&k_path, &k, rgb.width(), rgb.height())?;
     let extrinsics = read_extrinsics(&extrinsics_file(dir)?)?;
     let scene_path = dir.join("scene.txt");
     let scene = if scene_path.is_file() { Some(read_text(&scene_path)?.trim().to_string()) } else { None };
@@ -635,7 +745,15 @@ impl Dataset {
         }
         let mut frames = Vec::new();
         let mut stack = vec![root.clone()];
+        // Directories already walked, by canonical path: a symbolic link back up the tree (or to itself)
+        // would otherwise make the walk endless.
+        let mut visited = std::collections::HashSet::new();
         while let Some(dir) = stack.pop() {
+            let canonical = fs::canonicalize(&dir).map_err(|e| Error::io(&dir, e))?;
+            if !visited.insert(canonical) {
+                log::warn!("{}: already searched (a symbolic link loop or a second link); skipped", dir.display());
+                continue;
+            }
             if is_frame_dir(&dir) {
                 frames.push(dir);
                 continue;

@@ -604,3 +604,63 @@ pub fn polygon_contains(polygon: &[Vec2], p: Vec2) -> bool {
     }
     inside
 }
+
+/// Signed area of a polygon (shoelace formula, positive counter-clockwise), in f64.
+pub fn polygon_signed_area(polygon: &[Vec2]) -> f64 {
+    let n = polygon.len();
+    (0..n)
+        .map(|i| {
+            let (a, b) = (polygon[i].as_dvec2(), polygon[(i + 1) % n].as_dvec2());
+            a.perp_dot(b)
+        })
+        .sum::<f64>()
+        * 0.5
+}
+
+/// Whether two edges of a polygon that share no corner cross or touch (f64 orientation tests).
+fn segments_meet(a: Vec2, b: Vec2, c: Vec2, d: Vec2) -> bool {
+    let (a, b, c, d) = (a.as_dvec2(), b.as_dvec2(), c.as_dvec2(), d.as_dvec2());
+    let orient = |p: glam::DVec2, q: glam::DVec2, r: glam::DVec2| (q - p).perp_dot(r - p);
+    let (d1, d2) = (orient(c, d, a), orient(c, d, b));
+    let (d3, d4) = (orient(a, b, c), orient(a, b, d));
+    let within = |p: glam::DVec2, q: glam::DVec2, r: glam::DVec2| {
+        r.x >= p.x.min(q.x) && r.x <= p.x.max(q.x) && r.y >= p.y.min(q.y) && r.y <= p.y.max(q.y)
+    };
+    if ((d1 > 0.0 && d2 < 0.0) || (d1 < 0.0 && d2 > 0.0)) && ((d3 > 0.0 && d4 < 0.0) || (d3 < 0.0 && d4 > 0.0)) {
+        return true;
+    }
+    (d1 == 0.0 && within(c, d, a))
+        || (d2 == 0.0 && within(c, d, b))
+        || (d3 == 0.0 && within(a, b, c))
+        || (d4 == 0.0 && within(a, b, d))
+}
+
+/// What is wrong with a polygon as a footprint or a room outline, or `None` when it is a usable simple
+/// polygon: fewer than 3 corners, a non-finite corner, a zero (or, relative to its edges, negligible) area —
+/// collinear corners —, or two non-adjacent edges that cross or touch (a bow-tie).
+pub fn polygon_problem(polygon: &[Vec2]) -> Option<&'static str> {
+    let n = polygon.len();
+    if n < 3 {
+        return Some("has fewer than 3 corners");
+    }
+    if polygon.iter().any(|c| !c.is_finite()) {
+        return Some("has a non-finite corner");
+    }
+    let perimeter: f64 = (0..n).map(|i| polygon[i].as_dvec2().distance(polygon[(i + 1) % n].as_dvec2())).sum();
+    // A square of the same perimeter has area (perimeter/4)²; a real outline has a sizeable fraction of it.
+    if polygon_signed_area(polygon).abs() <= 1e-3 * (perimeter / 4.0).powi(2) || perimeter < 1e-6 {
+        return Some("has (nearly) zero area: its corners are collinear or coincide");
+    }
+    for i in 0..n {
+        for j in i + 1..n {
+            // Adjacent edges share a corner (edge n−1 and edge 0 too).
+            if j == i + 1 || (i == 0 && j == n - 1) {
+                continue;
+            }
+            if segments_meet(polygon[i], polygon[(i + 1) % n], polygon[j], polygon[(j + 1) % n]) {
+                return Some("intersects itself");
+            }
+        }
+    }
+    None
+}

@@ -39,6 +39,7 @@ use crate::category::{normalise_name, CATEGORIES};
 use crate::error::{Error, Result};
 use crate::features::fast::FastOptions;
 use crate::features::{Layout, SizeQuantiles};
+use crate::limits::{check_step, check_subdivisions, MAX_OBJECT_SIZE_M};
 
 pub const MODEL_FORMAT: &str = "cog-gpu-model";
 pub const MODEL_VERSION: u32 = 1;
@@ -164,8 +165,8 @@ impl Model {
         self.layout.validate().map_err(|e| format!("layout: {e}"))?;
         if self.layout_id != self.layout.id() {
             return Err(format!(
-                "layout_id '{}' does not match this build's feature layout '{}' (the model was written for \
-                 another feature order; retrain it)",
+                "layout_id '{}' is not this build's id for the model's layout, '{}' (the model was written \
+                 for another feature order; retrain it)",
                 self.layout_id,
                 self.layout.id()
             ));
@@ -186,19 +187,18 @@ impl Model {
         let lists =
             [("widths", &self.sizes.widths, 5), ("depths", &self.sizes.depths, 3), ("heights", &self.sizes.heights, 3)];
         for (name, values, count) in lists {
-            if values.len() != count || values.iter().any(|v| !(v.is_finite() && *v > 0.0 && *v < 20.0)) {
-                return Err(format!("sizes.{name} must hold {count} sizes in (0, 20) m, found {values:?}"));
+            if values.len() != count || values.iter().any(|v| !(v.is_finite() && *v > 0.0 && *v < MAX_OBJECT_SIZE_M)) {
+                return Err(format!(
+                    "sizes.{name} must hold {count} sizes in (0, {MAX_OBJECT_SIZE_M}) m, found {values:?}"
+                ));
             }
         }
-        if !(self.window.step.is_finite() && (0.01..=1.0).contains(&self.window.step)) {
-            return Err(format!("window.step must be between 0.01 and 1 m, found {}", self.window.step));
-        }
-        if self.features.subdivisions == 0 || self.features.subdivisions > 16 {
-            return Err(format!("features.subdivisions must be 1..=16, found {}", self.features.subdivisions));
-        }
+        check_step("window.step", self.window.step).map_err(|e| e.to_string())?;
+        check_subdivisions("features.subdivisions", self.features.subdivisions).map_err(|e| e.to_string())?;
         if !self.bias.is_finite() || self.threshold.is_nan() {
             return Err("bias must be finite and threshold a number".into());
         }
+        check_weight_magnitudes(&self.weights, self.bias)?;
         if let Some(calibration) = &self.calibration {
             calibration.validate()?;
         }
@@ -207,7 +207,7 @@ impl Model {
 
     /// Reads and checks a model file.
     pub fn read(path: &Path) -> Result<Model> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let text = crate::frame::read_text(path)?;
         let model: Model =
             serde_json::from_str(&text).map_err(|e| Error::invalid(path, format!("not a cog-gpu model file: {e}")))?;
         model.check().map_err(|e| Error::invalid(path, e))?;
@@ -223,6 +223,22 @@ impl Model {
         std::fs::write(&temporary, text).map_err(|e| Error::io(&temporary, e))?;
         std::fs::rename(&temporary, path).map_err(|e| Error::io(path, e))
     }
+}
+
+/// Largest absolute weight or bias a model or weights file may hold: features are bounded (densities and
+/// bin counts per projected pixel, normalised COG, view RBFs), so any real model's weights are many orders
+/// of magnitude below it, and with it no score of the 12 017 dimensions can overflow to infinity or NaN.
+pub const MAX_WEIGHT: f32 = 1e6;
+
+/// Checks every weight and the bias against ±[`MAX_WEIGHT`].
+pub fn check_weight_magnitudes(weights: &[f32], bias: f32) -> std::result::Result<(), String> {
+    if let Some(i) = weights.iter().position(|w| w.abs() > MAX_WEIGHT) {
+        return Err(format!("weights[{i}] = {} is beyond ±{MAX_WEIGHT:e}: not a trained model", weights[i]));
+    }
+    if bias.abs() > MAX_WEIGHT {
+        return Err(format!("bias = {bias} is beyond ±{MAX_WEIGHT:e}: not a trained model"));
+    }
+    Ok(())
 }
 
 /// The models of a directory (`*.json`), sorted by category. With `categories`, exactly those (each must

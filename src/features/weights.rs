@@ -64,7 +64,7 @@ impl WeightsFile {
         self.layout.validate().map_err(|e| e.to_string())?;
         if self.layout_id != self.layout.id() {
             return Err(format!(
-                "layout_id '{}' does not match this build's id for the layout, '{}'",
+                "layout_id '{}' is not this build's id for the file's layout, '{}'",
                 self.layout_id,
                 self.layout.id()
             ));
@@ -78,6 +78,7 @@ impl WeightsFile {
         if !self.bias.is_finite() {
             return Err("bias is not finite".into());
         }
+        crate::model::check_weight_magnitudes(&self.weights, self.bias)?;
         let mask = self.layout.mask();
         if let Some(n) = (0..mask.len()).find(|&n| !mask[n] && self.weights[n] != 0.0) {
             return Err(format!(
@@ -89,7 +90,7 @@ impl WeightsFile {
     }
 
     pub fn read(path: &Path) -> Result<WeightsFile> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let text = crate::frame::read_text(path)?;
         let file: WeightsFile =
             serde_json::from_str(&text).map_err(|e| Error::invalid(path, format!("not a weights file: {e}")))?;
         file.check().map_err(|m| Error::invalid(path, m))?;
