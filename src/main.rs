@@ -40,7 +40,14 @@ enum Command {
 
 fn main() {
     env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("info")).format_timestamp(None).init();
-    let cli = Cli::parse();
+    // Bad options exit with status 1 like every other error (README); --help and --version with 0.
+    let cli = Cli::try_parse().unwrap_or_else(|err| {
+        if err.use_stderr() {
+            let _ = err.print();
+            std::process::exit(1);
+        }
+        err.exit()
+    });
     let options = cli::GlobalOptions { force_cpu: cli.cpu };
     let result = match cli.command {
         Command::Info(args) => cli::info::run(args, &options),
@@ -53,7 +60,7 @@ fn main() {
         Command::Calibrate(args) => cli::calibrate::run(args, &options),
     };
     if let Err(err) = result {
-        eprintln!("error: {err:#}");
+        eprintln!("error: {}", cli::error_text(&err));
         std::process::exit(1);
     }
 }

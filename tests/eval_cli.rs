@@ -183,7 +183,15 @@ fn bad_detection_files_are_errors_naming_the_file() {
     let tmp = tempfile::tempdir().unwrap();
     let (data, dets) = dataset(tmp.path());
     std::fs::write(dets.join("f2.json"), "{ \"frame\": \"f2\", \"detections\": [ {").unwrap();
+    // The bad frame is reported and left out, the others are evaluated, and the run fails at the end.
     let out = run(&["--data", data.to_str().unwrap(), "--detections", dets.to_str().unwrap(), "--json"]);
+    assert_eq!(out.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("f2.json") && stderr.contains("1 of 4 frames failed"), "{stderr}");
+    let report: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(report["frames"], 3);
+    // --fail-fast: the first bad frame stops the run before any report.
+    let out = run(&["--data", data.to_str().unwrap(), "--detections", dets.to_str().unwrap(), "--json", "--fail-fast"]);
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("f2.json"), "{}", String::from_utf8_lossy(&out.stderr));
     assert!(out.stdout.is_empty());

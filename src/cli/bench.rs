@@ -17,11 +17,11 @@ use std::time::Instant;
 use anyhow::bail;
 use serde_json::json;
 
-use super::GlobalOptions;
+use super::{options, GlobalOptions};
 use cog_gpu::features::fast::{FastEngine, FastOptions};
 use cog_gpu::features::hypotheses::{DEFAULT_MIN_POINTS, DEFAULT_STEP};
 use cog_gpu::features::window::{category_sizes, DEFAULT_SIZE_STATS};
-use cog_gpu::features::{cpu, Backend, Hypothesis, Layout, PreparedWindow};
+use cog_gpu::features::{budget, cpu, Backend, Hypothesis, Layout, PreparedWindow};
 use cog_gpu::frame::{DepthSource, Frame};
 
 /// The real frame benchmarked when no `--frame` is given (until the synthetic standard frame exists).
@@ -42,11 +42,11 @@ pub struct Args {
     #[arg(long)]
     pub both: bool,
     /// Score at most this many of the kept hypotheses (evenly spread), for a quick run.
-    #[arg(long)]
+    #[arg(long, value_parser = options::at_least_one)]
     pub limit: Option<usize>,
     #[arg(long, default_value = DEFAULT_SIZE_STATS)]
     pub sizes: PathBuf,
-    #[arg(long, default_value_t = DEFAULT_STEP)]
+    #[arg(long, default_value_t = DEFAULT_STEP, value_parser = options::step)]
     pub step: f32,
     #[arg(long, default_value_t = DEFAULT_MIN_POINTS)]
     pub min_points: u32,
@@ -56,7 +56,7 @@ pub struct Args {
     #[arg(long, value_enum, default_value_t = PathChoice::All)]
     pub features: PathChoice,
     /// Lattice cells per centre step of the fast path.
-    #[arg(long, default_value_t = cog_gpu::features::fast::DEFAULT_SUBDIVISIONS)]
+    #[arg(long, default_value_t = cog_gpu::features::fast::DEFAULT_SUBDIVISIONS, value_parser = options::subdivisions)]
     pub subdivisions: u32,
     /// Print one JSON object.
     #[arg(long)]
@@ -106,7 +106,10 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     };
     let run_exact = args.features != PathChoice::Fast;
     let run_fast = args.features != PathChoice::Exact;
-    let fast_options = FastOptions { subdivisions: args.subdivisions.max(1) };
+    let fast_options = FastOptions { subdivisions: args.subdivisions };
+    if run_fast {
+        budget::check_fast(&window.scene.pre, args.step, &layout, fast_options.subdivisions)?;
+    }
     // Both feature paths have a GPU twin (exact: gpu::features, fast: gpu::fast).
     let gpu = if want_gpu { cog_gpu::gpu::acquire(false) } else { None };
     if args.gpu && gpu.is_none() {

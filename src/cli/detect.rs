@@ -5,7 +5,9 @@
 //! Defaults: every frame under `assets/sample/`, the models of `assets/models/`, output `detections/`.
 //! When a default `assets/...` path does not exist relative to the current directory, the crate's own
 //! `assets/` is used, so `cargo run --release -- detect` works from anywhere in a checkout. A frame that
-//! cannot be read stops the run with an error naming it (files already written are kept).
+//! cannot be read or detected in is reported and skipped; the run goes on with the other frames and exits
+//! with an error listing the failed frames at the end (`--fail-fast`: stop at the first one; files
+//! already written are kept either way).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -20,7 +22,7 @@ use cog_gpu::model::read_models_dir;
 use cog_gpu::nms::DEFAULT_NMS_IOU;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use super::GlobalOptions;
+use super::{options, GlobalOptions};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -39,7 +41,7 @@ pub struct Args {
     #[arg(long, default_value_t = DEFAULT_NMS_IOU)]
     pub nms_iou: f32,
     /// Detections kept per category and frame.
-    #[arg(long, default_value_t = 20)]
+    #[arg(long, default_value_t = 20, value_parser = options::at_least_one)]
     pub max_per_category: usize,
     /// Drop detections whose raw score (w·φ + bias, before calibration) is below this (overrides the
     /// models' thresholds).
@@ -47,7 +49,7 @@ pub struct Args {
     pub min_score: Option<f32>,
     /// Overrides every model's sliding-window centre step (metres; the shipped models' own is 0.2): finer
     /// is slower (4× the hypotheses at 0.1) and places boxes more precisely.
-    #[arg(long)]
+    #[arg(long, value_parser = options::step)]
     pub step: Option<f32>,
     /// Do not write the overlay pictures.
     #[arg(long)]
@@ -59,6 +61,10 @@ pub struct Args {
     /// Print the detections of all frames as one JSON array on stdout.
     #[arg(long)]
     pub json: bool,
+    /// Stop at the first frame that cannot be read or detected in (default: report it, go on with the
+    /// others and fail at the end).
+    #[arg(long)]
+    pub fail_fast: bool,
 }
 
 /// `path` if it exists, else the same relative path inside the crate's checkout (for the defaults).
@@ -116,14 +122,12 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         ..DetectOptions::default()
     };
     detect_options.validate()?;
-    let categories: Vec<String> = args.categories.iter().map(|c| normalise_name(c).0).collect();
+    let categories: Vec<String> =
+        options::names("--categories", &args.categories)?.iter().map(|c| normalise_name(c).0).collect();
     let models_dir =
         if args.models == Path::new("assets/models") { resolve_default(&args.models) } else { args.models.clone() };
     let mut models = read_models_dir(&models_dir, (!categories.is_empty()).then_some(categories.as_slice()))?;
     if let Some(step) = args.step {
-        if !(step.is_finite() && (0.01..=1.0).contains(&step)) {
-            bail!("--step must be between 0.01 and 1 metre, got {step}");
-        }
         for model in &mut models {
             model.window.step = step;
         }
@@ -149,34 +153,53 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     }
     let started = Instant::now();
     let mut results = Vec::new();
+    let mut failures = Vec::new();
     for dir in &frames {
         progress.set_message(dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default());
-        let frame = Frame::read(dir, DepthSource::Raw)?;
-        let detections = detect_frame(&frame, &models, backend, &detect_options)
-            .with_context(|| format!("detecting in {}", dir.display()))?;
-        let json_path = args.out.join(format!("{}.json", frame.name));
-        detections.write(&json_path)?;
-        if !args.no_overlay {
-            let png_path = args.out.join(format!("{}.png", frame.name));
-            // The best detections over all categories, one category per object.
-            let best = FrameDetections {
-                frame: detections.frame.clone(),
-                detections: overlay_selection(&detections.detections, args.overlay_top),
-            };
-            overlay(&frame, &best)
-                .save(&png_path)
-                .with_context(|| format!("writing the overlay {}", png_path.display()))?;
+        match detect_one(dir, &models, backend, &detect_options, &args) {
+            Ok(detections) => results.push(detections),
+            Err(err) if args.fail_fast => return Err(err),
+            Err(err) => {
+                progress.suspend(|| log::error!("{}: skipped: {}", dir.display(), super::error_text(&err)));
+                failures.push((dir.clone(), err));
+            }
         }
-        results.push(detections);
         progress.inc(1);
     }
     progress.finish_and_clear();
     if args.json {
         println!("{}", serde_json::to_string_pretty(&results)?);
-        return Ok(());
+    } else {
+        print_summary(&results, &args.out, started.elapsed().as_secs_f64());
     }
-    print_summary(&results, &args.out, started.elapsed().as_secs_f64());
-    Ok(())
+    super::batch_result(&failures, frames.len())
+}
+
+/// Reads one frame, detects, and writes its detections file and overlay.
+fn detect_one(
+    dir: &Path,
+    models: &[cog_gpu::model::Model],
+    backend: Backend,
+    detect_options: &DetectOptions,
+    args: &Args,
+) -> anyhow::Result<FrameDetections> {
+    let frame = Frame::read(dir, DepthSource::Raw)?;
+    let detections = detect_frame(&frame, models, backend, detect_options)
+        .with_context(|| format!("detecting in {}", dir.display()))?;
+    let json_path = args.out.join(format!("{}.json", frame.name));
+    detections.write(&json_path)?;
+    if !args.no_overlay {
+        let png_path = args.out.join(format!("{}.png", frame.name));
+        // The best detections over all categories, one category per object.
+        let best = FrameDetections {
+            frame: detections.frame.clone(),
+            detections: overlay_selection(&detections.detections, args.overlay_top),
+        };
+        overlay(&frame, &best)
+            .save(&png_path)
+            .with_context(|| format!("writing the overlay {}", png_path.display()))?;
+    }
+    Ok(detections)
 }
 
 /// One line per frame: detections per category and the best score.

@@ -37,7 +37,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use super::GlobalOptions;
+use super::{options, GlobalOptions};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -71,10 +71,17 @@ pub struct Args {
     /// ceiling (reads and preprocesses every frame with ground truth of a modelled category).
     #[arg(long, requires = "diagnose")]
     pub models: Option<PathBuf>,
+    /// Stop at the first frame whose annotations or detections file cannot be read (default: report it,
+    /// evaluate the other frames and fail at the end with the list).
+    #[arg(long)]
+    pub fail_fast: bool,
     /// With --diagnose --models: overrides every model's window step (metres), as `detect --step`.
-    #[arg(long, requires = "models")]
+    #[arg(long, requires = "models", value_parser = options::step)]
     pub step: Option<f32>,
 }
+
+/// One frame's ground truth and its detections (`None`: no detections file).
+type FrameInputs = (Vec<Object>, Option<Vec<Detection>>);
 
 /// The `--diagnose --json` document.
 #[derive(Serialize)]
@@ -196,7 +203,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     }
 
     let bar = progress(dataset.len(), "frames")?;
-    let per_frame: Vec<(Vec<Object>, Option<Vec<Detection>>)> = dataset
+    let read: Vec<anyhow::Result<FrameInputs>> = dataset
         .frames
         .par_iter()
         .zip(&names)
@@ -219,22 +226,39 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
             bar.inc(1);
             Ok((objects, detections))
         })
-        .collect::<anyhow::Result<_>>()?;
+        .collect();
     bar.finish_and_clear();
+    // A frame that cannot be read is left out of the evaluation (its ground truth and its detections).
+    let mut per_frame = Vec::new();
+    let mut failures = Vec::new();
+    let mut frames = Vec::new();
+    for (result, dir) in read.into_iter().zip(&dataset.frames) {
+        match result {
+            Ok(frame) => {
+                per_frame.push(frame);
+                frames.push(dir.clone());
+            }
+            Err(err) if args.fail_fast => return Err(err),
+            Err(err) => {
+                log::error!("{}: skipped: {}", dir.display(), super::error_text(&err));
+                failures.push((dir.clone(), err));
+            }
+        }
+    }
+    let evaluated = frames.len();
 
     let missing = per_frame.iter().filter(|(_, d)| d.is_none()).count();
     let (truth, detections): (Vec<Vec<Object>>, Vec<Vec<Detection>>) =
         per_frame.into_iter().map(|(t, d)| (t, d.unwrap_or_default())).unzip();
     if missing > 0 {
         log::warn!(
-            "{missing} of {} frames have no detections file in {}; counted as no detections",
-            names.len(),
+            "{missing} of {evaluated} frames have no detections file in {}; counted as no detections",
             args.detections.display()
         );
     }
     if args.diagnose {
         let window = match &models {
-            Some(models) => Some(window_recall(&dataset.frames, &truth, models)?),
+            Some(models) => Some(window_recall(&frames, &truth, models)?),
             None => None,
         };
         let diagnosis = diagnose_categories(&truth, &detections, &categories, args.iou, window.as_ref());
@@ -246,9 +270,9 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
             };
             println!("{}", serde_json::to_string_pretty(&report)?);
         } else {
-            print_diagnosis(&args, &diagnosis, &overlay, names.len(), missing);
+            print_diagnosis(&args, &diagnosis, &overlay, evaluated, missing);
         }
-        return Ok(());
+        return super::batch_result(&failures, names.len());
     }
     let results = evaluate_categories(&truth, &detections, &categories, args.iou);
     let map = mean_ap(results.iter().map(|r| &r.pr.ap));
@@ -261,16 +285,16 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
             iou: args.iou,
             ap: results.iter().map(|r| (r.category.clone(), r.pr.ap)).collect(),
             map,
-            frames: names.len(),
+            frames: evaluated,
             missing_detection_files: missing,
             ground_truth: results.iter().map(|r| (r.category.clone(), r.ground_truth)).collect(),
             detections: results.iter().map(|r| (r.category.clone(), r.detections)).collect(),
         };
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
-        print_table(&args, &results, map, names.len(), missing);
+        print_table(&args, &results, map, evaluated, missing);
     }
-    Ok(())
+    super::batch_result(&failures, names.len())
 }
 
 fn percent(ap: Option<f32>) -> String {
@@ -318,11 +342,6 @@ fn plot_colour(category: &str) -> cog_gpu::draw::Colour {
 /// The models of `dir` for the evaluated categories (with `step` overriding their window step); a warning
 /// names the evaluated categories without a model.
 fn diagnosis_models(dir: &Path, step: Option<f32>, categories: &[String]) -> anyhow::Result<Vec<Model>> {
-    if let Some(step) = step {
-        if !(step.is_finite() && (0.01..=1.0).contains(&step)) {
-            bail!("--step must be between 0.01 and 1 metre, got {step}");
-        }
-    }
     let mut models = read_models_dir(dir, None).with_context(|| format!("--models {}", dir.display()))?;
     models.retain(|m| categories.contains(&m.category));
     if models.is_empty() {
@@ -358,6 +377,8 @@ fn window_recall(
             let dir = &frames[i];
             let frame = Frame::read(dir, DepthSource::Raw)?;
             let pre = Preprocessed::from_frame(&frame).with_context(|| format!("{}: preprocessing", dir.display()))?;
+            cog_gpu::detect::check_budget(&pre, models)
+                .with_context(|| format!("{}: sliding window", dir.display()))?;
             let best = frame_window_best_ious(&pre, models, &truth[i]);
             bar.inc(1);
             Ok(best)

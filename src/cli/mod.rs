@@ -5,9 +5,38 @@ pub mod calibrate;
 pub mod detect;
 pub mod eval;
 pub mod info;
+pub mod options;
 pub mod score;
 pub mod synth;
 pub mod train;
+
+/// An error and its causes on one line, each cause once: a library error that already quotes its source
+/// (an I/O error's OS message) does not get it repeated.
+pub fn error_text(err: &anyhow::Error) -> String {
+    let mut text = String::new();
+    for cause in err.chain() {
+        let part = cause.to_string();
+        if text.contains(&part) {
+            continue;
+        }
+        if !text.is_empty() {
+            text.push_str(": ");
+        }
+        text.push_str(&part);
+    }
+    text
+}
+
+/// The end of a batch command (`detect`, `eval`) that went on past failed frames: an error listing them,
+/// or `Ok` when every frame succeeded.
+pub fn batch_result(failures: &[(std::path::PathBuf, anyhow::Error)], frames: usize) -> anyhow::Result<()> {
+    if failures.is_empty() {
+        return Ok(());
+    }
+    let list: Vec<String> =
+        failures.iter().map(|(dir, err)| format!("  {}: {}", dir.display(), error_text(err))).collect();
+    anyhow::bail!("{} of {frames} frames failed (skipped):\n{}", failures.len(), list.join("\n"))
+}
 
 /// Options shared by every subcommand.
 pub struct GlobalOptions {

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 
-use super::GlobalOptions;
+use super::{options, GlobalOptions};
 use cog_gpu::features::hypotheses::{DEFAULT_MIN_POINTS, DEFAULT_STEP};
 use cog_gpu::features::window::{category_sizes, DEFAULT_SIZE_STATS};
 use cog_gpu::features::{Backend, PreparedWindow, WeightsFile};
@@ -25,7 +25,7 @@ pub struct Args {
     #[arg(long, default_value = DEFAULT_SIZE_STATS)]
     pub sizes: PathBuf,
     /// Ground-plane step of the hypothesis centres (metres).
-    #[arg(long, default_value_t = DEFAULT_STEP)]
+    #[arg(long, default_value_t = DEFAULT_STEP, value_parser = options::step)]
     pub step: f32,
     /// Skip hypotheses with fewer points inside.
     #[arg(long, default_value_t = DEFAULT_MIN_POINTS)]

@@ -43,7 +43,11 @@ pub fn options(args: &Args) -> anyhow::Result<SynthOptions> {
         bail!("unknown sensor '{}': expected kv1, kv2, realsense, xtion or mixed", args.sensor);
     };
     let mut rooms = Vec::new();
-    for name in args.rooms.iter().filter(|n| !n.trim().is_empty()) {
+    if args.rooms.iter().all(|n| n.trim().is_empty()) && !args.rooms.is_empty() {
+        bail!("--rooms '{}' names no room type (leave --rooms out for the default mix)", args.rooms.join(","));
+    }
+    for name in super::options::names("--rooms", &args.rooms)? {
+        let name = name.as_str();
         let Some(r) = RoomType::parse(name) else {
             let known: Vec<&str> = RoomType::ALL.iter().map(|r| r.name()).collect();
             bail!("unknown room type '{name}': expected one of {}", known.join(", "));

@@ -35,16 +35,16 @@ use anyhow::{bail, Context};
 use cog_gpu::category::{normalise_name, CATEGORIES};
 use cog_gpu::features::fast::{FastOptions, DEFAULT_SUBDIVISIONS};
 use cog_gpu::features::hypotheses::DEFAULT_MIN_POINTS;
-use cog_gpu::features::{Groups, Layout, SizeQuantiles};
+use cog_gpu::features::{budget, Groups, Layout, SizeQuantiles};
 use cog_gpu::frame::Dataset;
 use cog_gpu::learn::detector::{
     collect_examples, instances_of, read_all_annotations, train_detector, DetectorOracle, ExampleLimits, FeatureEngine,
-    PositiveTarget, TrainingSettings,
+    PositiveTarget, TrainingExample, TrainingSettings,
 };
 use cog_gpu::learn::{CuttingPlane, SsvmOptions};
 use cog_gpu::model::{FeaturePath, FeatureSettings, Model, WindowSettings};
 
-use super::GlobalOptions;
+use super::{options, GlobalOptions};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -66,21 +66,26 @@ pub struct Args {
     /// Stop when the mean violation over the examples is at most this (loss units; 1-slack ε).
     #[arg(long = "eps", default_value_t = 0.02)]
     pub epsilon: f64,
+    #[arg(value_parser = options::iterations)]
     /// Cap on cutting-plane iterations (QP solves), counted across resumes.
     #[arg(long, default_value_t = 300)]
     pub max_iterations: usize,
     /// Continue from the checkpoint `<out>.ckpt`.
     #[arg(long)]
     pub resume: bool,
+    #[arg(value_parser = options::positives)]
     /// Most instances of the category to train on.
     #[arg(long, default_value_t = 100)]
     pub positives: usize,
+    #[arg(value_parser = options::negatives)]
     /// Most frames without the category to train on.
     #[arg(long, default_value_t = 60)]
     pub negatives: usize,
+    #[arg(value_parser = options::step)]
     /// Centre step of the training sliding window (metres).
     #[arg(long, default_value_t = 0.2)]
     pub step: f32,
+    #[arg(value_parser = options::step)]
     /// Centre step written into the model for detection (metres).
     #[arg(long, default_value_t = 0.2)]
     pub detect_step: f32,
@@ -90,6 +95,7 @@ pub struct Args {
     /// Feature path: fast (shared-work approximation) or exact.
     #[arg(long, value_enum, default_value_t = PathArg::Fast)]
     pub features: PathArg,
+    #[arg(value_parser = options::subdivisions)]
     /// Lattice cells per centre step of the fast path.
     #[arg(long, default_value_t = DEFAULT_SUBDIVISIONS)]
     pub subdivisions: u32,
@@ -99,12 +105,15 @@ pub struct Args {
     /// Do not expand the 5×5×5 grid by a voxel layer (the paper's "+expanded" off).
     #[arg(long)]
     pub no_expand: bool,
+    #[arg(value_parser = options::every)]
     /// Also a full pass every this many iterations (0: only when the cached candidates hold no violation).
     #[arg(long, default_value_t = 0)]
     pub full_every: usize,
+    #[arg(value_parser = options::iterations)]
     /// Most full passes over every example's sliding window (the first included).
     #[arg(long, default_value_t = 2)]
     pub max_full_passes: usize,
+    #[arg(value_parser = options::candidates)]
     /// Candidates (with their feature vectors) cached per example by a full pass.
     #[arg(long, default_value_t = 100)]
     pub candidates: usize,
@@ -131,6 +140,41 @@ pub enum PathArg {
     Exact,
 }
 
+/// Drops positive examples without any point inside their box (nothing to learn from; counted in the log)
+/// and checks, before any window is built, that every example's sliding window and the candidate cache
+/// fit in memory (`cog_gpu::limits`), naming the example that does not.
+fn check_examples(
+    examples: &mut Vec<TrainingExample>,
+    settings: &TrainingSettings,
+    candidates: usize,
+) -> anyhow::Result<()> {
+    let before = examples.len();
+    examples.retain(|ex| ex.truth.is_none_or(|truth| ex.pre.points.iter().any(|p| truth.contains(*p))));
+    if examples.len() < before {
+        log::warn!("{} positive examples have no point inside their box; not trained on", before - examples.len());
+    }
+    if !examples.iter().any(|ex| ex.truth.is_some()) {
+        bail!("no positive example has points inside its box: nothing to train on");
+    }
+    for ex in examples.iter() {
+        budget::check_window(&ex.pre, settings.step, settings.sizes.len())
+            .with_context(|| format!("training example {}", ex.name))?;
+        if let FeatureEngine::Fast(options) = settings.engine {
+            budget::check_fast(&ex.pre, settings.step, &settings.layout, options.subdivisions)
+                .with_context(|| format!("training example {}", ex.name))?;
+        }
+    }
+    // Each example caches its candidates' feature vectors (plus the boxes nearest a positive's truth).
+    let vectors = examples.len() as f64 * (candidates + 25) as f64;
+    cog_gpu::limits::check_memory(
+        "the candidate cache",
+        vectors,
+        settings.layout.dim() as f64 * 4.0,
+        "lower --candidates, --positives or --negatives",
+    )?;
+    Ok(())
+}
+
 /// Parses a comma-separated group list.
 pub fn parse_groups(text: &str) -> anyhow::Result<Groups> {
     let mut groups = Groups { density: false, normals: false, cog: false, view: false };
@@ -155,11 +199,6 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     let (category, _) = normalise_name(&args.category);
     if !CATEGORIES.contains(&category.as_str()) {
         bail!("unknown category '{}'; the categories are: {}", args.category, CATEGORIES.join(", "));
-    }
-    for (name, value) in [("--step", args.step), ("--detect-step", args.detect_step)] {
-        if !(value.is_finite() && (0.01..=1.0).contains(&value)) {
-            bail!("{name} must be between 0.01 and 1 metre, got {value}");
-        }
     }
     let layout = Layout::new([5, 5, 5], !args.no_expand, parse_groups(&args.groups)?)?;
     let out = args.out.clone().unwrap_or_else(|| PathBuf::from("models").join(format!("{category}.json")));
@@ -202,7 +241,8 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         args.positives,
         args.negatives
     );
-    let examples = collect_examples(&dataset.frames, &category, limits)?;
+    let mut examples = collect_examples(&dataset.frames, &category, limits)?;
+    check_examples(&mut examples, &settings, args.candidates)?;
     let positives = examples.iter().filter(|e| e.truth.is_some()).count();
     log::info!(
         "{category}: {positives} positive and {} negative examples, prepared in {:.1} s",

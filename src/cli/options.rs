@@ -1,0 +1,79 @@
+//! One range check per numeric option, shared by every command that takes it (`score`, `bench`, `train`,
+//! `detect`, `eval`), as clap value parsers: a value out of range is refused before any work starts, with
+//! clap's message naming the flag, the value and the allowed range, e.g.
+//! `invalid value '0' for '--subdivisions <SUBDIVISIONS>': 0 is not in 1..=16`.
+
+use cog_gpu::limits::{check_step, MAX_SUBDIVISIONS};
+
+/// Largest `--candidates` (feature vectors cached per training example).
+pub const MAX_CANDIDATES: u64 = 10_000;
+/// Largest `--max-iterations`, `--full-every`, `--max-full-passes` and `--prune-after`.
+pub const MAX_ITERATIONS: u64 = 100_000;
+/// Largest `--positives` and `--negatives`.
+pub const MAX_EXAMPLES: u64 = 1_000_000;
+
+/// `--step`, `--detect-step`: a centre step in metres within [`cog_gpu::limits::MIN_STEP_M`] …
+/// [`cog_gpu::limits::MAX_STEP_M`].
+pub fn step(text: &str) -> Result<f32, String> {
+    let value: f32 = text.trim().parse().map_err(|_| format!("'{text}' is not a number"))?;
+    check_step("the step", value).map_err(|e| e.to_string())?;
+    Ok(value)
+}
+
+/// A whole number within `min..=max` (clap adds the flag and the value to the message).
+fn count(text: &str, min: u64, max: u64) -> Result<u64, String> {
+    let value: u64 = text.trim().parse().map_err(|_| format!("'{text}' is not a whole number ≥ 0"))?;
+    if (min..=max).contains(&value) {
+        Ok(value)
+    } else {
+        Err(format!("{value} is not in {min}..={max}"))
+    }
+}
+
+/// `--subdivisions`: 1..=[`MAX_SUBDIVISIONS`].
+pub fn subdivisions(text: &str) -> Result<u32, String> {
+    Ok(count(text, 1, MAX_SUBDIVISIONS as u64)? as u32)
+}
+
+/// `--candidates`: 1..=[`MAX_CANDIDATES`].
+pub fn candidates(text: &str) -> Result<usize, String> {
+    Ok(count(text, 1, MAX_CANDIDATES)? as usize)
+}
+
+/// `--max-iterations`, `--max-full-passes`: 1..=[`MAX_ITERATIONS`].
+pub fn iterations(text: &str) -> Result<usize, String> {
+    Ok(count(text, 1, MAX_ITERATIONS)? as usize)
+}
+
+/// `--full-every` (0 means "never on a schedule"): 0..=[`MAX_ITERATIONS`].
+pub fn every(text: &str) -> Result<usize, String> {
+    Ok(count(text, 0, MAX_ITERATIONS)? as usize)
+}
+
+/// `--positives`: 1..=[`MAX_EXAMPLES`].
+pub fn positives(text: &str) -> Result<usize, String> {
+    Ok(count(text, 1, MAX_EXAMPLES)? as usize)
+}
+
+/// `--negatives`: 0..=[`MAX_EXAMPLES`].
+pub fn negatives(text: &str) -> Result<usize, String> {
+    Ok(count(text, 0, MAX_EXAMPLES)? as usize)
+}
+
+/// Counts that must be at least 1 (`--limit`, `--max-per-category`).
+pub fn at_least_one(text: &str) -> Result<usize, String> {
+    Ok(count(text, 1, usize::MAX as u64)? as usize)
+}
+
+/// Comma-separated names (`--categories`, `--rooms`): trimmed; an empty entry ("bed,," or "") is an error
+/// naming the flag instead of a silently dropped or empty name.
+pub fn names(flag: &str, values: &[String]) -> anyhow::Result<Vec<String>> {
+    let names: Vec<String> = values.iter().map(|v| v.trim().to_string()).collect();
+    if names.is_empty() {
+        return Ok(names);
+    }
+    if let Some(n) = names.iter().position(String::is_empty) {
+        anyhow::bail!("{flag} '{}' has an empty name at position {} (a stray comma?)", values.join(","), n + 1);
+    }
+    Ok(names)
+}
