@@ -21,6 +21,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
 use crate::geometry::{iou_3d, Cuboid};
+use crate::limits::{MAX_COORDINATE_M, MAX_OBJECT_SIZE_M};
 
 /// One detected object, as written in a frame's detections JSON (upright frame; yaw as in
 /// [`crate::geometry`]).
@@ -85,6 +86,18 @@ impl FrameDetections {
             }
             if d.size.iter().any(|s| *s <= 0.0) {
                 return Err(Error::invalid(path, format!("detections[{i}] has a non-positive size {:?}", d.size)));
+            }
+            if d.size.iter().any(|&s| s > MAX_OBJECT_SIZE_M)
+                || d.centre.iter().any(|&c| c.abs() as f64 > MAX_COORDINATE_M)
+            {
+                return Err(Error::invalid(
+                    path,
+                    format!(
+                        "detections[{i}] (centre {:?}, size {:?}) lies beyond ±{MAX_COORDINATE_M} m or is larger than \
+                         {MAX_OBJECT_SIZE_M} m",
+                        d.centre, d.size
+                    ),
+                ));
             }
         }
         Ok(parsed)

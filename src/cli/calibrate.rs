@@ -47,7 +47,8 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     if !(args.iou > 0.0 && args.iou <= 1.0) {
         bail!("--iou must be in (0, 1], got {}", args.iou);
     }
-    let categories: Vec<String> = args.categories.iter().map(|c| normalise_name(c).0).collect();
+    let categories: Vec<String> =
+        super::options::names("--categories", &args.categories)?.iter().map(|c| normalise_name(c).0).collect();
     let mut models = read_models_dir(&args.models, (!categories.is_empty()).then_some(categories.as_slice()))?;
     let dataset = Dataset::open(&args.data)?;
     if dataset.is_empty() {

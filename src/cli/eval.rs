@@ -110,6 +110,9 @@ fn categories(requested: &Option<Vec<String>>) -> anyhow::Result<Vec<String>> {
     let Some(list) = requested else {
         return Ok(LARGE_CATEGORIES.iter().map(|c| c.to_string()).collect());
     };
+    if list.len() > 1 {
+        options::names("--categories", list)?;
+    }
     let names: Vec<&str> = list.iter().map(|c| c.trim()).filter(|c| !c.is_empty()).collect();
     if names == ["all"] {
         return Ok(CATEGORIES.iter().map(|c| c.to_string()).collect());
