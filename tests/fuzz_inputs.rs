@@ -1,0 +1,415 @@
+//! Malformed inputs for every reader and every command's numeric options, run through the binary as a
+//! careless or unlucky user would: each case must end with exit status 1 (0 where the input is to be
+//! accepted with a warning), never a panic, an abort or a hang, and its message must name the file or the
+//! flag. The frames are tiny (32×24) so that the whole file runs in seconds.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use cog_gpu::features::{Groups, Layout, SizeQuantiles};
+use cog_gpu::frame::{Frame, Object, RoomLayout};
+use cog_gpu::geometry::Cuboid;
+use cog_gpu::model::{FeaturePath, FeatureSettings, Model, WindowSettings};
+use glam::{Vec2, Vec3};
+use serde_json::Value;
+
+const WIDTH: u32 = 32;
+const HEIGHT: u32 = 24;
+/// Longest any case may run: every case here is refused or finishes in well under a second.
+const DEADLINE: Duration = Duration::from_secs(60);
+
+/// Runs the binary with a deadline (a hang fails the test instead of blocking it).
+fn run(args: &[&str]) -> Output {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_cog-gpu"))
+        .arg("--cpu")
+        .args(args)
+        .env("NODEVICE_SELECT", "1")
+        .env("RUST_BACKTRACE", "0")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("run cog-gpu");
+    let start = Instant::now();
+    while child.try_wait().expect("wait").is_none() {
+        if start.elapsed() > DEADLINE {
+            child.kill().ok();
+            panic!("cog-gpu {args:?} did not finish in {DEADLINE:?}");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.wait_with_output().expect("output")
+}
+
+fn stderr(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+/// The command fails with status 1, without a panic, and its message contains every `needles` entry.
+fn assert_rejected(args: &[&str], needles: &[&str]) -> String {
+    let out = run(args);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{args:?} should fail with status 1: {err}");
+    assert!(!err.contains("panicked"), "{args:?} panicked: {err}");
+    for needle in needles {
+        assert!(err.contains(needle), "{args:?}: expected '{needle}' in: {err}");
+    }
+    err
+}
+
+/// The command succeeds without a panic; returns stdout and stderr.
+fn assert_accepted(args: &[&str]) -> (String, String) {
+    let out = run(args);
+    let err = stderr(&out);
+    assert!(out.status.success(), "{args:?} should succeed: {err}");
+    assert!(!err.contains("panicked"), "{args:?} panicked: {err}");
+    (String::from_utf8_lossy(&out.stdout).into_owned(), err)
+}
+
+/// A plausible frame: a wall 2–3 m away seen by a 32×24 camera (fx = 30), a bed annotated in front.
+fn good_frame(name: &str) -> Frame {
+    let depth_mm = (0..WIDTH * HEIGHT).map(|i| 2000 + (i % WIDTH) as u16 * 30).collect();
+    let rgb = image::RgbImage::from_fn(WIDTH, HEIGHT, |x, y| image::Rgb([(x * 7) as u8, (y * 9) as u8, 90]));
+    let bed = Cuboid::new(Vec3::new(0.0, 2.4, -0.2), Vec3::new(1.0, 0.8, 0.6), 0.0);
+    Frame {
+        name: name.into(),
+        rgb,
+        depth_mm,
+        k: [[30.0, 0.0, 16.5], [0.0, 30.0, 12.5], [0.0, 0.0, 1.0]],
+        extrinsics: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        scene: Some("bedroom".into()),
+        objects: vec![Object { category: "bed".into(), label: None, cuboid: bed }],
+        layout: Some(RoomLayout {
+            corners: vec![Vec2::new(-3.0, 0.0), Vec2::new(3.0, 0.0), Vec2::new(3.0, 4.0), Vec2::new(-3.0, 4.0)],
+            floor: -1.5,
+            ceiling: 1.5,
+        }),
+    }
+}
+
+fn write_frame(dir: &Path, frame: &Frame) -> PathBuf {
+    let path = dir.join(&frame.name);
+    frame.write(&path).unwrap();
+    path
+}
+
+fn text(path: &Path) -> &str {
+    path.to_str().unwrap()
+}
+
+/// A one-voxel density model (weight 1 on the density) for `category`.
+fn model(category: &str) -> Model {
+    let layout = Layout::new([1, 1, 1], false, Groups::GEOM).unwrap();
+    let mut weights = vec![0.0; layout.dim()];
+    weights[0] = 1.0;
+    let sizes =
+        SizeQuantiles { widths: vec![0.8, 0.9, 1.0, 1.1, 1.2], depths: vec![0.7, 0.8, 0.9], heights: vec![0.5; 3] };
+    Model::new(
+        category,
+        layout,
+        sizes,
+        WindowSettings { step: 0.2, min_points: 5 },
+        FeatureSettings { path: FeaturePath::Fast, subdivisions: 2 },
+        weights,
+        Value::Null,
+    )
+    .unwrap()
+}
+
+fn models_dir(dir: &Path) -> PathBuf {
+    let models = dir.join("models");
+    std::fs::create_dir_all(&models).unwrap();
+    model("bed").write(&models.join("bed.json")).unwrap();
+    models
+}
+
+/// The annotation file of a frame with one object whose footprint has corners `xs`, `zs`.
+fn annotation_with(xs: [f64; 4], zs: [f64; 4]) -> String {
+    serde_json::json!({"objects": [{"name": "bed", "polygon": [{"X": xs, "Z": zs, "Ymin": -0.5, "Ymax": 0.5}]}]})
+        .to_string()
+}
+
+#[test]
+fn implausible_calibrations_are_rejected_naming_the_file_and_value() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cases: [(&str, &[&str]); 7] = [
+        ("0.01 0 16.5\n0 0.01 12.5\n0 0 1\n", &["intrinsics.txt", "fx = 0.01"]),
+        ("1 0 16.5\n0 1 12.5\n0 0 1\n", &["intrinsics.txt", "fx = 1", "allowed"]),
+        ("30 0 1e9\n0 30 12.5\n0 0 1\n", &["intrinsics.txt", "cx = 1000000000"]),
+        ("30 0 16.5\n0 30 -1e9\n0 0 1\n", &["intrinsics.txt", "cy"]),
+        ("30 2 16.5\n0 30 12.5\n0 0 1\n", &["intrinsics.txt", "skew"]),
+        ("30 0 16.5\n0 -30 12.5\n0 0 1\n", &["intrinsics.txt", "positive"]),
+        ("30 0 16.5\n0 30 12.5\n0 0\n", &["intrinsics.txt", "9 numbers"]),
+    ];
+    for (n, (k, needles)) in cases.iter().enumerate() {
+        let dir = write_frame(tmp.path(), &good_frame(&format!("k{n}")));
+        std::fs::write(dir.join("intrinsics.txt"), k).unwrap();
+        assert_rejected(&["info", text(&dir)], needles);
+    }
+    let dir = write_frame(tmp.path(), &good_frame("e"));
+    std::fs::write(dir.join("extrinsics/00000000000000.txt"), "2 0 0 0\n0 1 0 0\n0 0 1 0\n").unwrap();
+    assert_rejected(&["info", text(&dir)], &["extrinsics", "rotation"]);
+}
+
+#[test]
+fn broken_images_are_errors() {
+    let tmp = tempfile::tempdir().unwrap();
+    // A JPEG cut short in its entropy-coded data decodes without complaint in the decoder (the missing
+    // part comes out grey): the reader must notice. A textured 256×192 image has enough of that data.
+    let mut textured = good_frame("jpeg");
+    let (w, h) = (WIDTH * 8, HEIGHT * 8);
+    textured.rgb = image::RgbImage::from_fn(w, h, |x, y| {
+        let v = (x.wrapping_mul(2654435761) ^ y.wrapping_mul(40503)).rotate_left(x % 13) as u8;
+        image::Rgb([v, v.wrapping_mul(3), v ^ 0x5a])
+    });
+    textured.depth_mm = vec![2500; (w * h) as usize];
+    textured.k = [[240.0, 0.0, 128.5], [0.0, 240.0, 96.5], [0.0, 0.0, 1.0]];
+    let dir = write_frame(tmp.path(), &textured);
+    let png = dir.join("image/jpeg.png");
+    let jpeg = dir.join("image/jpeg.jpg");
+    image::open(&png).unwrap().save(&jpeg).unwrap();
+    std::fs::remove_file(&png).unwrap();
+    assert_accepted(&["info", text(&dir)]);
+    let bytes = std::fs::read(&jpeg).unwrap();
+    std::fs::write(&jpeg, &bytes[..bytes.len() * 2 / 3]).unwrap();
+    assert_rejected(&["info", text(&dir)], &["jpeg.jpg", "truncated"]);
+
+    let dir = write_frame(tmp.path(), &good_frame("png"));
+    let depth = dir.join("depth/png.png");
+    let bytes = std::fs::read(&depth).unwrap();
+    std::fs::write(&depth, &bytes[..bytes.len() - 12]).unwrap();
+    assert_rejected(&["info", text(&dir)], &["depth/png.png"]);
+
+    let dir = write_frame(tmp.path(), &good_frame("garbage"));
+    std::fs::write(dir.join("image/garbage.png"), b"not an image at all").unwrap();
+    assert_rejected(&["info", text(&dir)], &["garbage.png"]);
+
+    // Too many pixels: refused from the header, before decoding.
+    let dir = write_frame(tmp.path(), &good_frame("huge"));
+    image::GrayImage::new(2100, 2100).save(dir.join("image/huge.png")).unwrap();
+    assert_rejected(&["info", text(&dir)], &["huge.png", "pixels"]);
+
+    let dir = write_frame(tmp.path(), &good_frame("size"));
+    let mut small = good_frame("size");
+    small.rgb = image::RgbImage::new(WIDTH / 2, HEIGHT / 2);
+    small.rgb.save(dir.join("image/size.png")).unwrap();
+    assert_rejected(&["info", text(&dir)], &["depth/size.png", "RGB image"]);
+
+    let file = tmp.path().join("plain.txt");
+    std::fs::write(&file, "x").unwrap();
+    assert_rejected(&["info", text(&file)], &["plain.txt", "is a file"]);
+}
+
+#[test]
+fn bad_annotations_are_skipped_with_a_warning_naming_frame_and_object() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cases: [(&str, String, &str); 5] = [
+        ("collinear", annotation_with([0.0, 1.0, 2.0, 3.0], [2.0, 2.0, 2.0, 2.0]), "zero area"),
+        ("bowtie", annotation_with([0.0, 2.0, 0.0, 3.0], [2.0, 4.0, 4.0, 2.0]), "intersects itself"),
+        ("far", annotation_with([-1e30, 1e30, 1e30, -1e30], [2.0, 2.0, 1e30, 1e30]), "beyond"),
+        ("point", annotation_with([1.0, 1.0, 1.0, 1.0], [2.0, 2.0, 2.0, 2.0]), "zero area"),
+        ("huge", annotation_with([0.0, 50.0, 50.0, 0.0], [2.0, 2.0, 60.0, 60.0]), "larger than"),
+    ];
+    for (name, annotation, needle) in &cases {
+        let dir = write_frame(tmp.path(), &good_frame(name));
+        std::fs::write(dir.join("annotation3Dfinal/index.json"), annotation).unwrap();
+        let (stdout, err) = assert_accepted(&["info", text(&dir), "--json"]);
+        let info: Value = serde_json::from_str(&stdout).unwrap();
+        assert_eq!(info["objects"].as_array().unwrap().len(), 0, "{name}: the object was kept");
+        for expected in [*name, "objects[0]", "bed", needle] {
+            assert!(err.contains(expected), "{name}: expected '{expected}' in the warning: {err}");
+        }
+    }
+    // Room polygons: zero area and self-intersecting ones are skipped, the frame is kept.
+    for (name, xs, zs) in
+        [("flatroom", [0.0, 1.0, 2.0, 3.0], [0.0; 4]), ("bowroom", [0.0, 4.0, 0.0, 4.0], [0.0, 4.0, 4.0, 0.0])]
+    {
+        let dir = write_frame(tmp.path(), &good_frame(name));
+        let layout = serde_json::json!({"objects": [{"name": "room", "polygon": [{"X": xs, "Z": zs, "Ymin": -1.5, "Ymax": 1.5}]}]});
+        std::fs::write(dir.join("annotation3Dlayout/index.json"), layout.to_string()).unwrap();
+        let (stdout, err) = assert_accepted(&["info", text(&dir), "--json"]);
+        let info: Value = serde_json::from_str(&stdout).unwrap();
+        assert!(info["layout"].is_null(), "{name}: the room was kept");
+        assert!(err.contains(name) && err.contains("room polygon"), "{name}: {err}");
+    }
+    // A byte-order mark is accepted: the object is read.
+    let dir = write_frame(tmp.path(), &good_frame("bom"));
+    let path = dir.join("annotation3Dfinal/index.json");
+    let original = std::fs::read_to_string(&path).unwrap();
+    std::fs::write(&path, format!("\u{feff}{original}")).unwrap();
+    let (stdout, _) = assert_accepted(&["info", text(&dir), "--json"]);
+    let info: Value = serde_json::from_str(&stdout).unwrap();
+    assert_eq!(info["objects"].as_array().unwrap().len(), 1);
+    // A file of the wrong shape is an error naming it.
+    std::fs::write(&path, "[1, 2, 3]").unwrap();
+    assert_rejected(&["info", text(&dir)], &["annotation3Dfinal/index.json", "objects"]);
+}
+
+#[test]
+fn numeric_options_are_range_checked_naming_flag_value_and_range() {
+    let tmp = tempfile::tempdir().unwrap();
+    let frame = write_frame(tmp.path(), &good_frame("f"));
+    let f = text(&frame);
+    let weights = tmp.path().join("w.json");
+    let synth_out = tmp.path().join("s");
+    let cases: Vec<(Vec<&str>, Vec<&str>)> = vec![
+        (vec!["score", f, "--weights", text(&weights), "--step", "0"], vec!["--step", "'0'", "0.01", "1 metre"]),
+        (vec!["score", f, "--weights", text(&weights), "--step", "NaN"], vec!["--step", "NaN"]),
+        (vec!["score", f, "--weights", text(&weights), "--step=-0.1"], vec!["--step", "-0.1"]),
+        (vec!["score", f, "--weights", text(&weights), "--step", "0.0001"], vec!["--step", "0.0001"]),
+        (vec!["bench", "--frame", f, "--step", "0.001"], vec!["--step", "0.001"]),
+        (vec!["bench", "--frame", f, "--subdivisions", "0"], vec!["--subdivisions", "1..=16"]),
+        (vec!["bench", "--frame", f, "--subdivisions", "1000"], vec!["--subdivisions", "1000"]),
+        (vec!["bench", "--frame", f, "--limit", "0"], vec!["--limit", "'0'"]),
+        (
+            vec!["train", "--data", f, "--category", "bed", "--subdivisions", "17"],
+            vec!["--subdivisions", "17", "1..=16"],
+        ),
+        (vec!["train", "--data", f, "--category", "bed", "--max-iterations", "0"], vec!["--max-iterations", "'0'"]),
+        (vec!["train", "--data", f, "--category", "bed", "--positives", "0"], vec!["--positives", "'0'"]),
+        (vec!["train", "--data", f, "--category", "bed", "--candidates", "0"], vec!["--candidates", "'0'"]),
+        (vec!["train", "--data", f, "--category", "bed", "--step", "0"], vec!["--step", "'0'"]),
+        (vec!["train", "--data", f, "--category", "bed", "--detect-step", "5"], vec!["--detect-step", "'5'"]),
+        (vec!["detect", f, "--step", "0.0001"], vec!["--step", "0.0001"]),
+        (vec!["detect", f, "--max-per-category", "0"], vec!["--max-per-category", "'0'"]),
+        (vec!["detect", f, "--categories", "bed,"], vec!["--categories", "empty name"]),
+        (
+            vec!["eval", "--data", f, "--detections", f, "--categories", "bed,,chair"],
+            vec!["--categories", "empty name"],
+        ),
+        (vec!["calibrate", "--data", f, "--detections", f, "--categories", ",bed"], vec!["--categories", "empty name"]),
+        (vec!["eval", "--data", f, "--detections", f, "--diagnose", "--models", f, "--step", "0"], vec!["--step"]),
+        (vec!["synth", "--out", text(&synth_out), "--frames", "1", "--rooms", ""], vec!["--rooms"]),
+    ];
+    for (args, needles) in &cases {
+        assert_rejected(args, needles);
+    }
+    assert!(!synth_out.exists(), "synth wrote frames for an empty --rooms");
+}
+
+#[test]
+fn bad_model_and_detection_files_are_errors_naming_the_file() {
+    let tmp = tempfile::tempdir().unwrap();
+    let frame = write_frame(tmp.path(), &good_frame("f"));
+    let dir = tmp.path().join("bad-models");
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut huge: Value = serde_json::to_value(model("bed")).unwrap();
+    huge["weights"][0] = 1e38.into();
+    std::fs::write(dir.join("bed.json"), huge.to_string()).unwrap();
+    assert_rejected(&["detect", text(&frame), "--models", text(&dir)], &["bed.json", "weights[0]"]);
+    let mut array = serde_json::to_value(model("bed")).unwrap();
+    array["features"]["subdivisions"] = 0.into();
+    std::fs::write(dir.join("bed.json"), array.to_string()).unwrap();
+    assert_rejected(&["detect", text(&frame), "--models", text(&dir)], &["bed.json", "subdivisions"]);
+    std::fs::write(dir.join("bed.json"), "[]").unwrap();
+    assert_rejected(&["detect", text(&frame), "--models", text(&dir)], &["bed.json"]);
+
+    // Detections files: a JSON array (what `detect --json` prints) and a BOM.
+    let dets = tmp.path().join("dets");
+    std::fs::create_dir_all(&dets).unwrap();
+    std::fs::write(dets.join("f.json"), "[{\"frame\": \"f\", \"detections\": []}]").unwrap();
+    assert_rejected(&["eval", "--data", text(&frame), "--detections", text(&dets)], &["f.json", "JSON array"]);
+    let far = r#"{"frame": "f", "detections": [{"category": "bed", "centre": [1e30, 2, 0], "size": [1, 1, 1], "yaw": 0, "score": 1}]}"#;
+    std::fs::write(dets.join("f.json"), far).unwrap();
+    assert_rejected(&["eval", "--data", text(&frame), "--detections", text(&dets)], &["f.json", "detections[0]"]);
+    std::fs::write(dets.join("f.json"), "\u{feff}{\"frame\": \"f\", \"detections\": []}").unwrap();
+    assert_accepted(&["eval", "--data", text(&frame), "--detections", text(&dets)]);
+    // An I/O error names the file and quotes the system's message once.
+    let err = assert_rejected(
+        &["score", text(&frame), "--weights", text(&tmp.path().join("nowhere.json"))],
+        &["nowhere.json"],
+    );
+    assert_eq!(err.matches("No such file").count(), 1, "{err}");
+}
+
+#[test]
+fn a_point_cloud_too_large_for_the_step_is_refused_before_allocating() {
+    let tmp = tempfile::tempdir().unwrap();
+    // The widest calibration allowed (fx = 0.2 × width, principal point well outside the image) and the
+    // far end of the depth range: the points span tens of metres.
+    let mut wide = good_frame("wide");
+    wide.k = [[6.4, 0.0, -8.0], [0.0, 6.4, 30.0], [0.0, 0.0, 1.0]];
+    wide.depth_mm = vec![7990; (WIDTH * HEIGHT) as usize];
+    let dir = write_frame(tmp.path(), &wide);
+    let models = models_dir(tmp.path());
+    let out = tmp.path().join("out");
+    assert_rejected(
+        &["detect", text(&dir), "--models", text(&models), "--out", text(&out), "--step", "0.01"],
+        &["wide", "would need", "limit", "larger step"],
+    );
+}
+
+#[test]
+fn batch_detect_and_eval_go_on_past_a_bad_frame() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tmp.path().join("data");
+    for name in ["a-bad", "b-good", "c-good"] {
+        write_frame(&data, &good_frame(name));
+    }
+    std::fs::write(data.join("a-bad/intrinsics.txt"), "1 2 3").unwrap();
+    // A symbolic link loop in the dataset must not make the walks endless.
+    #[cfg(unix)]
+    {
+        std::fs::create_dir_all(data.join("sub")).unwrap();
+        std::os::unix::fs::symlink("..", data.join("sub/up")).unwrap();
+        std::os::unix::fs::symlink("self", data.join("sub/self")).unwrap();
+    }
+    let models = models_dir(tmp.path());
+    let out = tmp.path().join("out");
+    let err = assert_rejected(
+        &["detect", text(&data), "--models", text(&models), "--out", text(&out), "--no-overlay"],
+        &["1 of 3 frames failed", "a-bad", "intrinsics.txt"],
+    );
+    for good in ["b-good", "c-good"] {
+        assert!(out.join(format!("{good}.json")).is_file(), "{good} was not detected: {err}");
+    }
+    assert!(!out.join("a-bad.json").exists());
+
+    let fast = tmp.path().join("fast");
+    assert_rejected(
+        &["detect", text(&data), "--models", text(&models), "--out", text(&fast), "--no-overlay", "--fail-fast"],
+        &["a-bad", "intrinsics.txt"],
+    );
+    assert!(!fast.join("b-good.json").exists(), "--fail-fast went on after the bad frame");
+
+    // eval reads annotations only, so the bad calibration does not matter; a bad detections file does.
+    std::fs::write(out.join("b-good.json"), "{").unwrap();
+    let out_eval = run(&["eval", "--data", text(&data), "--detections", text(&out), "--json"]);
+    assert_eq!(out_eval.status.code(), Some(1));
+    let err = stderr(&out_eval);
+    assert!(err.contains("b-good.json") && err.contains("1 of 3 frames failed"), "{err}");
+    let report: Value = serde_json::from_slice(&out_eval.stdout).unwrap();
+    assert_eq!(report["frames"], 2);
+}
+
+#[test]
+fn training_skips_positives_without_points_and_reports_them() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tmp.path().join("data");
+    write_frame(&data, &good_frame("seen"));
+    // A bed annotated far behind the wall: no point inside it.
+    let mut hidden = good_frame("hidden");
+    hidden.objects[0].cuboid.centre = Vec3::new(0.0, 9.0, -0.2);
+    write_frame(&data, &hidden);
+    let model = tmp.path().join("bed.json");
+    let (_, err) = assert_accepted(&[
+        "train",
+        "--data",
+        text(&data),
+        "--category",
+        "bed",
+        "--out",
+        text(&model),
+        "--max-iterations",
+        "1",
+        "--min-points",
+        "1",
+        "--candidates",
+        "5",
+        "--max-full-passes",
+        "1",
+    ]);
+    assert!(err.contains("1 positive examples have no point inside their box"), "{err}");
+    let written: Value = serde_json::from_str(&std::fs::read_to_string(&model).unwrap()).unwrap();
+    assert_eq!(written["training"]["positives"], 1);
+}
