@@ -36,7 +36,7 @@ pub struct Args {
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// 3D IoU that makes a detection a true positive.
-    #[arg(long, default_value_t = 0.25)]
+    #[arg(long, default_value_t = 0.25, value_parser = super::options::iou)]
     pub iou: f32,
     /// Only these categories (comma-separated); default: every model in --models.
     #[arg(long, value_delimiter = ',')]
@@ -44,9 +44,6 @@ pub struct Args {
 }
 
 pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
-    if !(args.iou > 0.0 && args.iou <= 1.0) {
-        bail!("--iou must be in (0, 1], got {}", args.iou);
-    }
     let categories: Vec<String> =
         super::options::names("--categories", &args.categories)?.iter().map(|c| normalise_name(c).0).collect();
     let mut models = read_models_dir(&args.models, (!categories.is_empty()).then_some(categories.as_slice()))?;

@@ -49,7 +49,7 @@ pub struct Args {
     #[arg(long)]
     pub detections: PathBuf,
     /// 3D IoU a detection needs with a ground-truth box to count as correct.
-    #[arg(long, default_value_t = 0.25)]
+    #[arg(long, default_value_t = 0.25, value_parser = options::iou)]
     pub iou: f32,
     /// Comma-separated categories to evaluate, or `all` for the 19 [default: the 10 large ones].
     #[arg(long, value_delimiter = ',')]
@@ -165,9 +165,6 @@ fn detection_files(dir: &Path) -> anyhow::Result<HashMap<String, PathBuf>> {
 }
 
 pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
-    if !(args.iou > 0.0 && args.iou <= 1.0) {
-        bail!("--iou must be in (0, 1], got {}", args.iou);
-    }
     let categories = categories(&args.categories)?;
     let models = match &args.models {
         Some(dir) => Some(diagnosis_models(dir, args.step, &categories)?),

@@ -20,6 +20,46 @@ pub fn step(text: &str) -> Result<f32, String> {
     Ok(value)
 }
 
+/// A finite number (clap adds the flag and the value to the message).
+fn number(text: &str) -> Result<f64, String> {
+    let value: f64 = text.trim().parse().map_err(|_| format!("'{text}' is not a number"))?;
+    if value.is_finite() {
+        Ok(value)
+    } else {
+        Err(format!("{value} is not a finite number"))
+    }
+}
+
+/// `--iou` of `eval` and `calibrate`: a 3D IoU in (0, 1].
+pub fn iou(text: &str) -> Result<f32, String> {
+    let value = number(text)?;
+    if value > 0.0 && value <= 1.0 {
+        Ok(value as f32)
+    } else {
+        Err(format!("{value} is not in (0, 1]"))
+    }
+}
+
+/// `train --c`: the regularisation constant, finite and > 0.
+pub fn positive(text: &str) -> Result<f64, String> {
+    let value = number(text)?;
+    if value > 0.0 {
+        Ok(value)
+    } else {
+        Err(format!("{value} is not > 0"))
+    }
+}
+
+/// `train --eps`: finite and ≥ 0.
+pub fn non_negative(text: &str) -> Result<f64, String> {
+    let value = number(text)?;
+    if value >= 0.0 {
+        Ok(value)
+    } else {
+        Err(format!("{value} is not ≥ 0"))
+    }
+}
+
 /// A whole number within `min..=max` (clap adds the flag and the value to the message).
 fn count(text: &str, min: u64, max: u64) -> Result<u64, String> {
     let value: u64 = text.trim().parse().map_err(|_| format!("'{text}' is not a whole number ≥ 0"))?;

@@ -60,9 +60,11 @@ pub struct Args {
     /// Model file to write; default `models/<category>.json`.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    #[arg(value_parser = options::positive)]
     /// Regularisation constant C of eq. 4.
     #[arg(long = "c", default_value_t = 10.0)]
     pub c: f64,
+    #[arg(value_parser = options::non_negative)]
     /// Stop when the mean violation over the examples is at most this (loss units; 1-slack ε).
     #[arg(long = "eps", default_value_t = 0.02)]
     pub epsilon: f64,

@@ -60,8 +60,15 @@ pub fn check_window(pre: &Preprocessed, step: f32, sizes: usize) -> Result<()> {
     let cells: f64 = yaws.iter().map(|y| y.cells[0] * y.cells[1]).sum();
     let records = (pre.len() * yaws.len()) as f64 * std::mem::size_of::<PointRecord>() as f64;
     check_memory("the yaw grids", cells + records / 4.0, 4.0, &hint)?;
-    let table: f64 = yaws.iter().map(|y| (y.cells[0] + 1.0) * (y.cells[1] + 1.0) * (y.layers + 1.0)).sum();
-    check_memory("the count tables of the skipping test", table, 4.0, &hint)?;
+    // Each yaw's count table lives while that yaw's hypotheses are enumerated, one per rayon thread.
+    let largest = yaws.iter().map(|y| (y.cells[0] + 1.0) * (y.cells[1] + 1.0) * (y.layers + 1.0)).fold(0.0, f64::max);
+    let concurrent = rayon::current_num_threads().min(yaws.len()) as f64;
+    check_memory(
+        &format!("the count tables of the skipping test ({concurrent} built at once)"),
+        largest * concurrent,
+        4.0,
+        &hint,
+    )?;
     // A hypothesis per size at every cell that holds a point: at most min(points, cells) cells per yaw.
     let centres: f64 = yaws.iter().map(|y| (y.cells[0] * y.cells[1]).min(pre.len() as f64)).sum();
     check_memory(
