@@ -7,7 +7,8 @@
 //!   real camera pass, a focal length that would fan the points out over kilometres does not); the
 //!   principal point at most [`PRINCIPAL_POINT_MARGIN`] × the image size outside the image; no skew.
 //! * **Annotations**: coordinates within ±[`MAX_COORDINATE_M`] of the camera; boxes larger than
-//!   [`MAX_OBJECT_SIZE_M`] on a side are not objects.
+//!   [`MAX_OBJECT_SIZE_M`] on a side are not objects; hypothesis sizes lie in [[`MIN_OBJECT_SIZE_M`],
+//!   [`MAX_OBJECT_SIZE_M`]].
 //! * **Options**: the sliding-window centre step in [[`MIN_STEP_M`], [`MAX_STEP_M`]], the fast path's
 //!   subdivisions in 1..=[`MAX_SUBDIVISIONS`].
 //! * **Memory**: every structure whose size comes from the input (yaw grids, count tables, hypothesis sets,
@@ -25,7 +26,9 @@ pub const MAX_FOCAL_PER_SIZE: f64 = 100.0;
 pub const PRINCIPAL_POINT_MARGIN: f64 = 0.25;
 /// Largest absolute coordinate (metres) of an annotation corner or height.
 pub const MAX_COORDINATE_M: f64 = 100.0;
-/// Largest side (metres) of an object's box (hypothesis sizes, model sizes, size statistics).
+/// Smallest and largest side (metres) of a hypothesis box (model sizes, size statistics); annotated
+/// boxes may be smaller (a thin picture) but not larger.
+pub const MIN_OBJECT_SIZE_M: f32 = 0.01;
 pub const MAX_OBJECT_SIZE_M: f32 = 20.0;
 /// Range of the sliding-window centre step (metres).
 pub const MIN_STEP_M: f32 = 0.01;

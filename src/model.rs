@@ -39,7 +39,7 @@ use crate::category::{normalise_name, CATEGORIES};
 use crate::error::{Error, Result};
 use crate::features::fast::FastOptions;
 use crate::features::{Layout, SizeQuantiles};
-use crate::limits::{check_step, check_subdivisions, MAX_OBJECT_SIZE_M};
+use crate::limits::{check_step, check_subdivisions, MAX_OBJECT_SIZE_M, MIN_OBJECT_SIZE_M};
 
 pub const MODEL_FORMAT: &str = "cog-gpu-model";
 pub const MODEL_VERSION: u32 = 1;
@@ -184,15 +184,7 @@ impl Model {
                 self.layout.describe(i)
             ));
         }
-        let lists =
-            [("widths", &self.sizes.widths, 5), ("depths", &self.sizes.depths, 3), ("heights", &self.sizes.heights, 3)];
-        for (name, values, count) in lists {
-            if values.len() != count || values.iter().any(|v| !(v.is_finite() && *v > 0.0 && *v < MAX_OBJECT_SIZE_M)) {
-                return Err(format!(
-                    "sizes.{name} must hold {count} sizes in (0, {MAX_OBJECT_SIZE_M}) m, found {values:?}"
-                ));
-            }
-        }
+        check_sizes(&self.sizes)?;
         check_step("window.step", self.window.step).map_err(|e| e.to_string())?;
         check_subdivisions("features.subdivisions", self.features.subdivisions).map_err(|e| e.to_string())?;
         if !self.bias.is_finite() || self.threshold.is_nan() {
@@ -229,6 +221,22 @@ impl Model {
 /// bin counts per projected pixel, normalised COG, view RBFs), so any real model's weights are many orders
 /// of magnitude below it, and with it no score of the 12 017 dimensions can overflow to infinity or NaN.
 pub const MAX_WEIGHT: f32 = 1e6;
+
+/// Checks hypothesis sizes: 5 widths, 3 depths and 3 heights, each within
+/// [[`MIN_OBJECT_SIZE_M`], [`MAX_OBJECT_SIZE_M`]] metres.
+pub fn check_sizes(sizes: &SizeQuantiles) -> std::result::Result<(), String> {
+    let lists = [("widths", &sizes.widths, 5), ("depths", &sizes.depths, 3), ("heights", &sizes.heights, 3)];
+    for (name, values, count) in lists {
+        if values.len() != count
+            || values.iter().any(|v| !(v.is_finite() && (MIN_OBJECT_SIZE_M..=MAX_OBJECT_SIZE_M).contains(v)))
+        {
+            return Err(format!(
+                "sizes.{name} must hold {count} sizes in [{MIN_OBJECT_SIZE_M}, {MAX_OBJECT_SIZE_M}] m, found {values:?}"
+            ));
+        }
+    }
+    Ok(())
+}
 
 /// Checks every weight and the bias against ±[`MAX_WEIGHT`].
 pub fn check_weight_magnitudes(weights: &[f32], bias: f32) -> std::result::Result<(), String> {

@@ -307,6 +307,10 @@ fn bad_model_and_detection_files_are_errors_naming_the_file() {
     array["features"]["subdivisions"] = 0.into();
     std::fs::write(dir.join("bed.json"), array.to_string()).unwrap();
     assert_rejected(&["detect", text(&frame), "--models", text(&dir)], &["bed.json", "subdivisions"]);
+    let mut tiny = serde_json::to_value(model("bed")).unwrap();
+    tiny["sizes"]["widths"] = serde_json::json!([1e-30, 1e-30, 1e-30, 1e-30, 1e-30]);
+    std::fs::write(dir.join("bed.json"), tiny.to_string()).unwrap();
+    assert_rejected(&["detect", text(&frame), "--models", text(&dir)], &["bed.json", "sizes.widths"]);
     std::fs::write(dir.join("bed.json"), "[]").unwrap();
     assert_rejected(&["detect", text(&frame), "--models", text(&dir)], &["bed.json"]);
 

@@ -225,6 +225,8 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         bail!("{} frames under {} hold no '{category}' to train on", dataset.len(), args.data.display());
     }
     let sizes = SizeQuantiles::from_cuboids(&truths)?;
+    cog_gpu::model::check_sizes(&sizes)
+        .map_err(|e| anyhow::anyhow!("the '{category}' boxes of {}: {e}", args.data.display()))?;
     let engine = match args.features {
         PathArg::Fast => FeatureEngine::Fast(FastOptions { subdivisions: args.subdivisions.max(1) }),
         PathArg::Exact => FeatureEngine::Exact,

@@ -73,11 +73,12 @@ impl SizeQuantiles {
             if q.len() != levels.len() || q.iter().zip(levels).any(|(a, b)| (a - b).abs() > 1e-9) {
                 return Err(Error::invalid(path, format!("{what}.q is {q:?}, expected {levels:?}")));
             }
-            let largest = crate::limits::MAX_OBJECT_SIZE_M as f64;
-            if v.len() != q.len() || v.iter().any(|x| !(x.is_finite() && *x > 0.0 && *x < largest)) {
+            let (smallest, largest) =
+                (crate::limits::MIN_OBJECT_SIZE_M as f64, crate::limits::MAX_OBJECT_SIZE_M as f64);
+            if v.len() != q.len() || v.iter().any(|x| !(x.is_finite() && (smallest..=largest).contains(x))) {
                 return Err(Error::invalid(
                     path,
-                    format!("{what}.v must hold {} sizes in (0, {largest}) m, found {v:?}", q.len()),
+                    format!("{what}.v must hold {} sizes in [{smallest}, {largest}] m, found {v:?}", q.len()),
                 ));
             }
             Ok(v.iter().map(|&x| x as f32).collect())
