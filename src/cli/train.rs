@@ -38,8 +38,8 @@ use cog_gpu::features::hypotheses::DEFAULT_MIN_POINTS;
 use cog_gpu::features::{budget, Groups, Layout, SizeQuantiles};
 use cog_gpu::frame::Dataset;
 use cog_gpu::learn::detector::{
-    collect_examples, instances_of, read_all_annotations, train_detector, DetectorOracle, ExampleLimits, FeatureEngine,
-    PositiveTarget, TrainingExample, TrainingSettings,
+    cached_rows_per_example, collect_examples, instances_of, read_all_annotations, train_detector, DetectorOracle,
+    ExampleLimits, FeatureEngine, PositiveTarget, TrainingExample, TrainingSettings,
 };
 use cog_gpu::learn::{CuttingPlane, SsvmOptions};
 use cog_gpu::model::{FeaturePath, FeatureSettings, Model, WindowSettings};
@@ -167,7 +167,7 @@ fn check_examples(
         }
     }
     // Each example caches its candidates' feature vectors (plus the boxes nearest a positive's truth).
-    let vectors = examples.len() as f64 * (candidates + 25) as f64;
+    let vectors = examples.len() as f64 * cached_rows_per_example(candidates) as f64;
     cog_gpu::limits::check_memory(
         "the candidate cache",
         vectors,

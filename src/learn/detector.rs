@@ -234,6 +234,18 @@ struct Candidates {
     features: Vec<f32>,
 }
 
+/// How many of the boxes nearest a positive's truth a full pass caches besides its `candidate_count`
+/// best-valued hypotheses (a quarter of the count).
+pub fn nearest_truth_count(candidate_count: usize) -> usize {
+    candidate_count / 4
+}
+
+/// The most feature rows one example caches: its candidates plus, for a positive, the boxes nearest its
+/// truth (for sizing the cache before training).
+pub fn cached_rows_per_example(candidate_count: usize) -> usize {
+    candidate_count + nearest_truth_count(candidate_count)
+}
+
 /// Deterministic pseudo-random tie-break key of a hypothesis index (a 32-bit integer hash): among
 /// candidates of equal value (all loss-1 hypotheses at w = 0) the cache then holds a spread-out random
 /// sample of the window instead of its first hypotheses.
@@ -409,7 +421,7 @@ impl DetectorOracle {
             // The boxes nearest the truth (smallest loss), a quarter of the count, if not already in.
             let mut nearest: Vec<u32> =
                 (0..hypotheses.len() as u32).filter(|&n| window.losses[n as usize] < 1.0).collect();
-            let extra = (self.candidate_count / 4).min(nearest.len());
+            let extra = nearest_truth_count(self.candidate_count).min(nearest.len());
             if extra > 0 && extra < nearest.len() {
                 let by_loss =
                     |a: &u32, b: &u32| window.losses[*a as usize].total_cmp(&window.losses[*b as usize]).then(a.cmp(b));
