@@ -19,6 +19,10 @@
 //!    number of ground-truth boxes of the evaluated categories) over all evaluated categories, chosen exactly
 //!    as the overlay picture chooses them ([`crate::detect::overlay_selection`]: by score, skipping a box
 //!    that overlaps a better one of another category); the fraction of them that are correct.
+//! 5. **False-positive kinds** ([`false_positive_kinds`]): the highest-scoring false positives (as many as
+//!    the category has ground-truth boxes) split into duplicates, poor localisation, confusion with
+//!    another category's object, and background in frames with or without the category — which of them
+//!    a better detector must push down.
 //!
 //! Detections are read through [`Detection::score`] only, so other fields a detections file may carry do
 //! not change the diagnosis.
@@ -294,6 +298,90 @@ pub fn overlay_precision(
 }
 
 // ---------------------------------------------------------------------------------------------------------
+// 5. What the highest-scoring false positives are
+
+/// IoU from which a false positive counts as touching a ground-truth box (localisation error with a box of
+/// its own category, confusion with a box of another), as in Hoiem, Chodpathumwan & Dai, "Diagnosing error
+/// in object detectors" (ECCV 2012).
+pub const TOUCH_IOU: f32 = 0.1;
+
+/// The kinds of the highest-scoring false positives of one category: the first `gt_boxes` false positives
+/// in the AP's score order ([`crate::eval::score_order`]), which are the ones that cost AP before recall
+/// can reach 1. Each counts once, in the first kind that applies, in this order.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct FalsePositiveKinds {
+    /// False positives examined (at most the category's ground-truth boxes).
+    pub examined: usize,
+    /// IoU ≥ the threshold with a box of the category already taken by a better detection.
+    pub duplicate: usize,
+    /// Best IoU with a box of the category in [[`TOUCH_IOU`], threshold).
+    pub localisation: usize,
+    /// IoU ≥ [`TOUCH_IOU`] with an annotated object of another category.
+    pub confusion: usize,
+    /// The other category most often confused with (by count; ties: the first in name order).
+    pub most_confused_with: Option<String>,
+    /// None of the above, in a frame with the category.
+    pub background_in_frame: usize,
+    /// None of the above, in a frame without the category.
+    pub background_elsewhere: usize,
+}
+
+/// Classifies the highest-scoring false positives of `category` ([`FalsePositiveKinds`]); `truth[i]` and
+/// `detections[i]` are image `i`'s objects (any category) and detections (a missing one: none).
+pub fn false_positive_kinds(
+    truth: &[Vec<Object>],
+    detections: &[Vec<Detection>],
+    category: &str,
+    iou_threshold: f32,
+) -> FalsePositiveKinds {
+    let ground_truth = ground_truth(truth, category);
+    let scored = scored_boxes(detections, category);
+    let pr = average_precision(&scored, &ground_truth, iou_threshold);
+    let mut out = FalsePositiveKinds::default();
+    let mut confused: BTreeMap<&str, usize> = BTreeMap::new();
+    for (&d, &hit) in crate::eval::score_order(&scored).iter().zip(&pr.true_positive) {
+        if out.examined >= pr.positives {
+            break;
+        }
+        if hit {
+            continue;
+        }
+        out.examined += 1;
+        let det = &scored[d];
+        let own = ground_truth[det.image].iter().map(|t| iou_3d(&det.cuboid, t)).fold(0.0f32, f32::max);
+        let other = truth[det.image]
+            .iter()
+            .filter(|o| o.category != category)
+            .map(|o| (o.category.as_str(), iou_3d(&det.cuboid, &o.cuboid)))
+            .fold(None, |best: Option<(&str, f32)>, (c, iou)| match best {
+                Some((_, b)) if b >= iou => best,
+                _ => Some((c, iou)),
+            });
+        if own >= iou_threshold {
+            out.duplicate += 1;
+        } else if own >= TOUCH_IOU {
+            out.localisation += 1;
+        } else if let Some((other_category, _)) = other.filter(|(_, iou)| *iou >= TOUCH_IOU) {
+            out.confusion += 1;
+            *confused.entry(other_category).or_default() += 1;
+        } else if ground_truth[det.image].is_empty() {
+            out.background_elsewhere += 1;
+        } else {
+            out.background_in_frame += 1;
+        }
+    }
+    // Largest count; among equal counts the first name (iteration is in name order, `>` keeps the first).
+    let mut most: Option<(&str, usize)> = None;
+    for (c, n) in confused {
+        if most.is_none_or(|(_, m)| n > m) {
+            most = Some((c, n));
+        }
+    }
+    out.most_confused_with = most.map(|(c, _)| c.to_string());
+    out
+}
+
+// ---------------------------------------------------------------------------------------------------------
 // All together
 
 /// The diagnosis of one category, as printed by `cog-gpu eval --diagnose --json`. Fractions are in
@@ -320,6 +408,8 @@ pub struct CategoryDiagnosis {
     pub ap: Option<f32>,
     /// The AP of the in-frame ranks ([`rank_average_precision`]).
     pub rank_ap: Option<f32>,
+    /// What the highest-scoring false positives are ([`false_positive_kinds`]).
+    pub false_positives: FalsePositiveKinds,
 }
 
 /// Diagnoses each of `categories` (numbers 2 and 3 of the module doc, and number 1 from `window`: the best
@@ -352,6 +442,7 @@ pub fn diagnose_categories(
                 best_is_tp: ranking.fraction(),
                 ap: pr.ap,
                 rank_ap: rank.ap,
+                false_positives: false_positive_kinds(truth, detections, category, iou_threshold),
             }
         })
         .collect()

@@ -39,6 +39,14 @@ pub struct Detection {
     /// The model's raw score `w·φ + bias`, when `score` is calibrated.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub raw_score: Option<f32>,
+    /// When the context cascade rescored the detection ([`crate::cascade`]): the first stage's calibrated
+    /// probability, which `score` replaced.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub first_stage_score: Option<f32>,
+    /// When the context cascade rescored the detection: its second-stage score `z'` (the cascade's `score`
+    /// is the calibrated `raw_score + context_score`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub context_score: Option<f32>,
 }
 
 impl Detection {
@@ -54,6 +62,8 @@ impl Detection {
             yaw: cuboid.yaw,
             score,
             raw_score: None,
+            first_stage_score: None,
+            context_score: None,
         }
     }
 }
@@ -140,9 +150,7 @@ pub fn average_precision(
     iou_threshold: f32,
 ) -> PrecisionRecall {
     let positives: usize = ground_truth.iter().map(Vec::len).sum();
-    let mut order: Vec<usize> = (0..detections.len()).collect();
-    // A stable sort keeps the input order among equal scores.
-    order.sort_by(|&a, &b| detections[b].score.total_cmp(&detections[a].score));
+    let order = score_order(detections);
     let mut taken: Vec<Vec<bool>> = ground_truth.iter().map(|g| vec![false; g.len()]).collect();
     let mut true_positive = Vec::with_capacity(order.len());
     for &d in &order {
@@ -172,6 +180,14 @@ pub fn average_precision(
     }
     let ap = (positives > 0).then(|| interpolated_ap(&precision, &recall));
     PrecisionRecall { precision, recall, true_positive, positives, ap }
+}
+
+/// The indices of `detections` in the order [`average_precision`] visits them: score descending, equal
+/// scores in input order (a stable sort).
+pub fn score_order(detections: &[ScoredBox]) -> Vec<usize> {
+    let mut order: Vec<usize> = (0..detections.len()).collect();
+    order.sort_by(|&a, &b| detections[b].score.total_cmp(&detections[a].score));
+    order
 }
 
 /// All-point interpolated area under a precision–recall curve given in detection order (VOC 2010+):

@@ -7,6 +7,7 @@
 //! `synth` writes frames in the same layout the `frame` module reads.
 
 pub mod calibration;
+pub mod cascade;
 pub mod category;
 pub mod detect;
 pub mod diagnose;

@@ -34,6 +34,10 @@ enum Command {
     Detect(cli::detect::Args),
     /// Fit each model's score calibration (raw score -> probability of a true positive) on held-out frames.
     Calibrate(cli::calibrate::Args),
+    /// Train the context cascade (second-stage rescoring from the other detections) on held-out frames.
+    Cascade(cli::cascade::Args),
+    /// Apply a context cascade to first-stage detections files without detecting again.
+    Rescore(cli::rescore::Args),
     /// Train one category's detector (structural SVM) on annotated frames and write a model file.
     Train(cli::train::Args),
 }
@@ -58,6 +62,8 @@ fn main() {
         Command::Train(args) => cli::train::run(args, &options),
         Command::Detect(args) => cli::detect::run(args, &options),
         Command::Calibrate(args) => cli::calibrate::run(args, &options),
+        Command::Cascade(args) => cli::cascade::run(args, &options),
+        Command::Rescore(args) => cli::rescore::run(args, &options),
     };
     if let Err(err) = result {
         eprintln!("error: {}", cli::error_text(&err));

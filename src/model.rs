@@ -249,7 +249,11 @@ pub fn check_weight_magnitudes(weights: &[f32], bias: f32) -> std::result::Resul
     Ok(())
 }
 
-/// The models of a directory (`*.json`), sorted by category. With `categories`, exactly those (each must
+/// Files of a models directory that belong to later stages, not detector models: the context cascade
+/// (`cascade.json`, [`crate::cascade`]) and the room layout model (`layout.json`).
+pub const OTHER_STAGE_FILES: &[&str] = &["cascade", "layout"];
+
+/// The models of a directory (`*.json` except [`OTHER_STAGE_FILES`]), sorted by category. With `categories`, exactly those (each must
 /// have a model); without, every model file. A directory without models is an error.
 pub fn read_models_dir(dir: &Path, categories: Option<&[String]>) -> Result<Vec<Model>> {
     if !dir.is_dir() {
@@ -261,6 +265,7 @@ pub fn read_models_dir(dir: &Path, categories: Option<&[String]>) -> Result<Vec<
         .flatten()
         .map(|e| e.path())
         .filter(|p| p.extension().is_some_and(|x| x == "json") && p.is_file())
+        .filter(|p| !p.file_stem().and_then(|s| s.to_str()).is_some_and(|stem| OTHER_STAGE_FILES.contains(&stem)))
         .collect();
     paths.sort();
     for path in paths {

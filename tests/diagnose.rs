@@ -1,12 +1,13 @@
 //! `cog_gpu::diagnose` against hand-computed numbers, the window recall on a synthetic frame, and
 //! `cog-gpu eval --diagnose` end to end.
 
-use std::path::Path;
 use std::process::Command;
 
+mod common;
+
 use cog_gpu::diagnose::{
-    best_window_ious, diagnose_categories, frame_window_best_ious, in_frame_ranking, overlay_precision,
-    rank_average_precision, WindowRecall,
+    best_window_ious, diagnose_categories, false_positive_kinds, frame_window_best_ious, in_frame_ranking,
+    overlay_precision, rank_average_precision, WindowRecall,
 };
 use cog_gpu::eval::{Detection, FrameDetections};
 use cog_gpu::features::hypotheses::{default_yaws, sliding_window, WindowOptions};
@@ -159,6 +160,38 @@ fn overlay_precision_by_hand() {
 }
 
 #[test]
+fn false_positive_kinds_by_hand() {
+    // Frame 0: six chairs (two of them detected), a sofa; frame 1: a table, no chair.
+    let chairs = [0.0, 3.0, 30.0, 40.0, 50.0, 60.0].map(|x| object("chair", unit_box(x, 0.0)));
+    let mut frame0 = chairs.to_vec();
+    frame0.push(object("sofa", unit_box(6.0, 0.0)));
+    let truth = vec![frame0, vec![object("table", unit_box(0.0, 0.0))]];
+    let detections = vec![
+        vec![
+            det("chair", unit_box(0.0, 0.0), 0.9),  // true positive (takes the chair at 0)
+            det("chair", unit_box(0.3, 0.0), 0.8),  // IoU 0.7/1.3 with the taken chair: duplicate
+            det("chair", unit_box(3.8, 0.0), 0.7),  // IoU 0.2/1.8 = 0.11 with the chair at 3: localisation
+            det("chair", unit_box(6.0, 0.0), 0.6),  // on the sofa: confusion
+            det("chair", unit_box(10.0, 0.0), 0.5), // nothing there, frame has chairs
+        ],
+        vec![
+            det("chair", unit_box(20.0, 0.0), 0.4), // nothing there, frame without chairs
+            det("chair", unit_box(0.0, 0.0), 0.3),  // on the table: confusion
+            det("chair", unit_box(90.0, 0.0), 0.2), // the seventh false positive: not examined (6 chairs)
+        ],
+    ];
+    let kinds = false_positive_kinds(&truth, &detections, "chair", 0.25);
+    assert_eq!(kinds.examined, 6);
+    assert_eq!((kinds.duplicate, kinds.localisation, kinds.confusion), (1, 1, 2));
+    assert_eq!((kinds.background_in_frame, kinds.background_elsewhere), (1, 1));
+    // One sofa and one table: the tie goes to the first name.
+    assert_eq!(kinds.most_confused_with.as_deref(), Some("sofa"));
+    // A category without detections examines nothing.
+    let none = false_positive_kinds(&truth, &detections, "table", 0.25);
+    assert_eq!((none.examined, none.most_confused_with), (0, None));
+}
+
+#[test]
 fn window_recall_summary() {
     let r = WindowRecall::from_best_ious(&[0.1, 0.3, 0.6, 1.0]);
     assert_eq!(r.boxes, 4);
@@ -219,19 +252,7 @@ fn window_recall_on_a_synthetic_frame() {
     assert!(frame_window_best_ious(&pre, &[model], &others).is_empty());
 }
 
-fn write_frame(root: &Path, name: &str, objects: Vec<Object>) {
-    let frame = Frame {
-        name: name.into(),
-        rgb: image::RgbImage::from_pixel(8, 6, image::Rgb([90, 120, 150])),
-        depth_mm: vec![2000; 48],
-        k: [[10.0, 0.0, 4.5], [0.0, 10.0, 3.5], [0.0, 0.0, 1.0]],
-        extrinsics: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
-        scene: None,
-        objects,
-        layout: None,
-    };
-    frame.write(root.join(name)).unwrap();
-}
+use common::write_tiny_frame as write_frame;
 
 #[test]
 fn cli_diagnose_json_and_table() {
@@ -270,6 +291,7 @@ fn cli_diagnose_json_and_table() {
         "best_is_tp",
         "ap",
         "rank_ap",
+        "false_positives",
     ];
     let mut expected: Vec<&str> = keys.to_vec();
     expected.sort();
@@ -282,6 +304,9 @@ fn cli_diagnose_json_and_table() {
     assert!((num(&bed["ap"]) - 5.0 / 6.0).abs() < 1e-5);
     assert!((num(&bed["rank_ap"]) - 1.0).abs() < 1e-6);
     assert!(diagnosis["sofa"]["ap"].is_null() && diagnosis["sofa"]["best_is_tp"].is_null());
+    // The one false positive (a's far box) is background in a frame with a bed.
+    let fp = &bed["false_positives"];
+    assert_eq!((fp["examined"].as_u64(), fp["background_in_frame"].as_u64()), (Some(1), Some(1)));
     // Overlay: one box per frame, a's best (TP) and b's (TP).
     let overlay = &report["overlay_precision"];
     assert_eq!((overlay["true_positives"].as_u64(), overlay["shown"].as_u64()), (Some(2), Some(2)));

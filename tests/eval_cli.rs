@@ -9,6 +9,8 @@ use cog_gpu::geometry::Cuboid;
 use glam::Vec3;
 use serde_json::Value;
 
+mod common;
+
 fn unit_box(x: f32, y: f32) -> Cuboid {
     Cuboid::new(Vec3::new(x, y, 0.5), Vec3::ONE, 0.0)
 }
@@ -17,19 +19,7 @@ fn object(category: &str, cuboid: Cuboid) -> Object {
     Object { category: category.into(), label: None, cuboid }
 }
 
-fn write_frame(root: &Path, name: &str, objects: Vec<Object>) {
-    let frame = Frame {
-        name: name.into(),
-        rgb: image::RgbImage::from_pixel(8, 6, image::Rgb([90, 120, 150])),
-        depth_mm: vec![2000; 48],
-        k: [[10.0, 0.0, 4.5], [0.0, 10.0, 3.5], [0.0, 0.0, 1.0]],
-        extrinsics: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
-        scene: None,
-        objects,
-        layout: None,
-    };
-    frame.write(root.join(name)).unwrap();
-}
+use common::write_tiny_frame as write_frame;
 
 fn write_detections(dir: &Path, frame: &str, detections: Vec<Detection>) {
     FrameDetections { frame: frame.into(), detections }.write(&dir.join(format!("{frame}.json"))).unwrap();

@@ -16,25 +16,34 @@ use anyhow::{bail, Context};
 use cog_gpu::calibration::{fit_logistic, label_detections, Calibration};
 use cog_gpu::category::normalise_name;
 use cog_gpu::eval::{Detection, FrameDetections};
-use cog_gpu::frame::{read_annotations, Dataset};
+use cog_gpu::frame::{read_annotations, Dataset, Object};
 use cog_gpu::model::read_models_dir;
 
 use super::GlobalOptions;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// Held-out frames (ground truth in annotation3Dfinal/index.json).
-    #[arg(long)]
-    pub data: PathBuf,
-    /// Detections of those frames: one `<frame name>.json` per frame, from `cog-gpu detect --min-score -3`.
-    #[arg(long)]
-    pub detections: PathBuf,
-    /// Models to calibrate (`<category>.json`).
-    #[arg(long, default_value = "assets/models")]
-    pub models: PathBuf,
+    #[command(flatten)]
+    pub held_out: HeldOutArgs,
     /// Where to write the calibrated models; default: over the models themselves.
     #[arg(long)]
     pub out: Option<PathBuf>,
+}
+
+/// What `calibrate` and `cascade` learn from: held-out frames, their detections by a models directory's
+/// models, the IoU of a true positive and the categories.
+#[derive(clap::Args)]
+pub struct HeldOutArgs {
+    /// Held-out frames (ground truth in annotation3Dfinal/index.json).
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Detections of those frames: one `<frame name>.json` per frame, from `cog-gpu detect --min-score -3`
+    /// with the models of --models (`--no-cascade` for `cascade`).
+    #[arg(long)]
+    pub detections: PathBuf,
+    /// The models (`<category>.json`) that made the detections.
+    #[arg(long, default_value = "assets/models")]
+    pub models: PathBuf,
     /// 3D IoU that makes a detection a true positive.
     #[arg(long, default_value_t = 0.25, value_parser = super::options::iou)]
     pub iou: f32,
@@ -43,52 +52,27 @@ pub struct Args {
     pub categories: Vec<String>,
 }
 
+impl HeldOutArgs {
+    /// The models of --models (only --categories when given).
+    pub fn models(&self) -> anyhow::Result<Vec<cog_gpu::model::Model>> {
+        let categories: Vec<String> =
+            super::options::names("--categories", &self.categories)?.iter().map(|c| normalise_name(c).0).collect();
+        Ok(read_models_dir(&self.models, (!categories.is_empty()).then_some(categories.as_slice()))?)
+    }
+}
+
 pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
-    let categories: Vec<String> =
-        super::options::names("--categories", &args.categories)?.iter().map(|c| normalise_name(c).0).collect();
-    let mut models = read_models_dir(&args.models, (!categories.is_empty()).then_some(categories.as_slice()))?;
-    let dataset = Dataset::open(&args.data)?;
-    if dataset.is_empty() {
-        bail!("{}: no frame directories", args.data.display());
-    }
-    if !args.detections.is_dir() {
-        bail!("{}: detections directory not found", args.detections.display());
-    }
-    let mut truth = Vec::new();
-    let mut detections: Vec<Vec<Detection>> = Vec::new();
-    let mut missing = 0;
-    for dir in &dataset.frames {
-        let name = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-        truth.push(read_annotations(dir)?.0);
-        let path = args.detections.join(format!("{name}.json"));
-        if path.is_file() {
-            detections.push(FrameDetections::read(&path)?.detections);
-        } else {
-            missing += 1;
-            detections.push(Vec::new());
-        }
-    }
-    if missing == dataset.len() {
-        bail!(
-            "{}: no detections file for any of the {} frames of {} (run cog-gpu detect on them first)",
-            args.detections.display(),
-            dataset.len(),
-            args.data.display()
-        );
-    }
-    if missing > 0 {
-        log::warn!(
-            "{missing} of {} frames have no detections file; counted as frames without detections",
-            dataset.len()
-        );
-    }
-    let out_dir = args.out.clone().unwrap_or_else(|| args.models.clone());
+    let held_out = &args.held_out;
+    let mut models = held_out.models()?;
+    let LabelledDetections { frames, truth, detections } =
+        read_labelled_detections(&held_out.data, &held_out.detections)?;
+    let out_dir = args.out.clone().unwrap_or_else(|| held_out.models.clone());
     std::fs::create_dir_all(&out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
     // Fit every model first: a category that cannot be fitted stops the run before any file is written,
     // so a models directory is never left half calibrated.
     let mut failures = Vec::new();
     for model in &mut models {
-        let samples = label_detections(&detections, &truth, &model.category, args.iou);
+        let samples = label_detections(&detections, &truth, &model.category, held_out.iou);
         match fit_logistic(&samples) {
             Ok((a, b)) => {
                 model.calibration = Some(Calibration {
@@ -96,9 +80,9 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
                     b,
                     detections: samples.len(),
                     true_positives: samples.iter().filter(|s| s.1).count(),
-                    iou: args.iou,
-                    data: args.data.display().to_string(),
-                    frames: dataset.len(),
+                    iou: held_out.iou,
+                    data: held_out.data.display().to_string(),
+                    frames,
                 })
             }
             Err(err) => failures.push(format!("{}: {err}", model.category)),
@@ -108,7 +92,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         bail!(
             "cannot calibrate on the detections in {} (nothing written; add held-out frames that hold these \
              categories):\n  {}",
-            args.detections.display(),
+            held_out.detections.display(),
             failures.join("\n  ")
         );
     }
@@ -130,4 +114,56 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     }
     println!("wrote {} calibrated model(s) to {}", models.len(), out_dir.display());
     Ok(())
+}
+
+/// The held-out frames of `data` with their annotations and their detections from `detections`
+/// (`<frame name>.json` each; a frame without a file counts as one without detections, with a warning;
+/// no file at all is an error).
+pub fn read_labelled_detections(
+    data: &std::path::Path,
+    detections_dir: &std::path::Path,
+) -> anyhow::Result<LabelledDetections> {
+    let dataset = Dataset::open(data)?;
+    if dataset.is_empty() {
+        bail!("{}: no frame directories", data.display());
+    }
+    if !detections_dir.is_dir() {
+        bail!("{}: detections directory not found", detections_dir.display());
+    }
+    let mut truth = Vec::new();
+    let mut detections: Vec<Vec<Detection>> = Vec::new();
+    let mut missing = 0;
+    for dir in &dataset.frames {
+        let name = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        truth.push(read_annotations(dir)?.0);
+        let path = detections_dir.join(format!("{name}.json"));
+        if path.is_file() {
+            detections.push(FrameDetections::read(&path)?.detections);
+        } else {
+            missing += 1;
+            detections.push(Vec::new());
+        }
+    }
+    if missing == dataset.len() {
+        bail!(
+            "{}: no detections file for any of the {} frames of {} (run cog-gpu detect on them first)",
+            detections_dir.display(),
+            dataset.len(),
+            data.display()
+        );
+    }
+    if missing > 0 {
+        log::warn!(
+            "{missing} of {} frames have no detections file; counted as frames without detections",
+            dataset.len()
+        );
+    }
+    Ok(LabelledDetections { frames: dataset.len(), truth, detections })
+}
+
+/// Held-out frames' annotations and detections, frame by frame.
+pub struct LabelledDetections {
+    pub frames: usize,
+    pub truth: Vec<Vec<Object>>,
+    pub detections: Vec<Vec<Detection>>,
 }

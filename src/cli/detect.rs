@@ -13,6 +13,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{bail, Context};
+use cog_gpu::cascade::Cascade;
 use cog_gpu::category::normalise_name;
 use cog_gpu::detect::{detect_frame, overlay, overlay_selection, DetectOptions};
 use cog_gpu::eval::FrameDetections;
@@ -61,6 +62,10 @@ pub struct Args {
     /// Print the detections of all frames as one JSON array on stdout.
     #[arg(long)]
     pub json: bool,
+    /// Do not apply the context cascade (`<models>/cascade.json`) even when the models directory has one:
+    /// report the first-stage detections (as `cog-gpu cascade` needs for training).
+    #[arg(long)]
+    pub no_cascade: bool,
     /// Stop at the first frame that cannot be read or detected in (default: report it, go on with the
     /// others and fail at the end).
     #[arg(long)]
@@ -132,6 +137,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
             model.window.step = step;
         }
     }
+    let cascade = cascade_for(&models_dir, &models, args.no_cascade)?;
     let frames = frame_dirs(&args.frames)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating the output directory {}", args.out.display()))?;
@@ -156,7 +162,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     let mut failures = Vec::new();
     for dir in &frames {
         progress.set_message(dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default());
-        match detect_one(dir, &models, backend, &detect_options, &args) {
+        match detect_one(dir, &models, cascade.as_ref(), backend, &detect_options, &args) {
             Ok(detections) => results.push(detections),
             Err(err) if args.fail_fast => return Err(err),
             Err(err) => {
@@ -175,17 +181,56 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     super::batch_result(&failures, frames.len())
 }
 
+/// The cascade to apply: `<models>/cascade.json` unless `--no-cascade` or absent. Its context categories
+/// must all have a loaded model (the second stage was trained on their detections): with `--categories`
+/// leaving one out, the cascade is skipped with a warning.
+fn cascade_for(
+    models_dir: &Path,
+    models: &[cog_gpu::model::Model],
+    no_cascade: bool,
+) -> anyhow::Result<Option<Cascade>> {
+    let path = models_dir.join(cog_gpu::cascade::FILE_NAME);
+    if no_cascade || !path.is_file() {
+        return Ok(None);
+    }
+    let cascade = Cascade::read(&path)?;
+    if let Some(model) = models.iter().find(|m| m.calibration.is_none()) {
+        log::warn!(
+            "{}: not applied, the '{}' model is not calibrated (the cascade reads calibrated scores)",
+            path.display(),
+            model.category
+        );
+        return Ok(None);
+    }
+    let missing: Vec<&str> =
+        cascade.categories.iter().filter(|c| !models.iter().any(|m| &m.category == *c)).map(String::as_str).collect();
+    if !missing.is_empty() {
+        log::warn!(
+            "{}: not applied, its context categories {} have no loaded model (first-stage scores reported)",
+            path.display(),
+            missing.join(", ")
+        );
+        return Ok(None);
+    }
+    log::info!("context cascade: {}", path.display());
+    Ok(Some(cascade))
+}
+
 /// Reads one frame, detects, and writes its detections file and overlay.
 fn detect_one(
     dir: &Path,
     models: &[cog_gpu::model::Model],
+    cascade: Option<&Cascade>,
     backend: Backend,
     detect_options: &DetectOptions,
     args: &Args,
 ) -> anyhow::Result<FrameDetections> {
     let frame = Frame::read(dir, DepthSource::Raw)?;
-    let detections = detect_frame(&frame, models, backend, detect_options)
+    let mut detections = detect_frame(&frame, models, backend, detect_options)
         .with_context(|| format!("detecting in {}", dir.display()))?;
+    if let Some(cascade) = cascade {
+        cascade.rescore(&mut detections.detections).with_context(|| format!("rescoring {}", dir.display()))?;
+    }
     let json_path = args.out.join(format!("{}.json", frame.name));
     detections.write(&json_path)?;
     if !args.no_overlay {

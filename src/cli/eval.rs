@@ -436,6 +436,26 @@ fn print_diagnosis(
             percent(d.rank_ap)
         );
     }
+    println!("highest-scoring false positives (as many as #GT), by kind (% of those examined):");
+    println!(
+        "{:<12} {:>8} {:>6} {:>6} {:>6} {:>12} {:>8} {:>8}",
+        "category", "examined", "dup", "loc", "conf", "conf. with", "bg here", "bg else"
+    );
+    for d in diagnosis {
+        let fp = &d.false_positives;
+        let share = |n: usize| percent((fp.examined > 0).then(|| n as f32 / fp.examined as f32));
+        println!(
+            "{:<12} {:>8} {:>6} {:>6} {:>6} {:>12} {:>8} {:>8}",
+            d.category,
+            fp.examined,
+            share(fp.duplicate),
+            share(fp.localisation),
+            share(fp.confusion),
+            fp.most_confused_with.as_deref().unwrap_or("-"),
+            share(fp.background_in_frame),
+            share(fp.background_elsewhere)
+        );
+    }
     println!(
         "overlay precision (per frame the top k detections, k = its ground-truth boxes): {}/{} = {}",
         overlay.true_positives,

@@ -2,10 +2,12 @@
 
 pub mod bench;
 pub mod calibrate;
+pub mod cascade;
 pub mod detect;
 pub mod eval;
 pub mod info;
 pub mod options;
+pub mod rescore;
 pub mod score;
 pub mod synth;
 pub mod train;

@@ -25,6 +25,7 @@
 //! (a checkpoint records a hash of the ground-truth features and refuses to resume on other ones).
 //! Stop when the primal objective decreases by less than a tolerance.
 
+pub mod binary_svm;
 pub mod checkpoint;
 pub mod detector;
 pub mod one_slack;

@@ -1,10 +1,14 @@
-//! Helpers shared by the GPU test files (`mod common;` in each).
+//! Helpers shared by test files (`mod common;` in each; a file uses some of them).
 
+use std::path::Path;
+
+use cog_gpu::frame::{Frame, Object};
 use cog_gpu::gpu::GpuContext;
 
 /// The GPU context for a GPU test: `None` (the test skips, saying so) only when there is no adapter and
 /// `COG_GPU_SKIP_GPU_TESTS=1`; without that variable a missing adapter fails the test, so that CI cannot
 /// pass without running the GPU tests.
+#[allow(dead_code)]
 pub fn gpu_context() -> Option<GpuContext> {
     match GpuContext::new() {
         Ok(ctx) => Some(ctx),
@@ -17,4 +21,21 @@ pub fn gpu_context() -> Option<GpuContext> {
              and run with NODEVICE_SELECT=1, or set COG_GPU_SKIP_GPU_TESTS=1 to skip them"
         ),
     }
+}
+
+/// Writes a tiny frame (8×6 pixels at 2 m, identity extrinsics) with `objects` as its annotation to
+/// `root/name`: enough for commands that read only the annotations (eval, calibrate, cascade).
+#[allow(dead_code)]
+pub fn write_tiny_frame(root: &Path, name: &str, objects: Vec<Object>) {
+    let frame = Frame {
+        name: name.into(),
+        rgb: image::RgbImage::from_pixel(8, 6, image::Rgb([90, 120, 150])),
+        depth_mm: vec![2000; 48],
+        k: [[10.0, 0.0, 4.5], [0.0, 10.0, 3.5], [0.0, 0.0, 1.0]],
+        extrinsics: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        scene: None,
+        objects,
+        layout: None,
+    };
+    frame.write(root.join(name)).unwrap();
 }

@@ -1,0 +1,386 @@
+//! The context cascade (paper §6): second-stage classifiers that rescore every first-stage detection from
+//! the detections of all categories around it, so that a "piece" of a large object detected as a smaller
+//! one (a table on a chair, a bathtub on a bed) loses to the evidence of the object it is a piece of.
+//!
+//! # Features (paper §6.1; choices where it is terse)
+//! For detection `i` of category `c` with first-stage calibrated probability `p_i` ([`crate::calibration`],
+//! so that confidences of different categories share one scale), and for each context category `k` of the
+//! cascade (its [`Cascade::categories`], `c` itself included), `j` is the detection of `k` other than `i`
+//! whose box overlaps `i`'s (intersection volume > 0) with the largest `p_j` — the paper's `i_c`, "the
+//! instance of category c with maximum confidence" (ties: the first in the frame's list). With the
+//! overlap `O`, the volumes `V` and the union `U`: `S1 = O/V_i`, `S2 = O/V_j`, `S3 = O/U` (the paper's
+//! three). The paper's "quadratic function" of `z_i` and `S1..3` is taken as the products with the
+//! confidences, which keeps a category that is absent (`p_j = 0`) from contributing anything:
+//!
+//! ```text
+//! ψ_i = [p_i, p_i²] ++ for each k: [p_j, p_j·S1, p_j·S2, p_j·S3, p_i·p_j]     (zeros when no j)
+//! ```
+//!
+//! so `dim = 2 + 5·K` ([`feature_dim`]). The layout features of the paper (distance and angle to the
+//! nearest wall) wait for a room layout; the file format's `features` name says which set a cascade uses.
+//!
+//! # Learning (paper §6.2)
+//! Per category, a linear SVM ([`crate::learn::binary_svm`]; the paper's RBF kernel is "only slightly"
+//! better) on the first-stage detections of held-out frames, labelled with the benchmark's matching
+//! ([`crate::eval::average_precision`]: true when IoU ≥ the threshold with a ground-truth box not taken by
+//! a better detection), classes balanced ([`crate::learn::binary_svm::balanced_costs`]). `C` is chosen
+//! from [`C_GRID`] by two-fold cross-validation over the frames (even and odd frames), maximising the
+//! mean AP of the combined score; ties go to the smaller `C`. A category whose cross-validated AP with
+//! the context is not above its first stage's gets no second stage (its scores are left alone rather
+//! than made worse).
+//!
+//! # Prediction (paper §6.3)
+//! The second-stage score is `z'_i = w·ψ_i + b` and the combined score `z_i + z'_i`, with `z_i` the first
+//! stage's raw score (as the paper adds them). Combined scores are calibrated like the first stage's (a
+//! Platt fit on the training frames' detections, [`crate::calibration::fit_logistic`]) so that they
+//! still compare across categories. Features are computed from the first-stage detections only, so the
+//! result does not depend on the order the detections are rescored in. Detections of a category the
+//! cascade has no classifier for keep their first-stage score.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::calibration::{fit_logistic, Calibration};
+use crate::error::{Error, Result};
+use crate::eval::{average_precision, score_order, Detection, ScoredBox};
+use crate::frame::Object;
+use crate::geometry::{intersection_volume, Cuboid};
+use crate::learn::binary_svm::{balanced_costs, train_linear_svm, LinearSvm};
+
+/// The `format` field of a cascade file.
+pub const FORMAT: &str = "cog-gpu-cascade";
+/// The file format's version.
+pub const VERSION: u32 = 1;
+/// Name of the feature set of the module doc (stored in the file; a file with another is refused).
+pub const FEATURES: &str = "object-overlap-v1";
+/// The cascade's file name inside a models directory (next to `<category>.json`).
+pub const FILE_NAME: &str = "cascade.json";
+/// Values of the SVM's `C` tried by cross-validation.
+pub const C_GRID: [f64; 4] = [0.01, 0.1, 1.0, 10.0];
+/// Features per context category.
+const PER_CATEGORY: usize = 5;
+
+/// Length of ψ for `context_categories` categories.
+pub fn feature_dim(context_categories: usize) -> usize {
+    2 + PER_CATEGORY * context_categories
+}
+
+/// One category's second stage.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SecondStage {
+    pub weights: Vec<f64>,
+    pub bias: f64,
+    /// The SVM's C (chosen by cross-validation).
+    pub c: f64,
+    /// Cross-validated AP of the first-stage score and of the combined score (the choice of `C`).
+    pub cv_ap_first_stage: f32,
+    pub cv_ap_cascade: f32,
+    /// Maps the combined score `z + z'` to a probability.
+    pub calibration: Calibration,
+}
+
+/// Where a cascade came from.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct CascadeTraining {
+    /// Data directory and number of frames the detections came from.
+    pub data: String,
+    pub frames: usize,
+    /// The detections directory and the first-stage models that produced it.
+    pub detections: String,
+    pub iou: f32,
+}
+
+/// A trained cascade: the context categories (feature order) and a second stage per category.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Cascade {
+    pub format: String,
+    pub version: u32,
+    pub features: String,
+    pub categories: Vec<String>,
+    pub stages: BTreeMap<String, SecondStage>,
+    pub training: CascadeTraining,
+}
+
+impl Cascade {
+    /// Reads and checks a cascade file.
+    pub fn read(path: &Path) -> Result<Cascade> {
+        let text = crate::frame::read_text(path)?;
+        let cascade: Cascade = serde_json::from_str(&text).map_err(|e| Error::invalid(path, e.to_string()))?;
+        cascade.check().map_err(|problem| Error::invalid(path, problem))?;
+        Ok(cascade)
+    }
+
+    pub fn write(&self, path: &Path) -> Result<()> {
+        let text = serde_json::to_string_pretty(self).map_err(|e| Error::invalid(path, e.to_string()))?;
+        std::fs::write(path, text).map_err(|e| Error::io(path, e))
+    }
+
+    /// The stored numbers are usable: known format and features, finite weights of the right length.
+    pub fn check(&self) -> std::result::Result<(), String> {
+        if self.format != FORMAT || self.version != VERSION {
+            return Err(format!(
+                "not a {FORMAT} version {VERSION} file (format '{}', version {})",
+                self.format, self.version
+            ));
+        }
+        if self.features != FEATURES {
+            return Err(format!("feature set '{}' is not this build's '{FEATURES}'", self.features));
+        }
+        let dim = feature_dim(self.categories.len());
+        for (category, stage) in &self.stages {
+            if stage.weights.len() != dim {
+                return Err(format!("'{category}': {} weights, expected {dim}", stage.weights.len()));
+            }
+            if stage.weights.iter().chain([&stage.bias]).any(|v| !v.is_finite()) {
+                return Err(format!("'{category}': a weight is not finite"));
+            }
+            stage.calibration.validate().map_err(|e| format!("'{category}': {e}"))?;
+        }
+        Ok(())
+    }
+
+    /// Rescores one frame's first-stage detections (module doc), then sorts them by score, best first
+    /// (stable). Detections must be the first stage's, calibrated (`raw_score` present) and not rescored.
+    pub fn rescore(&self, detections: &mut [Detection]) -> Result<()> {
+        check_first_stage(detections)?;
+        let rescored: Vec<Option<(f32, f32)>> = (0..detections.len())
+            .map(|i| {
+                let stage = self.stages.get(&detections[i].category)?;
+                let psi = context_features(detections, i, &self.categories);
+                let context = LinearSvm { weights: stage.weights.clone(), bias: stage.bias }.decision(&psi) as f32;
+                Some((context, stage.calibration.probability(combined(&detections[i], context))))
+            })
+            .collect();
+        for (d, new) in detections.iter_mut().zip(rescored) {
+            if let Some((context, probability)) = new {
+                d.first_stage_score = Some(d.score);
+                d.context_score = Some(context);
+                d.score = probability;
+            }
+        }
+        detections.sort_by(|a, b| b.score.total_cmp(&a.score));
+        Ok(())
+    }
+}
+
+/// `z + z'`: the first stage's raw score plus the context score.
+fn combined(detection: &Detection, context: f32) -> f32 {
+    detection.raw_score.unwrap_or(detection.score) + context
+}
+
+/// Errors unless every detection is a calibrated first-stage one.
+fn check_first_stage(detections: &[Detection]) -> Result<()> {
+    if let Some(d) = detections.iter().find(|d| d.context_score.is_some()) {
+        return Err(Error::Input(format!(
+            "a '{}' detection was already rescored by a cascade; the cascade takes first-stage detections \
+             (detect --no-cascade)",
+            d.category
+        )));
+    }
+    if let Some(d) = detections.iter().find(|d| d.raw_score.is_none()) {
+        return Err(Error::Input(format!(
+            "a '{}' detection has no raw_score: the cascade needs calibrated first-stage models \
+             (cog-gpu calibrate) so that confidences compare across categories",
+            d.category
+        )));
+    }
+    Ok(())
+}
+
+/// ψ of detection `i` among its frame's first-stage `detections` (module doc); `p` is each detection's
+/// `score` (the first stage's calibrated probability).
+pub fn context_features(detections: &[Detection], i: usize, categories: &[String]) -> Vec<f64> {
+    let own = detections[i].cuboid();
+    let p_i = f64::from(detections[i].score);
+    let mut psi = vec![0.0; feature_dim(categories.len())];
+    psi[0] = p_i;
+    psi[1] = p_i * p_i;
+    let boxes: Vec<Cuboid> = detections.iter().map(Detection::cuboid).collect();
+    for (k, category) in categories.iter().enumerate() {
+        // (p_j, overlap volume, j) of the most confident overlapping detection of the category.
+        let mut best: Option<(f64, f64, usize)> = None;
+        for (j, d) in detections.iter().enumerate() {
+            if j == i || &d.category != category || best.is_some_and(|b| f64::from(d.score) <= b.0) {
+                continue;
+            }
+            let overlap = f64::from(intersection_volume(&own, &boxes[j]));
+            if overlap > 0.0 {
+                best = Some((f64::from(d.score), overlap, j));
+            }
+        }
+        let Some((p_j, overlap, j)) = best else { continue };
+        let (v_i, v_j) = (f64::from(own.volume()), f64::from(boxes[j].volume()));
+        let union = v_i + v_j - overlap;
+        let base = 2 + PER_CATEGORY * k;
+        psi[base] = p_j;
+        psi[base + 1] = p_j * overlap / v_i;
+        psi[base + 2] = p_j * overlap / v_j;
+        psi[base + 3] = if union > 0.0 { p_j * overlap / union } else { 0.0 };
+        psi[base + 4] = p_i * p_j;
+    }
+    psi
+}
+
+/// One category's training samples over frames: ψ, the combined-score base `z` (first-stage raw score),
+/// the benchmark label, and the frame each came from.
+struct Samples {
+    psi: Vec<Vec<f64>>,
+    raw: Vec<f32>,
+    labels: Vec<bool>,
+    frame: Vec<usize>,
+    cuboids: Vec<Cuboid>,
+    /// The category's ground-truth boxes per frame (for the cross-validated AP).
+    truth: Vec<Vec<Cuboid>>,
+}
+
+/// The samples of `category` (labels as the benchmark matches the first-stage scores).
+fn samples_of(
+    frames: &[(Vec<Object>, Vec<Detection>)],
+    category: &str,
+    categories: &[String],
+    iou_threshold: f32,
+) -> Samples {
+    let mut s = Samples { psi: vec![], raw: vec![], labels: vec![], frame: vec![], cuboids: vec![], truth: vec![] };
+    let mut boxes = Vec::new();
+    for (f, (objects, detections)) in frames.iter().enumerate() {
+        s.truth.push(objects.iter().filter(|o| o.category == category).map(|o| o.cuboid).collect());
+        for (i, d) in detections.iter().enumerate().filter(|(_, d)| d.category == category) {
+            s.psi.push(context_features(detections, i, categories));
+            s.raw.push(d.raw_score.unwrap_or(d.score));
+            s.frame.push(f);
+            s.cuboids.push(d.cuboid());
+            boxes.push(ScoredBox { image: f, score: d.raw_score.unwrap_or(d.score), cuboid: d.cuboid() });
+        }
+    }
+    let pr = average_precision(&boxes, &s.truth, iou_threshold);
+    s.labels = vec![false; boxes.len()];
+    for (&n, &hit) in score_order(&boxes).iter().zip(&pr.true_positive) {
+        s.labels[n] = hit;
+    }
+    s
+}
+
+/// AP of the samples `subset` scored by `scores` (one per sample of `subset`).
+fn subset_ap(s: &Samples, subset: &[usize], scores: &[f32], iou_threshold: f32) -> f32 {
+    let boxes: Vec<ScoredBox> = subset
+        .iter()
+        .zip(scores)
+        .map(|(&n, &score)| ScoredBox { image: s.frame[n], score, cuboid: s.cuboids[n] })
+        .collect();
+    // Ground truth of the frames in the subset only.
+    let frames: std::collections::BTreeSet<usize> = subset.iter().map(|&n| s.frame[n]).collect();
+    let truth: Vec<Vec<Cuboid>> =
+        s.truth.iter().enumerate().map(|(f, t)| if frames.contains(&f) { t.clone() } else { vec![] }).collect();
+    average_precision(&boxes, &truth, iou_threshold).ap.unwrap_or(0.0)
+}
+
+/// Trains an SVM on the samples `subset`.
+fn fit_subset(s: &Samples, subset: &[usize], c: f64) -> Result<LinearSvm> {
+    let psi: Vec<Vec<f64>> = subset.iter().map(|&n| s.psi[n].clone()).collect();
+    let labels: Vec<bool> = subset.iter().map(|&n| s.labels[n]).collect();
+    train_linear_svm(&psi, &labels, &balanced_costs(&labels, c))
+}
+
+/// Cross-validated (two folds: even and odd frames) mean AP of the first-stage and of the combined score
+/// at `c`; `None` when a fold lacks a class.
+fn cross_validate(s: &Samples, c: f64, iou_threshold: f32) -> Option<(f32, f32)> {
+    let (mut first, mut cascade) = (0.0, 0.0);
+    for fold in 0..2 {
+        let train: Vec<usize> = (0..s.labels.len()).filter(|&n| s.frame[n] % 2 != fold).collect();
+        let test: Vec<usize> = (0..s.labels.len()).filter(|&n| s.frame[n] % 2 == fold).collect();
+        let svm = fit_subset(s, &train, c).ok()?;
+        let base: Vec<f32> = test.iter().map(|&n| s.raw[n]).collect();
+        let combined: Vec<f32> = test.iter().map(|&n| s.raw[n] + svm.decision(&s.psi[n]) as f32).collect();
+        first += subset_ap(s, &test, &base, iou_threshold);
+        cascade += subset_ap(s, &test, &combined, iou_threshold);
+    }
+    Some((first / 2.0, cascade / 2.0))
+}
+
+/// Outcome of training one category: its stage, or why there is none.
+pub type StageResult = std::result::Result<SecondStage, String>;
+
+/// Trains the second stage of each of `categories` on `frames` (annotated objects and first-stage
+/// detections per frame), with `categories` also the context categories. A category whose detections
+/// hold no true or no false positive, whose cross-validation folds do, or whose cross-validated AP the
+/// context does not raise gets no stage (the reason is returned): its detections keep their first-stage
+/// scores.
+pub fn train_cascade(
+    frames: &[(Vec<Object>, Vec<Detection>)],
+    categories: &[String],
+    iou_threshold: f32,
+    training: CascadeTraining,
+) -> Result<(Cascade, BTreeMap<String, StageResult>)> {
+    for (_, detections) in frames {
+        check_first_stage(detections)?;
+    }
+    let results: Vec<(String, StageResult)> = categories
+        .par_iter()
+        .map(|category| (category.clone(), train_stage(frames, category, categories, iou_threshold)))
+        .collect();
+    let stages = results.iter().filter_map(|(c, r)| r.as_ref().ok().map(|s| (c.clone(), s.clone()))).collect();
+    let cascade = Cascade {
+        format: FORMAT.into(),
+        version: VERSION,
+        features: FEATURES.into(),
+        categories: categories.to_vec(),
+        stages,
+        training,
+    };
+    Ok((cascade, results.into_iter().collect()))
+}
+
+/// One category's stage (module doc): C by cross-validation, then the SVM and calibration on all frames.
+fn train_stage(
+    frames: &[(Vec<Object>, Vec<Detection>)],
+    category: &str,
+    categories: &[String],
+    iou_threshold: f32,
+) -> StageResult {
+    let s = samples_of(frames, category, categories, iou_threshold);
+    let positives = s.labels.iter().filter(|&&y| y).count();
+    if positives == 0 || positives == s.labels.len() {
+        return Err(format!("{positives} true positives among {} detections", s.labels.len()));
+    }
+    let mut best: Option<(f64, f32, f32)> = None;
+    for c in C_GRID {
+        if let Some((first, cascade)) = cross_validate(&s, c, iou_threshold) {
+            if best.is_none_or(|b| cascade > b.2) {
+                best = Some((c, first, cascade));
+            }
+        }
+    }
+    let (c, cv_first, cv_cascade) =
+        best.ok_or_else(|| "a cross-validation fold holds no true or no false positive".to_string())?;
+    if cv_cascade <= cv_first {
+        return Err(format!(
+            "the context does not help: cross-validated AP {:.1} with it, {:.1} without",
+            100.0 * cv_cascade,
+            100.0 * cv_first
+        ));
+    }
+    let all: Vec<usize> = (0..s.labels.len()).collect();
+    let svm = fit_subset(&s, &all, c).map_err(|e| e.to_string())?;
+    let scored: Vec<(f32, bool)> =
+        all.iter().map(|&n| (s.raw[n] + svm.decision(&s.psi[n]) as f32, s.labels[n])).collect();
+    let (a, b) = fit_logistic(&scored).map_err(|e| e.to_string())?;
+    Ok(SecondStage {
+        weights: svm.weights,
+        bias: svm.bias,
+        c,
+        cv_ap_first_stage: cv_first,
+        cv_ap_cascade: cv_cascade,
+        calibration: Calibration {
+            a,
+            b,
+            detections: scored.len(),
+            true_positives: positives,
+            iou: iou_threshold,
+            data: String::new(),
+            frames: frames.len(),
+        },
+    })
+}

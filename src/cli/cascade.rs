@@ -1,0 +1,76 @@
+//! `cog-gpu cascade --data DIR --detections DIR [--models assets/models] [--out FILE] [--iou 0.25]
+//! [--categories a,b,...]`: trains the context cascade ([`cog_gpu::cascade`]) on the first-stage detections
+//! of held-out frames and writes it as `<models>/cascade.json`, which `detect` then applies.
+//!
+//! The detections are those of `cog-gpu detect --no-cascade --min-score -3` with the calibrated models the
+//! cascade will sit on (the cascade's inputs are their calibrated scores, so recalibrating or retraining a
+//! model means retraining the cascade). The frames must be neither training frames of the models nor
+//! test frames. Choices: the categories default to every model in `--models` (they are also the context
+//! categories); a category whose detections hold no true or no false positive gets no second stage and
+//! keeps its first-stage scores (reported, not an error).
+
+use std::path::PathBuf;
+
+use anyhow::bail;
+use cog_gpu::cascade::{train_cascade, CascadeTraining, FILE_NAME};
+
+use super::calibrate::{read_labelled_detections, HeldOutArgs, LabelledDetections};
+use super::GlobalOptions;
+
+#[derive(clap::Args)]
+pub struct Args {
+    #[command(flatten)]
+    pub held_out: HeldOutArgs,
+    /// Where to write the cascade; default `<models>/cascade.json`.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
+    let held_out = &args.held_out;
+    let models = held_out.models()?;
+    if let Some(model) = models.iter().find(|m| m.calibration.is_none()) {
+        bail!(
+            "{}: the '{}' model is not calibrated; the cascade needs calibrated models (cog-gpu calibrate)",
+            held_out.models.display(),
+            model.category
+        );
+    }
+    let categories: Vec<String> = models.iter().map(|m| m.category.clone()).collect();
+    let LabelledDetections { frames, truth, detections } =
+        read_labelled_detections(&held_out.data, &held_out.detections)?;
+    let inputs: Vec<_> = truth.into_iter().zip(detections).collect();
+    let training = CascadeTraining {
+        data: held_out.data.display().to_string(),
+        frames,
+        detections: held_out.detections.display().to_string(),
+        iou: held_out.iou,
+    };
+    log::info!("training the second stage of {} categories on {frames} frames", categories.len());
+    let (cascade, results) = train_cascade(&inputs, &categories, held_out.iou, training)?;
+    println!(
+        "{:<12} {:>10} {:>6} {:>7} {:>12} {:>12}",
+        "category", "detections", "TP", "C", "CV AP first", "CV AP cascade"
+    );
+    for (category, result) in &results {
+        match result {
+            Ok(stage) => println!(
+                "{:<12} {:>10} {:>6} {:>7} {:>12.1} {:>12.1}",
+                category,
+                stage.calibration.detections,
+                stage.calibration.true_positives,
+                stage.c,
+                100.0 * stage.cv_ap_first_stage,
+                100.0 * stage.cv_ap_cascade
+            ),
+            Err(reason) => println!("{category:<12} no second stage (keeps its first-stage scores): {reason}"),
+        }
+    }
+    if cascade.stages.is_empty() {
+        bail!("{}: no category could be trained; nothing written", held_out.detections.display());
+    }
+    let out = args.out.clone().unwrap_or_else(|| held_out.models.join(FILE_NAME));
+    cascade.write(&out)?;
+    println!("wrote the cascade ({} of {} categories) to {}", cascade.stages.len(), categories.len(), out.display());
+    Ok(())
+}

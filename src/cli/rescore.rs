@@ -1,0 +1,59 @@
+//! `cog-gpu rescore --detections DIR --out DIR [--cascade assets/models/cascade.json]`: applies a context
+//! cascade ([`cog_gpu::cascade`]) to first-stage detections files (from `detect --no-cascade`) without
+//! detecting again, writing one rescored `<frame>.json` per input file. Compares the first stage with the
+//! cascade on the same detections (`eval` both directories). `--out` may not be `--detections`: the
+//! first-stage files are the input of `cog-gpu cascade` and of `rescore` itself, so they are kept.
+
+use std::path::PathBuf;
+
+use anyhow::{bail, Context};
+use cog_gpu::cascade::Cascade;
+use cog_gpu::eval::FrameDetections;
+
+use super::GlobalOptions;
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// First-stage detections (`<frame>.json` files from `detect --no-cascade`).
+    #[arg(long)]
+    pub detections: PathBuf,
+    /// Output directory for the rescored files.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// The cascade file.
+    #[arg(long, default_value = "assets/models/cascade.json")]
+    pub cascade: PathBuf,
+}
+
+pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
+    let cascade = Cascade::read(&args.cascade)?;
+    if !args.detections.is_dir() {
+        bail!("{}: detections directory not found", args.detections.display());
+    }
+    let same = |a: &std::path::Path, b: &std::path::Path| match (a.canonicalize(), b.canonicalize()) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => false,
+    };
+    if same(&args.detections, &args.out) {
+        bail!("{}: --out must differ from --detections (the first-stage files are kept)", args.out.display());
+    }
+    let mut inputs: Vec<PathBuf> = std::fs::read_dir(&args.detections)
+        .with_context(|| format!("reading {}", args.detections.display()))?
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "json") && p.is_file())
+        .collect();
+    inputs.sort();
+    if inputs.is_empty() {
+        bail!("{}: no detections files (<frame>.json)", args.detections.display());
+    }
+    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    for path in &inputs {
+        let mut frame = FrameDetections::read(path)?;
+        cascade.rescore(&mut frame.detections).with_context(|| format!("{}", path.display()))?;
+        let name = path.file_name().context("a detections file without a name")?;
+        frame.write(&args.out.join(name))?;
+    }
+    println!("rescored {} file(s) from {} into {}", inputs.len(), args.detections.display(), args.out.display());
+    Ok(())
+}

@@ -1,0 +1,258 @@
+//! The context cascade: the linear SVM against closed-form solutions, the context features against a hand
+//! computation, and training on constructed frames where only the context tells true from false.
+
+use std::collections::BTreeMap;
+use std::process::Command;
+
+mod common;
+
+use cog_gpu::cascade::{context_features, feature_dim, train_cascade, Cascade, CascadeTraining};
+use cog_gpu::eval::{average_precision, Detection, FrameDetections, ScoredBox};
+use cog_gpu::frame::Object;
+use cog_gpu::geometry::Cuboid;
+use cog_gpu::learn::binary_svm::{balanced_costs, train_linear_svm};
+use glam::Vec3;
+
+#[test]
+fn hard_margin_svm_is_the_perpendicular_bisector() {
+    // (0, 0) negative, (2, 0) positive: the maximum-margin line is x = 1, so w = (1, 0), b = −1 (both points
+    // on the margin). A large C makes the soft margin hard.
+    let samples = vec![vec![0.0, 0.0], vec![2.0, 0.0]];
+    let labels = [false, true];
+    let svm = train_linear_svm(&samples, &labels, &[1e4, 1e4]).unwrap();
+    assert!((svm.weights[0] - 1.0).abs() < 1e-4, "{svm:?}");
+    assert!(svm.weights[1].abs() < 1e-4, "{svm:?}");
+    assert!((svm.bias + 1.0).abs() < 1e-4, "{svm:?}");
+}
+
+#[test]
+fn soft_margin_svm_shrinks_as_the_closed_form_says() {
+    // x = −1 negative, x = +1 positive, each with cost c: for w < 1 both slacks are 1 − w (at b = 0, and
+    // no b does better), so ½w² + 2c(1 − w) is smallest at w = 2c. Balanced costs at C give c = C here.
+    let samples = vec![vec![-1.0], vec![1.0]];
+    let labels = [false, true];
+    let costs = balanced_costs(&labels, 0.1);
+    assert_eq!(costs, vec![0.1, 0.1]);
+    let svm = train_linear_svm(&samples, &labels, &costs).unwrap();
+    assert!((svm.weights[0] - 0.2).abs() < 1e-4, "{svm:?}");
+    assert!(train_linear_svm(&samples, &[true, true], &costs).is_err());
+}
+
+#[test]
+fn balanced_costs_give_each_class_the_same_weight() {
+    let labels = [true, false, false, false];
+    let costs = balanced_costs(&labels, 2.0);
+    let positive: f64 = costs.iter().zip(&labels).filter(|(_, &y)| y).map(|(c, _)| c).sum();
+    let negative: f64 = costs.iter().zip(&labels).filter(|(_, &y)| !y).map(|(c, _)| c).sum();
+    assert!((positive - negative).abs() < 1e-12 && (positive + negative - 2.0 * 4.0).abs() < 1e-12);
+}
+
+fn detection(category: &str, centre: [f32; 3], size: [f32; 3], probability: f32, raw: f32) -> Detection {
+    let mut d = Detection::new(category, &Cuboid::new(Vec3::from(centre), Vec3::from(size), 0.0), probability);
+    d.raw_score = Some(raw);
+    d
+}
+
+fn names(list: &[&str]) -> Vec<String> {
+    list.iter().map(|s| s.to_string()).collect()
+}
+
+#[test]
+fn context_features_match_a_hand_computation() {
+    let detections = vec![
+        // i: a unit table box at the origin, p = 0.5.
+        detection("table", [0.0, 0.0, 0.5], [1.0, 1.0, 1.0], 0.5, 0.0),
+        // The most confident overlapping bed: x from −0.5 to 1.5, so the overlap is the whole table (1 m³).
+        detection("bed", [0.5, 0.0, 0.5], [2.0, 1.0, 1.0], 0.8, 0.0),
+        // A less confident overlapping bed, and a more confident bed that does not overlap: both ignored.
+        detection("bed", [0.0, 0.2, 0.5], [1.0, 1.0, 1.0], 0.3, 0.0),
+        detection("bed", [5.0, 0.0, 0.5], [2.0, 1.0, 1.0], 0.9, 0.0),
+        // A chair far away: its block stays zero.
+        detection("chair", [0.0, 6.0, 0.5], [0.5, 0.5, 1.0], 0.7, 0.0),
+    ];
+    let categories = names(&["bed", "chair", "table"]);
+    let psi = context_features(&detections, 0, &categories);
+    assert_eq!(psi.len(), feature_dim(3));
+    // S1 = O/V_i = 1, S2 = O/V_j = 0.5, S3 = O/U = 1/(1 + 2 − 1) = 0.5.
+    let expected = [
+        0.5, 0.25, // p_i, p_i²
+        0.8, 0.8, 0.4, 0.4, 0.4, // bed: p_j, p_j·S1, p_j·S2, p_j·S3, p_i·p_j
+        0.0, 0.0, 0.0, 0.0, 0.0, // chair
+        0.0, 0.0, 0.0, 0.0, 0.0, // table: no other table
+    ];
+    for (k, (got, want)) in psi.iter().zip(expected).enumerate() {
+        assert!((got - want).abs() < 1e-6, "ψ[{k}] = {got}, expected {want}");
+    }
+}
+
+/// Frame `f` of a constructed set: a bed and a table (ground truth); the first stage finds the bed
+/// (p 0.9) and two tables: the real one, and a "piece" of the bed that the table model scores higher.
+fn frame(f: usize) -> (Vec<Object>, Vec<Detection>) {
+    let object = |category: &str, centre: [f32; 3], size: [f32; 3]| Object {
+        category: category.into(),
+        label: None,
+        cuboid: Cuboid::new(Vec3::from(centre), Vec3::from(size), 0.0),
+    };
+    let bed = ([0.0, 2.0, 0.5], [2.0, 1.6, 1.0]);
+    let table = ([4.0, 2.0, 0.4], [1.0, 0.6, 0.8]);
+    let truth = vec![object("bed", bed.0, bed.1), object("table", table.0, table.1)];
+    let noise = (f as f32 * 1.7).sin() * 0.3;
+    let (raw_false, raw_true) = (1.0 + noise, 0.7 - noise);
+    let sigmoid = |s: f32| 1.0 / (1.0 + (-s).exp());
+    let detections = vec![
+        detection("bed", bed.0, bed.1, 0.9, 2.0),
+        detection("table", [0.2, 2.0, 0.6], [1.0, 0.6, 0.8], sigmoid(raw_false), raw_false),
+        detection("table", table.0, table.1, sigmoid(raw_true), raw_true),
+    ];
+    (truth, detections)
+}
+
+fn table_ap(frames: &[(Vec<Object>, Vec<Detection>)]) -> f32 {
+    let boxes: Vec<ScoredBox> = frames
+        .iter()
+        .enumerate()
+        .flat_map(|(image, (_, dets))| {
+            dets.iter().filter(|d| d.category == "table").map(move |d| ScoredBox {
+                image,
+                score: d.score,
+                cuboid: d.cuboid(),
+            })
+        })
+        .collect();
+    let truth: Vec<Vec<Cuboid>> = frames
+        .iter()
+        .map(|(objects, _)| objects.iter().filter(|o| o.category == "table").map(|o| o.cuboid).collect())
+        .collect();
+    average_precision(&boxes, &truth, 0.25).ap.unwrap()
+}
+
+#[test]
+fn the_cascade_learns_that_a_table_on_a_bed_is_a_piece_of_the_bed() {
+    let training: Vec<_> = (0..40).map(frame).collect();
+    let categories = names(&["bed", "table"]);
+    let (cascade, results) = train_cascade(&training, &categories, 0.25, CascadeTraining::default()).unwrap();
+    // Every bed detection is correct: no second stage can be learnt for it.
+    assert!(results["bed"].is_err(), "{:?}", results["bed"]);
+    let stage = results["table"].as_ref().unwrap();
+    assert!(stage.cv_ap_cascade > stage.cv_ap_first_stage + 0.1, "{stage:?}");
+
+    // Held-out frames: the first stage ranks the pieces of beds above most real tables; after the
+    // cascade every real table is ranked above every piece.
+    let mut test: Vec<_> = (100..140).map(frame).collect();
+    let before = table_ap(&test);
+    assert!(before < 0.8, "first-stage AP {before}");
+    for (_, detections) in &mut test {
+        cascade.rescore(detections).unwrap();
+        assert!(detections.windows(2).all(|w| w[0].score >= w[1].score), "sorted by score");
+        let bed = detections.iter().find(|d| d.category == "bed").unwrap();
+        assert_eq!((bed.score, bed.context_score), (0.9, None), "a category without a stage is unchanged");
+    }
+    assert!((table_ap(&test) - 1.0).abs() < 1e-6, "cascade AP {}", table_ap(&test));
+    assert!(test[0].1.iter().filter(|d| d.category == "table").all(|d| d.first_stage_score.is_some()));
+
+    // The rescoring reads only the first-stage list: any input order gives the same scores.
+    let (_, mut forward) = frame(7);
+    let (_, mut reversed) = frame(7);
+    reversed.reverse();
+    cascade.rescore(&mut forward).unwrap();
+    cascade.rescore(&mut reversed).unwrap();
+    let by_box = |dets: &[Detection]| -> BTreeMap<String, f32> {
+        dets.iter().map(|d| (format!("{} {:?}", d.category, d.centre), d.score)).collect()
+    };
+    assert_eq!(by_box(&forward), by_box(&reversed));
+    // Rescored detections are not first-stage input any more.
+    let err = cascade.rescore(&mut forward).unwrap_err().to_string();
+    assert!(err.contains("already rescored"), "{err}");
+}
+
+#[test]
+fn cascade_files_round_trip_and_are_checked() {
+    let training: Vec<_> = (0..20).map(frame).collect();
+    let (cascade, _) = train_cascade(&training, &names(&["bed", "table"]), 0.25, CascadeTraining::default()).unwrap();
+    let dir = std::env::temp_dir().join(format!("cog-cascade-test-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("cascade.json");
+    cascade.write(&path).unwrap();
+    assert_eq!(Cascade::read(&path).unwrap(), cascade);
+    // One weight too few: refused with the file named.
+    let mut broken = cascade.clone();
+    broken.stages.get_mut("table").unwrap().weights.pop();
+    broken.write(&path).unwrap();
+    let err = Cascade::read(&path).unwrap_err().to_string();
+    assert!(err.contains("cascade.json") && err.contains("weights"), "{err}");
+    // Uncalibrated detections (no raw score) are refused.
+    let mut raw_only = vec![Detection::new("table", &Cuboid::new(Vec3::ZERO, Vec3::ONE, 0.0), 0.3)];
+    assert!(cascade.rescore(&mut raw_only).unwrap_err().to_string().contains("calibrated"));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn cli_trains_a_cascade_and_rescores_files() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (data, first, rescored) = (tmp.path().join("data"), tmp.path().join("first"), tmp.path().join("rescored"));
+    std::fs::create_dir_all(&first).unwrap();
+    for f in 0..30 {
+        let (objects, detections) = frame(f);
+        let name = format!("f{f:02}");
+        common::write_tiny_frame(&data, &name, objects);
+        FrameDetections { frame: name.clone(), detections }.write(&first.join(format!("{name}.json"))).unwrap();
+    }
+    let cascade_file = tmp.path().join("cascade.json");
+    let run = |args: &[&str]| Command::new(env!("CARGO_BIN_EXE_cog-gpu")).args(args).output().unwrap();
+    let models = concat!(env!("CARGO_MANIFEST_DIR"), "/assets/models");
+    let train = |detections: &std::path::Path| {
+        run(&[
+            "cascade",
+            "--data",
+            data.to_str().unwrap(),
+            "--detections",
+            detections.to_str().unwrap(),
+            "--models",
+            models,
+            "--categories",
+            "bed,table",
+            "--out",
+            cascade_file.to_str().unwrap(),
+        ])
+    };
+    let out = train(&first);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.lines().any(|l| l.starts_with("bed") && l.contains("no second stage")), "{text}");
+    assert!(text.contains("wrote the cascade (1 of 2 categories)"), "{text}");
+    let cascade = Cascade::read(&cascade_file).unwrap();
+    assert_eq!(cascade.categories, names(&["bed", "table"]));
+    assert_eq!(cascade.training.frames, 30);
+    // A models directory may hold the cascade (and a layout model): they are not detector models.
+    let dir = tmp.path().join("models");
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::copy(format!("{models}/bed.json"), dir.join("bed.json")).unwrap();
+    std::fs::copy(&cascade_file, dir.join("cascade.json")).unwrap();
+    std::fs::write(dir.join("layout.json"), "{}").unwrap();
+    let read = cog_gpu::model::read_models_dir(&dir, None).unwrap();
+    assert_eq!(read.iter().map(|m| m.category.as_str()).collect::<Vec<_>>(), ["bed"]);
+
+    let out = run(&[
+        "rescore",
+        "--detections",
+        first.to_str().unwrap(),
+        "--out",
+        rescored.to_str().unwrap(),
+        "--cascade",
+        cascade_file.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let file = FrameDetections::read(&rescored.join("f03.json")).unwrap();
+    let tables: Vec<&Detection> = file.detections.iter().filter(|d| d.category == "table").collect();
+    assert_eq!(tables.len(), 2);
+    assert!(tables.iter().all(|d| d.context_score.is_some() && d.first_stage_score.is_some()));
+    // The real table (x = 4) now outranks the piece of the bed.
+    assert!(tables[0].centre[0] > 3.0, "{tables:?}");
+
+    // Rescoring in place would lose the first-stage files: refused. Rescored files are not cascade input.
+    let out = run(&["rescore", "--detections", first.to_str().unwrap(), "--out", first.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(1));
+    let out = train(&rescored);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("already rescored"));
+}
