@@ -5,7 +5,7 @@ use std::path::Path;
 
 use cog_gpu::category::LARGE_CATEGORIES;
 use cog_gpu::detect::{detect_frame, DetectOptions};
-use cog_gpu::features::{Backend, Layout};
+use cog_gpu::features::{Backend, FeatureLayout};
 use cog_gpu::frame::{DepthSource, Frame};
 use cog_gpu::geometry::iou_3d;
 use cog_gpu::model::{read_models_dir, FeaturePath};
@@ -21,7 +21,7 @@ fn the_ten_shipped_models_load_with_this_builds_layout() {
     let mut expected: Vec<&str> = LARGE_CATEGORIES.to_vec();
     expected.sort_unstable();
     assert_eq!(categories, expected);
-    let full = Layout::default();
+    let full = FeatureLayout::default();
     for model in &models {
         assert_eq!(model.layout.id(), full.id(), "{}: the shipped models use the full feature set", model.category);
         assert_eq!(model.features.path, FeaturePath::Fast, "{}", model.category);
