@@ -36,6 +36,10 @@ enum Command {
     Calibrate(cli::calibrate::Args),
     /// Train one category's detector (structural SVM) on annotated frames and write a model file.
     Train(cli::train::Args),
+    /// Room layout of frames: a Manhattan cuboid per frame (JSON, overlay picture, optional PLY).
+    Layout(cli::layout::Args),
+    /// Train the room-layout model (structural SVM over layout hypotheses) on annotated frames.
+    TrainLayout(cli::train_layout::Args),
 }
 
 fn main() {
@@ -58,6 +62,8 @@ fn main() {
         Command::Train(args) => cli::train::run(args, &options),
         Command::Detect(args) => cli::detect::run(args, &options),
         Command::Calibrate(args) => cli::calibrate::run(args, &options),
+        Command::Layout(args) => cli::layout::run(args, &options),
+        Command::TrainLayout(args) => cli::train_layout::run(args, &options),
     };
     if let Err(err) = result {
         eprintln!("error: {}", cli::error_text(&err));

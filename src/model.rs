@@ -249,7 +249,10 @@ pub fn check_weight_magnitudes(weights: &[f32], bias: f32) -> std::result::Resul
     Ok(())
 }
 
-/// The models of a directory (`*.json`), sorted by category. With `categories`, exactly those (each must
+/// File name of the room-layout model in a models directory (`crate::room_layout::model`).
+pub const LAYOUT_MODEL_FILE: &str = "layout.json";
+
+/// The models of a directory (`*.json` except [`LAYOUT_MODEL_FILE`]), sorted by category. With `categories`, exactly those (each must
 /// have a model); without, every model file. A directory without models is an error.
 pub fn read_models_dir(dir: &Path, categories: Option<&[String]>) -> Result<Vec<Model>> {
     if !dir.is_dir() {
@@ -261,6 +264,8 @@ pub fn read_models_dir(dir: &Path, categories: Option<&[String]>) -> Result<Vec<
         .flatten()
         .map(|e| e.path())
         .filter(|p| p.extension().is_some_and(|x| x == "json") && p.is_file())
+        // The room-layout model lives beside the detectors; it is no category.
+        .filter(|p| p.file_name().is_none_or(|name| name != LAYOUT_MODEL_FILE))
         .collect();
     paths.sort();
     for path in paths {

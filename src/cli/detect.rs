@@ -68,7 +68,7 @@ pub struct Args {
 }
 
 /// `path` if it exists, else the same relative path inside the crate's checkout (for the defaults).
-fn resolve_default(path: &Path) -> PathBuf {
+pub(super) fn resolve_default(path: &Path) -> PathBuf {
     if path.exists() || path.is_absolute() {
         return path.to_path_buf();
     }
@@ -81,7 +81,7 @@ fn resolve_default(path: &Path) -> PathBuf {
 }
 
 /// Frame directories of the arguments (each a frame, or searched recursively).
-fn frame_dirs(args: &[PathBuf]) -> anyhow::Result<Vec<PathBuf>> {
+pub(super) fn frame_dirs(args: &[PathBuf]) -> anyhow::Result<Vec<PathBuf>> {
     let roots = if args.is_empty() { vec![resolve_default(Path::new("assets/sample"))] } else { args.to_vec() };
     let mut frames = Vec::new();
     for root in roots {
