@@ -15,6 +15,7 @@ use std::time::Instant;
 use anyhow::{bail, Context};
 use cog_gpu::category::normalise_name;
 use cog_gpu::detect::{detect_frame, overlay, overlay_selection, DetectOptions};
+use cog_gpu::draw::category_colour;
 use cog_gpu::eval::FrameDetections;
 use cog_gpu::features::Backend;
 use cog_gpu::frame::{is_frame_dir, DepthSource, Frame};
@@ -61,6 +62,10 @@ pub struct Args {
     /// Print the detections of all frames as one JSON array on stdout.
     #[arg(long)]
     pub json: bool,
+    /// Also write `<frame>.ply`: the coloured upright point cloud with the overlay's cuboids (and the room,
+    /// when there is a layout model) as line sets.
+    #[arg(long)]
+    pub ply: bool,
     /// Stop at the first frame that cannot be read or detected in (default: report it, go on with the
     /// others and fail at the end).
     #[arg(long)]
@@ -132,6 +137,8 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
             model.window.step = step;
         }
     }
+    // The room layout comes with the detections when the models directory holds a layout model.
+    let layout_model = super::layout::model_in_dir(&models_dir)?;
     let frames = frame_dirs(&args.frames)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating the output directory {}", args.out.display()))?;
@@ -156,7 +163,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     let mut failures = Vec::new();
     for dir in &frames {
         progress.set_message(dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default());
-        match detect_one(dir, &models, backend, &detect_options, &args) {
+        match detect_one(dir, &models, layout_model.as_ref(), backend, &detect_options, &args) {
             Ok(detections) => results.push(detections),
             Err(err) if args.fail_fast => return Err(err),
             Err(err) => {
@@ -175,10 +182,12 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     super::batch_result(&failures, frames.len())
 }
 
-/// Reads one frame, detects, and writes its detections file and overlay.
+/// Reads one frame, detects (and lays out the room with `layout_model`), and writes its detections file,
+/// overlay and PLY.
 fn detect_one(
     dir: &Path,
     models: &[cog_gpu::model::Model],
+    layout_model: Option<&cog_gpu::room_layout::model::LayoutModel>,
     backend: Backend,
     detect_options: &DetectOptions,
     args: &Args,
@@ -186,18 +195,43 @@ fn detect_one(
     let frame = Frame::read(dir, DepthSource::Raw)?;
     let detections = detect_frame(&frame, models, backend, detect_options)
         .with_context(|| format!("detecting in {}", dir.display()))?;
+    let layout = match layout_model {
+        Some(model) => Some(super::layout::frame_layout(&frame, Some(model), backend)?),
+        None => None,
+    };
     let json_path = args.out.join(format!("{}.json", frame.name));
-    detections.write(&json_path)?;
+    match &layout {
+        // The detections file with the room under "layout" (the layout file's record).
+        Some((_, record)) => {
+            let mut value = serde_json::to_value(&detections)?;
+            value["layout"] = serde_json::to_value(record)?;
+            std::fs::write(&json_path, serde_json::to_string_pretty(&value)?)
+                .with_context(|| format!("writing {}", json_path.display()))?;
+        }
+        None => detections.write(&json_path)?,
+    }
+    // The best detections over all categories, one category per object.
+    let best = FrameDetections {
+        frame: detections.frame.clone(),
+        detections: overlay_selection(&detections.detections, args.overlay_top),
+    };
+    let room = layout.as_ref().map(|(predicted, _)| &predicted.room);
     if !args.no_overlay {
         let png_path = args.out.join(format!("{}.png", frame.name));
-        // The best detections over all categories, one category per object.
-        let best = FrameDetections {
-            frame: detections.frame.clone(),
-            detections: overlay_selection(&detections.detections, args.overlay_top),
-        };
-        overlay(&frame, &best)
-            .save(&png_path)
-            .with_context(|| format!("writing the overlay {}", png_path.display()))?;
+        let mut img = overlay(&frame, &best);
+        if let Some(room) = room {
+            let camera = cog_gpu::geometry::Camera::new(frame.intrinsics(), frame.rtilt());
+            cog_gpu::room_layout::output::draw_room(&mut img, &camera, room, 2);
+        }
+        img.save(&png_path).with_context(|| format!("writing the overlay {}", png_path.display()))?;
+    }
+    if args.ply {
+        let boxes = best
+            .detections
+            .iter()
+            .map(|d| cog_gpu::ply::LineSet::from_box_corners(&d.cuboid().corners(), category_colour(&d.category)))
+            .collect();
+        super::layout::write_scene_ply(&args.out.join(format!("{}.ply", frame.name)), &frame, boxes, room)?;
     }
     Ok(detections)
 }

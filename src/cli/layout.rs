@@ -62,7 +62,6 @@ pub fn frame_layout(
 }
 
 /// The layout model of a models directory, when it holds one.
-#[allow(dead_code)] // used by detect (next commit)
 pub fn model_in_dir(dir: &Path) -> anyhow::Result<Option<LayoutModel>> {
     let path = dir.join(LAYOUT_MODEL_FILE);
     Ok(if path.is_file() { Some(LayoutModel::read(&path)?) } else { None })

@@ -4,6 +4,7 @@ pub mod bench;
 pub mod calibrate;
 pub mod detect;
 pub mod eval;
+pub mod eval_layout;
 pub mod info;
 pub mod layout;
 pub mod options;

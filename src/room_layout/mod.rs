@@ -12,7 +12,10 @@
 //!   smallest `s` giving at most [`MAX_LAYOUT_POINTS`]); walls are large, so a few thousand points place them
 //!   as well as 300 000 and the normals (15 nearest neighbours, as the detector) cost milliseconds.
 //! - **Floor and ceiling**: the 0.001 and 0.999 quantiles of all point heights (paper), shared by every
-//!   hypothesis of the frame.
+//!   hypothesis of the frame — except that a camera pitched down often sees no ceiling at all, and the
+//!   0.999 quantile is then the top of the visible walls, far below the ceiling. When the points reach less
+//!   than [`MIN_ROOM_HEIGHT`] above the floor, the ceiling is put at floor + [`MIN_ROOM_HEIGHT`] (rooms are
+//!   at least that high; our deviation from the paper, which loses the free space above the visible walls).
 //! - **Orientations**: a rectangle turned by 90° is the same rectangle, so the paper's 18 orientations in
 //!   [0°, 180°) are only 9 distinct rooms. We keep 18 *distinct* ones: yaws `−45° + 5°·k`, k = 0..17, i.e.
 //!   [−45°, 45°) in 5° steps. The yaw is measured from the upright +x axis; the room's own axes are
@@ -51,6 +54,8 @@ pub const MAX_LAYOUT_POINTS: usize = 16_000;
 pub const FLOOR_QUANTILE: f32 = 0.001;
 /// Ceiling at this quantile of the point heights (paper §5).
 pub const CEILING_QUANTILE: f32 = 0.999;
+/// Least floor-to-ceiling height of a room (metres); see the module doc.
+pub const MIN_ROOM_HEIGHT: f32 = 2.4;
 /// Number of distinct orientations (see the module doc).
 pub const ORIENTATIONS: usize = 18;
 /// First orientation (degrees) and step between orientations.
@@ -59,7 +64,7 @@ pub const YAW_STEP_DEG: f32 = 5.0;
 /// A hypothesis must hold at least this fraction of the points (paper §5).
 pub const MIN_INSIDE_FRACTION: f64 = 0.8;
 /// Histogram peaks kept as wall candidates per wall (besides the farthest point and the camera).
-pub const PEAKS_PER_WALL: usize = 5;
+pub const PEAKS_PER_WALL: usize = 8;
 /// Smallest room side, millimetres.
 pub const MIN_SIDE_MM: i32 = 1000;
 
@@ -138,6 +143,7 @@ impl LayoutScene {
             (Some(f), Some(c)) => (f, c),
             _ => return Err(Error::Input(format!("frame '{}' has no points with depth", frame.name))),
         };
+        let ceiling = ceiling.max(floor + MIN_ROOM_HEIGHT);
         let stride = subsampling_stride(cloud.len());
         let keep: Vec<usize> = (0..cloud.len())
             .filter(|&i| {
@@ -146,13 +152,11 @@ impl LayoutScene {
             })
             .collect();
         let points: Vec<Vec3> = keep.iter().map(|&i| cloud.points[i]).collect();
-        if points.len() < NORMAL_NEIGHBOURS || ceiling - floor < 0.5 {
+        if points.len() < NORMAL_NEIGHBOURS {
             return Err(Error::Input(format!(
-                "frame '{}': {} points (subsampled) spanning {:.2} m in height; the room layout needs at least \
-                 {NORMAL_NEIGHBOURS} points and 0.5 m between floor and ceiling",
+                "frame '{}': {} points (subsampled); the room layout needs at least {NORMAL_NEIGHBOURS}",
                 frame.name,
                 points.len(),
-                ceiling - floor
             )));
         }
         let normals = estimate_normals(&points);
