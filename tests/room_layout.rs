@@ -230,6 +230,8 @@ fn hypotheses_hold_eighty_percent_and_include_the_room() {
         let inside = cells[b.yaw_index as usize].points_inside(b);
         assert!(inside as f64 >= 0.8 * scene.points.len() as f64, "{b:?} holds {inside}");
         assert!(b.u1 - b.u0 >= 1000 && b.v1 - b.v0 >= 1000);
+        // The camera (the origin) is in the room.
+        assert!(b.u0 <= 0 && b.u1 >= 0 && b.v0 <= 0 && b.v1 >= 0, "{b:?}");
     }
     // The walls are at u = ±2000 (cells centred at ±1975 / ±2025), v = 5000; the back at the camera (0).
     let truth = RoomLayout { corners: rect(-2.0, 2.0, 0.0, 5.0, -1.5, 1.0).corners, floor: -1.5, ceiling: 1.0 };

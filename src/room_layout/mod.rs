@@ -29,8 +29,10 @@
 //!   points whose normal faces that wall (planes show as peaks), searched between the farthest point and the
 //!   0.2 quantile (a wall closer than that would leave more than 20 % of the points outside), and (iii) the
 //!   camera's own coordinate when the camera lies beyond the farthest point (the camera is in the room; the
-//!   wall behind it is never seen). All combinations with sides ≥ [`MIN_SIDE_MM`] whose cuboid holds ≥ 80 %
-//!   of the points (cell centres, see [`voxels`]) are kept.
+//!   wall behind it is never seen). All combinations with sides ≥ [`MIN_SIDE_MM`] that contain the camera
+//!   (our addition: the camera is in the room; without it the learned model sometimes put the unseen back
+//!   wall in front of the camera) and whose cuboid holds ≥ 80 % of the points (cell centres, see
+//!   [`voxels`]) are kept.
 //! - **Positions are integers** (millimetres in the room frame of each yaw), so that region assignment is
 //!   exact and identical on the CPU and the GPU.
 
@@ -244,10 +246,11 @@ pub fn orientation_hypotheses(scene: &LayoutScene, cells: &voxels::YawCells) -> 
     let v1s = wall_candidates(&vs, &faces_b, false, 0, cell);
     let needed = (MIN_INSIDE_FRACTION * cells.total_points as f64).ceil() as u64;
     let mut out = Vec::new();
-    for &u0 in &u0s {
-        for &u1 in u1s.iter().filter(|&&u1| u1 - u0 >= MIN_SIDE_MM) {
-            for &v0 in &v0s {
-                for &v1 in v1s.iter().filter(|&&v1| v1 - v0 >= MIN_SIDE_MM) {
+    // The camera (the origin) is inside every hypothesis.
+    for &u0 in u0s.iter().filter(|&&u0| u0 <= 0) {
+        for &u1 in u1s.iter().filter(|&&u1| u1 >= 0 && u1 - u0 >= MIN_SIDE_MM) {
+            for &v0 in v0s.iter().filter(|&&v0| v0 <= 0) {
+                for &v1 in v1s.iter().filter(|&&v1| v1 >= 0 && v1 - v0 >= MIN_SIDE_MM) {
                     let room_box = RoomBox { yaw_index: k as u32, u0, u1, v0, v1 };
                     if cells.points_inside(&room_box) >= needed {
                         out.push(room_box);
