@@ -1,6 +1,9 @@
 //! `cog-gpu detect [FRAME_DIR...] [--models DIR] [--out DIR] [--categories a,b,...] ...`: detects objects
 //! with trained models and writes, per frame, `<out>/<frame>.json` (detections) and `<out>/<frame>.png`
-//! (overlay). See `cog_gpu::detect` for what happens per frame.
+//! (overlay). See `cog_gpu::detect` for what happens per frame. When the models directory also holds
+//! `layout.json` (`cog_gpu::room_layout`), the room is laid out too: its record goes under `"layout"` in
+//! `<frame>.json` and its edges on the overlay. `--ply` writes `<out>/<frame>.ply`: the coloured upright
+//! point cloud with the overlay's cuboids and the room as line sets (`cog_gpu::ply`).
 //!
 //! Defaults: every frame under `assets/sample/`, the models of `assets/models/`, output `detections/`.
 //! When a default `assets/...` path does not exist relative to the current directory, the crate's own
