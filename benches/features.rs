@@ -10,7 +10,7 @@ use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 
 use cog_gpu::features::fast::{FastEngine, FastOptions};
 use cog_gpu::features::window::{category_sizes, DEFAULT_SIZE_STATS};
-use cog_gpu::features::{cpu, Hypothesis, Layout, PreparedWindow, Preprocessed};
+use cog_gpu::features::{cpu, FeatureLayout, Hypothesis, PreparedWindow, Preprocessed};
 use cog_gpu::frame::{DepthSource, Frame};
 
 const FRAME: &str = "../shared/data/sunrgbd/kv1-b3dodata-img_0063";
@@ -34,7 +34,7 @@ fn bench(c: &mut Criterion) {
     let sizes = category_sizes(Path::new(DEFAULT_SIZE_STATS), "bed").expect("size statistics");
     let window = PreparedWindow::new(&frame, sizes, 0.1, 50).expect("window");
     let hyps = subset(&window.set.hypotheses);
-    let layout = Layout::default();
+    let layout = FeatureLayout::default();
     let w = weights(layout.dim());
     group.throughput(Throughput::Elements(hyps.len() as u64));
     group.bench_function("score_cpu", |b| b.iter(|| cpu::scores(&window.scene, &layout, &hyps, &w)));

@@ -3,7 +3,7 @@
 //!
 //! Data flows one way through the modules:
 //! `frame` (SUN RGB-D frames, point clouds) → `geometry` (cuboids, IoU, projection) → `gpu` (context and
-//! kernels with their CPU twins) → later stages (features, learning, layout, cascade, evaluation).
+//! kernels with their CPU twins) → later stages (features, learning, the room layout `room_layout`, cascade, evaluation).
 //! `synth` writes frames in the same layout the `frame` module reads.
 
 pub mod calibration;
@@ -22,6 +22,8 @@ pub mod learn;
 pub mod limits;
 pub mod model;
 pub mod nms;
+pub mod ply;
+pub mod room_layout;
 pub mod synth;
 
 pub use error::{Error, Result};

@@ -40,6 +40,10 @@ enum Command {
     Rescore(cli::rescore::Args),
     /// Train one category's detector (structural SVM) on annotated frames and write a model file.
     Train(cli::train::Args),
+    /// Room layout of frames: a Manhattan cuboid per frame (JSON, overlay picture, optional PLY).
+    Layout(cli::layout::Args),
+    /// Train the room-layout model (structural SVM over layout hypotheses) on annotated frames.
+    TrainLayout(cli::train_layout::Args),
 }
 
 fn main() {
@@ -64,6 +68,8 @@ fn main() {
         Command::Calibrate(args) => cli::calibrate::run(args, &options),
         Command::Cascade(args) => cli::cascade::run(args, &options),
         Command::Rescore(args) => cli::rescore::run(args, &options),
+        Command::Layout(args) => cli::layout::run(args, &options),
+        Command::TrainLayout(args) => cli::train_layout::run(args, &options),
     };
     if let Err(err) = result {
         eprintln!("error: {}", cli::error_text(&err));

@@ -10,7 +10,7 @@
 //!   "window": {"step": 0.1, "min_points": 50},
 //!   "features": {"path": "fast", "subdivisions": 2},
 //!   "bias": 0.0, "threshold": 0.0,
-//!   "weights": [layout.dim() numbers, in the order of `features::layout`],
+//!   "weights": [layout.dim() numbers, in the order of `features::feature_layout`],
 //!   "training": {free-form provenance: data, C, ε, iterations, seconds, ...},
 //!   "calibration": {"a": 2.1, "b": -1.3, "detections": 5210, "true_positives": 212, "iou": 0.25,
 //!                   "data": "...", "frames": 150}   (optional, written by `cog-gpu calibrate`)
@@ -38,7 +38,7 @@ use crate::calibration::Calibration;
 use crate::category::{normalise_name, CATEGORIES};
 use crate::error::{Error, Result};
 use crate::features::fast::FastOptions;
-use crate::features::{Layout, SizeQuantiles};
+use crate::features::{FeatureLayout, SizeQuantiles};
 use crate::limits::{check_step, check_subdivisions, MAX_OBJECT_SIZE_M, MIN_OBJECT_SIZE_M};
 
 pub const MODEL_FORMAT: &str = "cog-gpu-model";
@@ -91,7 +91,7 @@ pub struct Model {
     pub version: u32,
     pub category: String,
     pub layout_id: String,
-    pub layout: Layout,
+    pub layout: FeatureLayout,
     pub sizes: SizeQuantiles,
     pub window: WindowSettings,
     pub features: FeatureSettings,
@@ -116,7 +116,7 @@ impl Model {
     /// A checked model with bias 0 and the default threshold.
     pub fn new(
         category: &str,
-        layout: Layout,
+        layout: FeatureLayout,
         sizes: SizeQuantiles,
         window: WindowSettings,
         features: FeatureSettings,
@@ -249,9 +249,12 @@ pub fn check_weight_magnitudes(weights: &[f32], bias: f32) -> std::result::Resul
     Ok(())
 }
 
+/// File name of the room-layout model in a models directory (`crate::room_layout::model`).
+pub const LAYOUT_MODEL_FILE: &str = "layout.json";
+
 /// Files of a models directory that belong to later stages, not detector models: the context cascade
-/// (`cascade.json`, [`crate::cascade`]) and the room layout model (`layout.json`).
-pub const OTHER_STAGE_FILES: &[&str] = &["cascade", "layout"];
+/// (`cascade.json`, [`crate::cascade`]) and the room layout model ([`LAYOUT_MODEL_FILE`]).
+pub const OTHER_STAGE_FILES: &[&str] = &["cascade.json", LAYOUT_MODEL_FILE];
 
 /// The models of a directory (`*.json` except [`OTHER_STAGE_FILES`]), sorted by category. With `categories`, exactly those (each must
 /// have a model); without, every model file. A directory without models is an error.
@@ -265,7 +268,8 @@ pub fn read_models_dir(dir: &Path, categories: Option<&[String]>) -> Result<Vec<
         .flatten()
         .map(|e| e.path())
         .filter(|p| p.extension().is_some_and(|x| x == "json") && p.is_file())
-        .filter(|p| !p.file_stem().and_then(|s| s.to_str()).is_some_and(|stem| OTHER_STAGE_FILES.contains(&stem)))
+        // The later stages' files live beside the detectors; they are no category.
+        .filter(|p| !p.file_name().and_then(|s| s.to_str()).is_some_and(|name| OTHER_STAGE_FILES.contains(&name)))
         .collect();
     paths.sort();
     for path in paths {

@@ -4,7 +4,7 @@
 use cog_gpu::calibration::{fit_logistic, label_detections, Calibration, MIN_SLOPE};
 use cog_gpu::detect::{calibrate, overlay_selection};
 use cog_gpu::eval::Detection;
-use cog_gpu::features::{Layout, SizeQuantiles};
+use cog_gpu::features::{FeatureLayout, SizeQuantiles};
 use cog_gpu::frame::Object;
 use cog_gpu::geometry::Cuboid;
 use cog_gpu::model::{FeaturePath, FeatureSettings, Model, WindowSettings};
@@ -114,7 +114,7 @@ fn labels_follow_the_benchmark_matching() {
 }
 
 fn tiny_model(category: &str) -> Model {
-    let layout = Layout::new([3, 3, 3], false, cog_gpu::features::Groups::ALL).unwrap();
+    let layout = FeatureLayout::new([3, 3, 3], false, cog_gpu::features::Groups::ALL).unwrap();
     let boxes: Vec<Cuboid> =
         (0..5).map(|k| Cuboid::new(Vec3::ZERO, Vec3::new(1.0 + 0.1 * k as f32, 1.0, 1.0), 0.0)).collect();
     Model::new(

@@ -5,7 +5,7 @@ use std::process::Command;
 
 use cog_gpu::detect::{detect_frame, overlay, DetectOptions};
 use cog_gpu::eval::FrameDetections;
-use cog_gpu::features::{Backend, Groups, Layout, Preprocessed, SizeQuantiles};
+use cog_gpu::features::{Backend, FeatureLayout, Groups, Preprocessed, SizeQuantiles};
 use cog_gpu::frame::{DepthSource, Frame};
 use cog_gpu::geometry::{iou_3d, projected_hull_area, Camera};
 use cog_gpu::model::{FeaturePath, FeatureSettings, Model, WindowSettings};
@@ -18,7 +18,7 @@ fn bed_sizes() -> SizeQuantiles {
 
 /// A one-voxel model whose score is the box's point density: weight 1 on the density, 0 elsewhere.
 fn density_model(path: FeaturePath, step: f32) -> Model {
-    let layout = Layout::new([1, 1, 1], false, Groups::GEOM).unwrap();
+    let layout = FeatureLayout::new([1, 1, 1], false, Groups::GEOM).unwrap();
     let mut weights = vec![0.0; layout.dim()];
     weights[0] = 1.0;
     let mut model = Model::new(

@@ -11,7 +11,7 @@ use cog_gpu::diagnose::{
 };
 use cog_gpu::eval::{Detection, FrameDetections};
 use cog_gpu::features::hypotheses::{default_yaws, sliding_window, WindowOptions};
-use cog_gpu::features::{FeatureScene, Groups, Layout, Preprocessed, SizeQuantiles};
+use cog_gpu::features::{FeatureLayout, FeatureScene, Groups, Preprocessed, SizeQuantiles};
 use cog_gpu::frame::{Frame, Object};
 use cog_gpu::geometry::{iou_3d, Cuboid};
 use cog_gpu::model::{FeaturePath, FeatureSettings, Model, WindowSettings};
@@ -232,7 +232,7 @@ fn window_recall_on_a_synthetic_frame() {
     // The per-frame function with a model: the same hypotheses (its step, sizes, min_points), the frame's
     // boxes of the model's category; other categories absent.
     let category = frame.objects[0].category.clone();
-    let layout = Layout::new([1, 1, 1], false, Groups::GEOM).unwrap();
+    let layout = FeatureLayout::new([1, 1, 1], false, Groups::GEOM).unwrap();
     let model = Model::new(
         &category,
         layout,
@@ -343,7 +343,7 @@ fn cli_window_recall_with_models() {
     let frame_dir = data.join(&synthetic.frame.name);
     synthetic.write(&frame_dir, None).unwrap();
     let category = synthetic.frame.objects[0].category.clone();
-    let layout = Layout::new([1, 1, 1], false, Groups::GEOM).unwrap();
+    let layout = FeatureLayout::new([1, 1, 1], false, Groups::GEOM).unwrap();
     let model = Model::new(
         &category,
         layout,

@@ -4,7 +4,7 @@ use std::f32::consts::PI;
 use std::path::Path;
 
 use cog_gpu::features::cpu::{self, view_cosine};
-use cog_gpu::features::layout::{view_features, Groups, Layout, COG, DENSITY, NORMALS, PER_VOXEL, VIEW};
+use cog_gpu::features::feature_layout::{view_features, FeatureLayout, Groups, COG, DENSITY, NORMALS, PER_VOXEL, VIEW};
 use cog_gpu::features::preprocess::{
     estimate_normals, floor_height, gradient_orientation, normal_bin, plane_normal, ImageGradients, Preprocessed,
 };
@@ -148,7 +148,7 @@ fn silhouette_area(camera: &Camera, corners: &[Vec3; 8]) -> f32 {
 #[test]
 fn density_of_a_voxel_filled_at_a_known_rate() {
     // One 0.4 m voxel (1×1×1 grid, not expanded) 2 m in front of the camera; 400 points on its front face.
-    let layout = Layout::new([1, 1, 1], false, Groups::ALL).unwrap();
+    let layout = FeatureLayout::new([1, 1, 1], false, Groups::ALL).unwrap();
     let (points, normals, gradients) = wall(2.0, (-0.2, 0.2), (-0.2, 0.2), 20, Vec2::ZERO);
     let scene = scene_of(points, normals, gradients, -0.2, &[0.0]);
     let cuboid = Cuboid::new(Vec3::new(0.0, 2.1, 0.0), Vec3::splat(0.4), 0.0); // front face at y = 1.9
@@ -181,7 +181,7 @@ fn fronto_parallel_wall_lands_in_the_expected_cog_bin() {
     // Gradient at 40° = 2π/9 on the face (from the width axis toward up): COG bin 2. In the image, up is
     // −y, so the image gradient is (cos 40°, −sin 40°).
     let phi = 2.0 * PI / 9.0;
-    let layout = Layout::new([1, 1, 1], false, Groups::ALL).unwrap();
+    let layout = FeatureLayout::new([1, 1, 1], false, Groups::ALL).unwrap();
     let (points, normals, gradients) = wall(2.0, (-0.2, 0.2), (-0.2, 0.2), 10, Vec2::new(phi.cos(), -phi.sin()) * 0.5);
     let scene = scene_of(points, normals, gradients, -0.2, &[0.0]);
     let cuboid = Cuboid::new(Vec3::new(0.0, 2.1, 0.0), Vec3::splat(0.4), 0.0);
@@ -226,7 +226,7 @@ fn turning_cuboid_and_scene_together_keeps_cog_while_hog_changes() {
     // turned about its vertical axis by different yaws in front of a fixed camera. The image gradients are
     // recomputed analytically for each pose.
     let phi = 2.0 * PI / 9.0;
-    let layout = Layout::new([1, 1, 1], false, Groups::ALL).unwrap();
+    let layout = FeatureLayout::new([1, 1, 1], false, Groups::ALL).unwrap();
     let centre = Vec3::new(0.2, 2.5, -0.3);
     let size = Vec3::splat(0.15);
     let mut cogs = Vec::new();
@@ -300,7 +300,7 @@ fn real_frame_counts_match_a_brute_force_pass() {
     let strict = sliding_window(&scene, &WindowOptions { sizes: set_sizes(), min_points: hyp.points_inside });
     assert!(strict.hypotheses.len() < set.hypotheses.len() && strict.generated == set.generated);
     assert!(strict.hypotheses.iter().all(|h| h.points_inside >= hyp.points_inside));
-    let layout = Layout::default();
+    let layout = FeatureLayout::default();
     // A few kept hypotheses spread over the set: counts from the features vs a brute-force pass with
     // Cuboid::to_local over every point.
     let step = (set.hypotheses.len() / 5).max(1);
@@ -348,7 +348,7 @@ fn weights_files_round_trip_and_reject_other_layouts() {
     use cog_gpu::features::WeightsFile;
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("w.json");
-    let layout = Layout::default();
+    let layout = FeatureLayout::default();
     let weights: Vec<f32> = (0..layout.dim()).map(|n| n as f32 * 1e-4).collect();
     let file = WeightsFile::new(layout, "bed", weights, 0.5).unwrap();
     file.write(&path).unwrap();
@@ -360,7 +360,7 @@ fn weights_files_round_trip_and_reject_other_layouts() {
     assert!(err.contains("w.json") && err.contains("layout_id"), "{err}");
     // Wrong length; non-zero weights in a switched-off group.
     assert!(WeightsFile::new(layout, "bed", vec![0.0; 10], 0.0).is_err());
-    let geom = Layout::new([5, 5, 5], true, Groups::GEOM).unwrap();
+    let geom = FeatureLayout::new([5, 5, 5], true, Groups::GEOM).unwrap();
     let mut w = vec![0.0; geom.dim()];
     w[COG] = 1.0;
     assert!(WeightsFile::new(geom, "bed", w, 0.0).unwrap_err().to_string().contains("cog bin 0"));

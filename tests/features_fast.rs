@@ -4,7 +4,7 @@ use std::path::Path;
 
 use cog_gpu::features::cpu;
 use cog_gpu::features::fast::{FastEngine, FastOptions};
-use cog_gpu::features::layout::{Groups, Layout};
+use cog_gpu::features::feature_layout::{FeatureLayout, Groups};
 use cog_gpu::features::scene::FIXED_PER_METRE;
 use cog_gpu::features::{Hypothesis, PreparedWindow, SizeQuantiles};
 use cog_gpu::frame::{DepthSource, Frame};
@@ -38,7 +38,12 @@ fn cosine(a: &[f32], b: &[f32]) -> f64 {
 /// Brute force over all points, written from the module doc's rule rather than the engine's code: a point
 /// belongs to voxel (i, j) when the centre of its lattice cell lies inside the voxel's ground rectangle, and
 /// to layer k by its exact height.
-fn brute_force_counts(window: &PreparedWindow, layout: &Layout, hyp: &Hypothesis, subdivisions: u32) -> Vec<u32> {
+fn brute_force_counts(
+    window: &PreparedWindow,
+    layout: &FeatureLayout,
+    hyp: &Hypothesis,
+    subdivisions: u32,
+) -> Vec<u32> {
     let grid = &window.scene.yaws[hyp.yaw_index as usize];
     let cell = grid.step / subdivisions as f32;
     let g = layout.grid();
@@ -76,7 +81,7 @@ fn brute_force_counts(window: &PreparedWindow, layout: &Layout, hyp: &Hypothesis
 #[test]
 fn voxel_counts_equal_a_brute_force_count() {
     let w = window("chair", 0.1);
-    for layout in [Layout::default(), Layout::new([3, 1, 3], true, Groups::GEOM).unwrap()] {
+    for layout in [FeatureLayout::default(), FeatureLayout::new([3, 1, 3], true, Groups::GEOM).unwrap()] {
         for subdivisions in [1, 2, 3] {
             let engine = FastEngine::new(&w.scene, &layout, FastOptions { subdivisions });
             for hyp in sample(&w, 12) {
@@ -97,7 +102,7 @@ fn voxel_counts_equal_a_brute_force_count() {
 #[test]
 fn fast_features_approach_the_exact_ones_as_the_lattice_refines() {
     let w = window("bed", 0.1);
-    let layout = Layout::default();
+    let layout = FeatureLayout::default();
     let hyps = sample(&w, 40);
     let (exact, _) = cpu::features(&w.scene, &layout, &hyps);
     let mean_cosine = |subdivisions: u32| {
@@ -117,7 +122,7 @@ fn fast_features_approach_the_exact_ones_as_the_lattice_refines() {
 #[test]
 fn fused_scores_are_the_dot_products_of_the_features_and_reproducible() {
     let w = window("table", 0.1);
-    let layout = Layout::default();
+    let layout = FeatureLayout::default();
     let hyps = sample(&w, 60);
     let engine = FastEngine::new(&w.scene, &layout, FastOptions::default());
     let features = engine.features(&hyps);
@@ -143,7 +148,7 @@ fn fused_scores_are_the_dot_products_of_the_features_and_reproducible() {
 #[test]
 fn switched_off_groups_stay_zero() {
     let w = window("chair", 0.2);
-    let layout = Layout::new([5, 5, 5], true, Groups::GEOM).unwrap();
+    let layout = FeatureLayout::new([5, 5, 5], true, Groups::GEOM).unwrap();
     let hyps = sample(&w, 10);
     let features = FastEngine::new(&w.scene, &layout, FastOptions::default()).features(&hyps);
     let mask = layout.mask();

@@ -13,7 +13,7 @@ mod common;
 use std::path::Path;
 
 use cog_gpu::features::fast::{FastEngine, FastOptions};
-use cog_gpu::features::layout::{Groups, Layout};
+use cog_gpu::features::feature_layout::{FeatureLayout, Groups};
 use cog_gpu::features::{Hypothesis, PreparedWindow, SizeQuantiles};
 use cog_gpu::frame::{DepthSource, Frame};
 use cog_gpu::gpu::fast::{fast_scores_gpu, fast_scores_gpu_chunked, fast_scores_reference, MAX_CHUNK};
@@ -51,7 +51,7 @@ fn sample(window: &PreparedWindow, count: usize) -> Vec<Hypothesis> {
 }
 
 /// `count` pseudo-random weight vectors in [−1, 1) (a 64-bit LCG per vector).
-fn random_weights(layout: &Layout, count: usize, seed: u64) -> Vec<Vec<f32>> {
+fn random_weights(layout: &FeatureLayout, count: usize, seed: u64) -> Vec<Vec<f32>> {
     (0..count as u64)
         .map(|w| {
             let mut state = (seed * 1000 + w).wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
@@ -87,7 +87,7 @@ fn assert_scores_match(got: &[f32], expected: &[f32], magnitude: &[f32], what: &
 fn compare_paths(
     ctx: &GpuContext,
     window: &PreparedWindow,
-    layout: &Layout,
+    layout: &FeatureLayout,
     hyps: &[Hypothesis],
     weights: &[Vec<f32>],
     what: &str,
@@ -110,7 +110,7 @@ fn compare_paths(
 fn gpu_fast_scores_match_the_cpu_on_a_real_frame_and_are_reproducible() {
     let Some(ctx) = context() else { return };
     let window = real_window("bed");
-    let layout = Layout::default();
+    let layout = FeatureLayout::default();
     let hyps = sample(&window, 2000);
     assert!(hyps.len() >= 1500, "{} hypotheses", hyps.len());
     let weights = random_weights(&layout, 3, 1);
@@ -127,7 +127,7 @@ fn gpu_fast_scores_match_the_cpu_on_a_synthetic_frame() {
     let window = synthetic_window("chair");
     let hyps = sample(&window, 3000);
     assert!(hyps.len() >= 1000, "{} hypotheses", hyps.len());
-    let layout = Layout::default();
+    let layout = FeatureLayout::default();
     compare_paths(&ctx, &window, &layout, &hyps, &random_weights(&layout, 2, 2), "synthetic frame");
 }
 
@@ -138,11 +138,11 @@ fn gpu_fast_scores_honour_switched_off_groups_and_other_grids() {
     let hyps = sample(&window, 600);
     let off = |density, normals, cog, view| Groups { density, normals, cog, view };
     for layout in [
-        Layout::new([5, 5, 5], true, off(true, false, true, false)).unwrap(),
-        Layout::new([5, 5, 5], true, off(false, true, false, true)).unwrap(),
-        Layout::new([5, 5, 5], true, off(false, false, true, true)).unwrap(),
-        Layout::new([3, 1, 3], true, Groups::GEOM).unwrap(),
-        Layout::new([5, 5, 7], false, Groups::ALL).unwrap(),
+        FeatureLayout::new([5, 5, 5], true, off(true, false, true, false)).unwrap(),
+        FeatureLayout::new([5, 5, 5], true, off(false, true, false, true)).unwrap(),
+        FeatureLayout::new([5, 5, 5], true, off(false, false, true, true)).unwrap(),
+        FeatureLayout::new([3, 1, 3], true, Groups::GEOM).unwrap(),
+        FeatureLayout::new([5, 5, 7], false, Groups::ALL).unwrap(),
     ] {
         compare_paths(&ctx, &window, &layout, &hyps, &random_weights(&layout, 3, 3), &layout.id());
     }
@@ -152,7 +152,7 @@ fn gpu_fast_scores_honour_switched_off_groups_and_other_grids() {
 fn chunked_dispatches_and_weight_passes_equal_the_single_dispatch() {
     let Some(ctx) = context() else { return };
     let window = synthetic_window("bed");
-    let layout = Layout::default();
+    let layout = FeatureLayout::default();
     let hyps = sample(&window, 400);
     // Ten weight vectors: two passes of the kernel (at most 8 per pass).
     let weights = random_weights(&layout, 10, 4);

@@ -7,7 +7,7 @@ mod common;
 
 use std::path::Path;
 
-use cog_gpu::features::layout::{Groups, Layout, COG, PER_VOXEL};
+use cog_gpu::features::feature_layout::{FeatureLayout, Groups, COG, PER_VOXEL};
 use cog_gpu::features::{
     cpu, default_yaws, sliding_window, FeatureScene, Hypothesis, Preprocessed, SizeQuantiles, WindowOptions,
 };
@@ -41,7 +41,7 @@ fn real_scene(count: usize) -> (FeatureScene, Vec<Hypothesis>) {
 /// Compares GPU and CPU feature rows: densities and normal bins are (count / area), COG is normalised.
 /// Counts must agree exactly (checked through `inside` and through the zero pattern); values within 1e-5
 /// relative (with an absolute floor of 1e-5 for normalised entries near zero).
-fn assert_rows_match(layout: &Layout, gpu: &[f32], cpu: &[f32], what: &str) {
+fn assert_rows_match(layout: &FeatureLayout, gpu: &[f32], cpu: &[f32], what: &str) {
     assert_eq!(gpu.len(), cpu.len());
     for (n, (&g, &c)) in gpu.iter().zip(cpu).enumerate() {
         let slot = n % layout.dim();
@@ -60,7 +60,7 @@ fn assert_rows_match(layout: &Layout, gpu: &[f32], cpu: &[f32], what: &str) {
 fn gpu_features_equal_cpu_features_on_a_real_frame() {
     let Some(ctx) = context() else { return };
     let (scene, hyps) = real_scene(24);
-    let layout = Layout::default();
+    let layout = FeatureLayout::default();
     let (cpu_rows, cpu_inside) = cpu::features(&scene, &layout, &hyps);
     let (gpu_rows, gpu_inside) = features_gpu(&ctx, &scene, &layout, &hyps).unwrap();
     assert_eq!(gpu_inside, cpu_inside, "points inside each expanded box");
@@ -81,9 +81,9 @@ fn gpu_matches_cpu_on_other_grids_and_groups() {
     let Some(ctx) = context() else { return };
     let (scene, hyps) = real_scene(8);
     for layout in [
-        Layout::new([3, 1, 3], true, Groups::ALL).unwrap(),
-        Layout::new([5, 5, 7], false, Groups::ALL).unwrap(),
-        Layout::new([3, 3, 3], true, Groups::GEOM).unwrap(),
+        FeatureLayout::new([3, 1, 3], true, Groups::ALL).unwrap(),
+        FeatureLayout::new([5, 5, 7], false, Groups::ALL).unwrap(),
+        FeatureLayout::new([3, 3, 3], true, Groups::GEOM).unwrap(),
     ] {
         let (cpu_rows, cpu_inside) = cpu::features(&scene, &layout, &hyps);
         let (gpu_rows, gpu_inside) = features_gpu(&ctx, &scene, &layout, &hyps).unwrap();
@@ -97,7 +97,7 @@ fn fused_scores_equal_dot_products_of_cpu_features() {
     let Some(ctx) = context() else { return };
     // Bed-sized boxes: ~10⁵ points each, so the exact count comparison below covers millions of points.
     let (scene, hyps) = real_scene_of("bed", 12);
-    let layout = Layout::default();
+    let layout = FeatureLayout::default();
     let (cpu_rows, _) = cpu::features(&scene, &layout, &hyps);
     // Ten weight vectors: two passes of the kernel (at most 8 per pass).
     let weights: Vec<Vec<f32>> =
@@ -137,7 +137,7 @@ fn gpu_counts_match_where_lavapipe_capped_loops() {
         .expect("the hypothesis that exposed the cap");
     all.sort_by_key(|h| std::cmp::Reverse(h.points_inside));
     let hyps = vec![capped, all[0], all[1]];
-    let layout = Layout::default();
+    let layout = FeatureLayout::default();
     let (cpu_rows, cpu_inside) = cpu::features(&scene, &layout, &hyps);
     let (gpu_rows, gpu_inside) = features_gpu(&ctx, &scene, &layout, &hyps).unwrap();
     assert!(cpu_inside.iter().all(|&n| n > 50_000), "{cpu_inside:?}");

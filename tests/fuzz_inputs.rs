@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-use cog_gpu::features::{Groups, Layout, SizeQuantiles};
+use cog_gpu::features::{FeatureLayout, Groups, SizeQuantiles};
 use cog_gpu::frame::{Frame, Object, RoomLayout};
 use cog_gpu::geometry::Cuboid;
 use cog_gpu::model::{FeaturePath, FeatureSettings, Model, WindowSettings};
@@ -99,7 +99,7 @@ fn text(path: &Path) -> &str {
 
 /// A one-voxel density model (weight 1 on the density) for `category`.
 fn model(category: &str) -> Model {
-    let layout = Layout::new([1, 1, 1], false, Groups::GEOM).unwrap();
+    let layout = FeatureLayout::new([1, 1, 1], false, Groups::GEOM).unwrap();
     let mut weights = vec![0.0; layout.dim()];
     weights[0] = 1.0;
     let sizes =

@@ -2,7 +2,7 @@
 
 use std::path::Path;
 
-use cog_gpu::features::{Groups, Layout, SizeQuantiles};
+use cog_gpu::features::{FeatureLayout, Groups, SizeQuantiles};
 use cog_gpu::model::{read_models_dir, FeaturePath, FeatureSettings, Model, WindowSettings};
 
 fn sizes() -> SizeQuantiles {
@@ -10,7 +10,7 @@ fn sizes() -> SizeQuantiles {
 }
 
 fn model(category: &str) -> Model {
-    let layout = Layout::new([3, 3, 3], false, Groups::GEOM).unwrap();
+    let layout = FeatureLayout::new([3, 3, 3], false, Groups::GEOM).unwrap();
     let mask = layout.mask();
     let weights = (0..layout.dim()).map(|n| if mask[n] { (n % 7) as f32 * 0.1 - 0.3 } else { 0.0 }).collect();
     Model::new(

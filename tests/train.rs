@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use cog_gpu::features::fast::{FastEngine, FastOptions};
-use cog_gpu::features::{Groups, Layout, Preprocessed, SizeQuantiles};
+use cog_gpu::features::{FeatureLayout, Groups, Preprocessed, SizeQuantiles};
 use cog_gpu::frame::{DepthSource, Frame};
 use cog_gpu::geometry::{structured_loss, Cuboid};
 use cog_gpu::learn::detector::{
@@ -66,7 +66,7 @@ fn small_oracle_with(target: PositiveTarget) -> DetectorOracle {
     assert!(!chairs.is_empty());
     let sizes = SizeQuantiles::from_cuboids(&chairs).unwrap().sizes().into_iter().step_by(7).collect();
     let settings = TrainingSettings {
-        layout: Layout::new([3, 3, 3], false, Groups::ALL).unwrap(),
+        layout: FeatureLayout::new([3, 3, 3], false, Groups::ALL).unwrap(),
         sizes,
         step: 0.3,
         min_points: 50,
@@ -284,7 +284,7 @@ fn train_writes_a_model_and_resumes_to_the_same_weights() {
     let read = |p: &Path| -> serde_json::Value { serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap() };
     let (a, b) = (read(&straight), read(&split));
     assert_eq!(a["category"], "bed");
-    assert_eq!(a["weights"].as_array().unwrap().len(), Layout::default().dim());
+    assert_eq!(a["weights"].as_array().unwrap().len(), FeatureLayout::default().dim());
     assert_eq!(a["weights"], b["weights"], "a resumed run must end with the same weights");
     assert!(a["weights"].as_array().unwrap().iter().any(|v| v.as_f64().unwrap() != 0.0));
 }

@@ -21,7 +21,7 @@ use super::{options, GlobalOptions};
 use cog_gpu::features::fast::{FastEngine, FastOptions};
 use cog_gpu::features::hypotheses::{DEFAULT_MIN_POINTS, DEFAULT_STEP};
 use cog_gpu::features::window::{category_sizes, DEFAULT_SIZE_STATS};
-use cog_gpu::features::{budget, cpu, Backend, Hypothesis, Layout, PreparedWindow};
+use cog_gpu::features::{budget, cpu, Backend, FeatureLayout, Hypothesis, PreparedWindow};
 use cog_gpu::frame::{DepthSource, Frame};
 
 /// The real frame benchmarked when no `--frame` is given (until the synthetic standard frame exists).
@@ -94,7 +94,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     let frame = Frame::read(&args.frame, DepthSource::Raw)?;
     let sizes = category_sizes(&args.sizes, &args.category)?;
     let window = PreparedWindow::new(&frame, sizes, args.step, args.min_points)?;
-    let layout = Layout::default();
+    let layout = FeatureLayout::default();
     let weights = vec![bench_weights(layout.dim(), 7)];
     let kept = &window.set.hypotheses;
     let scored: Vec<_> = match args.limit {
@@ -239,7 +239,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
 /// Cosine similarity of fast and exact feature vectors on up to 300 of `hypotheses` (evenly spread).
 fn cosine_report(
     window: &PreparedWindow,
-    layout: &Layout,
+    layout: &FeatureLayout,
     hypotheses: &[Hypothesis],
     options: FastOptions,
 ) -> serde_json::Value {

@@ -1,6 +1,9 @@
 //! `cog-gpu detect [FRAME_DIR...] [--models DIR] [--out DIR] [--categories a,b,...] ...`: detects objects
 //! with trained models and writes, per frame, `<out>/<frame>.json` (detections) and `<out>/<frame>.png`
-//! (overlay). See `cog_gpu::detect` for what happens per frame.
+//! (overlay). See `cog_gpu::detect` for what happens per frame. When the models directory also holds
+//! `layout.json` (`cog_gpu::room_layout`), the room is laid out too: its record goes under `"layout"` in
+//! `<frame>.json` and its edges on the overlay. `--ply` writes `<out>/<frame>.ply`: the coloured upright
+//! point cloud with the overlay's cuboids and the room as line sets (`cog_gpu::ply`).
 //!
 //! Defaults: every frame under `assets/sample/`, the models of `assets/models/`, output `detections/`.
 //! When a default `assets/...` path does not exist relative to the current directory, the crate's own
@@ -16,6 +19,7 @@ use anyhow::{bail, Context};
 use cog_gpu::cascade::Cascade;
 use cog_gpu::category::normalise_name;
 use cog_gpu::detect::{detect_frame, overlay, overlay_selection, DetectOptions};
+use cog_gpu::draw::category_colour;
 use cog_gpu::eval::FrameDetections;
 use cog_gpu::features::Backend;
 use cog_gpu::frame::{is_frame_dir, DepthSource, Frame};
@@ -66,6 +70,10 @@ pub struct Args {
     /// report the first-stage detections (as `cog-gpu cascade` needs for training).
     #[arg(long)]
     pub no_cascade: bool,
+    /// Also write `<frame>.ply`: the coloured upright point cloud with the overlay's cuboids (and the room,
+    /// when there is a layout model) as line sets.
+    #[arg(long)]
+    pub ply: bool,
     /// Stop at the first frame that cannot be read or detected in (default: report it, go on with the
     /// others and fail at the end).
     #[arg(long)]
@@ -73,7 +81,7 @@ pub struct Args {
 }
 
 /// `path` if it exists, else the same relative path inside the crate's checkout (for the defaults).
-fn resolve_default(path: &Path) -> PathBuf {
+pub(super) fn resolve_default(path: &Path) -> PathBuf {
     if path.exists() || path.is_absolute() {
         return path.to_path_buf();
     }
@@ -86,7 +94,7 @@ fn resolve_default(path: &Path) -> PathBuf {
 }
 
 /// Frame directories of the arguments (each a frame, or searched recursively).
-fn frame_dirs(args: &[PathBuf]) -> anyhow::Result<Vec<PathBuf>> {
+pub(super) fn frame_dirs(args: &[PathBuf]) -> anyhow::Result<Vec<PathBuf>> {
     let roots = if args.is_empty() { vec![resolve_default(Path::new("assets/sample"))] } else { args.to_vec() };
     let mut frames = Vec::new();
     for root in roots {
@@ -138,6 +146,8 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         }
     }
     let cascade = cascade_for(&models_dir, &models, args.no_cascade)?;
+    // The room layout comes with the detections when the models directory holds a layout model.
+    let layout_model = super::layout::model_in_dir(&models_dir)?;
     let frames = frame_dirs(&args.frames)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating the output directory {}", args.out.display()))?;
@@ -162,7 +172,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     let mut failures = Vec::new();
     for dir in &frames {
         progress.set_message(dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default());
-        match detect_one(dir, &models, cascade.as_ref(), backend, &detect_options, &args) {
+        match detect_one(dir, &models, cascade.as_ref(), layout_model.as_ref(), backend, &detect_options, &args) {
             Ok(detections) => results.push(detections),
             Err(err) if args.fail_fast => return Err(err),
             Err(err) => {
@@ -216,11 +226,13 @@ fn cascade_for(
     Ok(Some(cascade))
 }
 
-/// Reads one frame, detects, and writes its detections file and overlay.
+/// Reads one frame, detects (rescores with `cascade`, lays out the room with `layout_model`), and writes
+/// its detections file, overlay and PLY.
 fn detect_one(
     dir: &Path,
     models: &[cog_gpu::model::Model],
     cascade: Option<&Cascade>,
+    layout_model: Option<&cog_gpu::room_layout::model::LayoutModel>,
     backend: Backend,
     detect_options: &DetectOptions,
     args: &Args,
@@ -231,18 +243,43 @@ fn detect_one(
     if let Some(cascade) = cascade {
         cascade.rescore(&mut detections.detections).with_context(|| format!("rescoring {}", dir.display()))?;
     }
+    let layout = match layout_model {
+        Some(model) => Some(super::layout::frame_layout(&frame, Some(model), backend)?),
+        None => None,
+    };
     let json_path = args.out.join(format!("{}.json", frame.name));
-    detections.write(&json_path)?;
+    match &layout {
+        // The detections file with the room under "layout" (the layout file's record).
+        Some((_, record)) => {
+            let mut value = serde_json::to_value(&detections)?;
+            value["layout"] = serde_json::to_value(record)?;
+            std::fs::write(&json_path, serde_json::to_string_pretty(&value)?)
+                .with_context(|| format!("writing {}", json_path.display()))?;
+        }
+        None => detections.write(&json_path)?,
+    }
+    // The best detections over all categories, one category per object.
+    let best = FrameDetections {
+        frame: detections.frame.clone(),
+        detections: overlay_selection(&detections.detections, args.overlay_top),
+    };
+    let room = layout.as_ref().map(|(predicted, _)| &predicted.room);
     if !args.no_overlay {
         let png_path = args.out.join(format!("{}.png", frame.name));
-        // The best detections over all categories, one category per object.
-        let best = FrameDetections {
-            frame: detections.frame.clone(),
-            detections: overlay_selection(&detections.detections, args.overlay_top),
-        };
-        overlay(&frame, &best)
-            .save(&png_path)
-            .with_context(|| format!("writing the overlay {}", png_path.display()))?;
+        let mut img = overlay(&frame, &best);
+        if let Some(room) = room {
+            let camera = cog_gpu::geometry::Camera::new(frame.intrinsics(), frame.rtilt());
+            cog_gpu::room_layout::output::draw_room(&mut img, &camera, room, 2);
+        }
+        img.save(&png_path).with_context(|| format!("writing the overlay {}", png_path.display()))?;
+    }
+    if args.ply {
+        let boxes = best
+            .detections
+            .iter()
+            .map(|d| cog_gpu::ply::LineSet::from_box_corners(&d.cuboid().corners(), category_colour(&d.category)))
+            .collect();
+        super::layout::write_scene_ply(&args.out.join(format!("{}.ply", frame.name)), &frame, boxes, room)?;
     }
     Ok(detections)
 }

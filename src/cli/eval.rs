@@ -78,6 +78,11 @@ pub struct Args {
     /// With --diagnose --models: overrides every model's window step (metres), as `detect --step`.
     #[arg(long, requires = "models", value_parser = options::step)]
     pub step: Option<f32>,
+    /// Evaluate room layouts instead of detections: per-frame and mean free-space IoU of the `layout`
+    /// files (or `detect` files with a "layout") in --detections against each frame's room annotation
+    /// (see `eval_layout`).
+    #[arg(long, conflicts_with_all = ["diagnose", "plots", "categories"])]
+    pub layout: bool,
 }
 
 /// One frame's ground truth and its detections (`None`: no detections file).
@@ -165,6 +170,13 @@ fn detection_files(dir: &Path) -> anyhow::Result<HashMap<String, PathBuf>> {
 }
 
 pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
+    if args.layout {
+        let mut dataset = Dataset::open(&args.data)?;
+        if let Some(split) = &args.split {
+            dataset = dataset.with_split(split)?;
+        }
+        return super::eval_layout::run(&dataset.frames, &args.detections, args.json, args.fail_fast);
+    }
     let categories = categories(&args.categories)?;
     let models = match &args.models {
         Some(dir) => Some(diagnosis_models(dir, args.step, &categories)?),

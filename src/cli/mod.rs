@@ -5,12 +5,15 @@ pub mod calibrate;
 pub mod cascade;
 pub mod detect;
 pub mod eval;
+pub mod eval_layout;
 pub mod info;
+pub mod layout;
 pub mod options;
 pub mod rescore;
 pub mod score;
 pub mod synth;
 pub mod train;
+pub mod train_layout;
 
 /// An error and its causes on one line, each cause once: a library error that already quotes its source
 /// (an I/O error's OS message) does not get it repeated.

@@ -35,7 +35,7 @@ use anyhow::{bail, Context};
 use cog_gpu::category::{normalise_name, CATEGORIES};
 use cog_gpu::features::fast::{FastOptions, DEFAULT_SUBDIVISIONS};
 use cog_gpu::features::hypotheses::DEFAULT_MIN_POINTS;
-use cog_gpu::features::{budget, Groups, Layout, SizeQuantiles};
+use cog_gpu::features::{budget, FeatureLayout, Groups, SizeQuantiles};
 use cog_gpu::frame::Dataset;
 use cog_gpu::learn::detector::{
     cached_rows_per_example, collect_examples, instances_of, read_all_annotations, train_detector, DetectorOracle,
@@ -202,7 +202,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     if !CATEGORIES.contains(&category.as_str()) {
         bail!("unknown category '{}'; the categories are: {}", args.category, CATEGORIES.join(", "));
     }
-    let layout = Layout::new([5, 5, 5], !args.no_expand, parse_groups(&args.groups)?)?;
+    let layout = FeatureLayout::new([5, 5, 5], !args.no_expand, parse_groups(&args.groups)?)?;
     let out = args.out.clone().unwrap_or_else(|| PathBuf::from("models").join(format!("{category}.json")));
     let checkpoint = PathBuf::from(format!("{}.ckpt", out.display()));
     if args.resume && !checkpoint.is_file() {

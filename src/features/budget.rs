@@ -10,8 +10,8 @@
 use rayon::prelude::*;
 
 use super::fast::CHANNELS;
+use super::feature_layout::FeatureLayout;
 use super::hypotheses::{default_yaws, Hypothesis};
-use super::layout::Layout;
 use super::preprocess::Preprocessed;
 use super::scene::{extent, grid_cells, rotate, PointRecord};
 use crate::error::Result;
@@ -81,7 +81,7 @@ pub fn check_window(pre: &Preprocessed, step: f32, sizes: usize) -> Result<()> {
 
 /// Checks the fast path's lattices and the layer tables built at once (one per rayon thread) for `layout`
 /// with `subdivisions` lattice cells per step `step` on `pre`.
-pub fn check_fast(pre: &Preprocessed, step: f32, layout: &Layout, subdivisions: u32) -> Result<()> {
+pub fn check_fast(pre: &Preprocessed, step: f32, layout: &FeatureLayout, subdivisions: u32) -> Result<()> {
     check_step("the centre step", step)?;
     check_subdivisions("the fast path's subdivisions", subdivisions)?;
     let yaws = yaw_sizes(pre, step);

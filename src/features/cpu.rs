@@ -44,8 +44,8 @@ use bytemuck::{Pod, Zeroable};
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
+use super::feature_layout::{view_features, FeatureLayout, COG, COG_BINS, COG_EPSILON, DENSITY, NORMALS, PER_VOXEL};
 use super::hypotheses::Hypothesis;
-use super::layout::{view_features, Layout, COG, COG_BINS, COG_EPSILON, DENSITY, NORMALS, PER_VOXEL};
 use super::preprocess::NORMAL_BINS;
 use super::scene::{to_fixed, FeatureScene, YawGrid};
 use crate::geometry::{projected_hull_area, voxel_corners, Cuboid, MIN_PROJECT_DEPTH};
@@ -55,7 +55,7 @@ pub const COG_FIXED_SCALE: f32 = 1048576.0;
 /// Edge-on threshold on `|J·a × J·z| / (|J·a|·|J·z|)`.
 pub const EDGE_ON_SIN: f32 = 1e-3;
 /// The largest nz the accumulators hold.
-const MAX_Z: usize = super::layout::MAX_GRID_Z as usize;
+const MAX_Z: usize = super::feature_layout::MAX_GRID_Z as usize;
 
 /// Per-hypothesis geometry as the kernels read it (48 bytes, mirrors `Hypothesis` in the shader).
 #[repr(C)]
@@ -77,7 +77,7 @@ pub struct HypothesisRecord {
 }
 
 impl HypothesisRecord {
-    pub fn new(scene: &FeatureScene, layout: &Layout, hyp: &Hypothesis) -> HypothesisRecord {
+    pub fn new(scene: &FeatureScene, layout: &FeatureLayout, hyp: &Hypothesis) -> HypothesisRecord {
         let grid = layout.grid();
         let expansion = layout.expansion();
         let extent = Vec3::new(hyp.size.x * expansion[0], hyp.size.y * expansion[1], hyp.size.z * expansion[2]);
@@ -109,7 +109,7 @@ pub fn view_cosine(cuboid: &Cuboid) -> f32 {
 }
 
 /// The upright expanded box of a hypothesis (what the voxel grid covers).
-pub fn expanded_cuboid(scene: &FeatureScene, layout: &Layout, hyp: &Hypothesis) -> Cuboid {
+pub fn expanded_cuboid(scene: &FeatureScene, layout: &FeatureLayout, hyp: &Hypothesis) -> Cuboid {
     let mut cuboid = hyp.cuboid(scene);
     let e = layout.expansion();
     cuboid.size = Vec3::new(cuboid.size.x * e[0], cuboid.size.y * e[1], cuboid.size.z * e[2]);
@@ -232,7 +232,7 @@ fn axis_index(p: i32, lo: i32, extent: i32, n: u32) -> Option<u32> {
 /// Stage 3: accumulates the points of voxel column (i, j). Returns the number of points accepted.
 pub fn accumulate_column(
     grid: &YawGrid,
-    layout: &Layout,
+    layout: &FeatureLayout,
     hyp: &HypothesisRecord,
     column: [u32; 2],
     frames: &[Option<CogFrame>],
@@ -279,7 +279,7 @@ pub fn fixed_to_f32(sum: u64) -> f32 {
 }
 
 /// Stage 4: the 35 features of voxel layer `k` of a column; `area` is the voxel's projected hull area.
-pub fn finalise_voxel(layout: &Layout, acc: &ColumnAccumulator, k: usize, area: Option<f32>, out: &mut [f32]) {
+pub fn finalise_voxel(layout: &FeatureLayout, acc: &ColumnAccumulator, k: usize, area: Option<f32>, out: &mut [f32]) {
     let groups = layout.groups;
     if let Some(area) = area {
         let inv_area = 1.0 / area.max(1.0);
@@ -317,7 +317,7 @@ pub fn voxel_centre(hyp: &HypothesisRecord, voxel: [u32; 3]) -> Vec3 {
 
 /// Features of one hypothesis into `out` (length `layout.dim()`, overwritten). Returns the number of
 /// points inside the expanded box (point·voxel updates).
-pub fn hypothesis_features(scene: &FeatureScene, layout: &Layout, hyp: &Hypothesis, out: &mut [f32]) -> u32 {
+pub fn hypothesis_features(scene: &FeatureScene, layout: &FeatureLayout, hyp: &Hypothesis, out: &mut [f32]) -> u32 {
     let grid = &scene.yaws[hyp.yaw_index as usize];
     let record = HypothesisRecord::new(scene, layout, hyp);
     let expanded = expanded_cuboid(scene, layout, hyp);
@@ -346,14 +346,14 @@ pub fn hypothesis_features(scene: &FeatureScene, layout: &Layout, hyp: &Hypothes
     }
     if layout.groups.view {
         let offset = layout.view_offset();
-        out[offset..offset + super::layout::VIEW].copy_from_slice(&view_features(record.view_x));
+        out[offset..offset + super::feature_layout::VIEW].copy_from_slice(&view_features(record.view_x));
     }
     inside
 }
 
 /// Features of many hypotheses (rayon), row-major `hypotheses.len() × layout.dim()`, and the points inside
 /// each.
-pub fn features(scene: &FeatureScene, layout: &Layout, hypotheses: &[Hypothesis]) -> (Vec<f32>, Vec<u32>) {
+pub fn features(scene: &FeatureScene, layout: &FeatureLayout, hypotheses: &[Hypothesis]) -> (Vec<f32>, Vec<u32>) {
     let dim = layout.dim();
     let mut out = vec![0.0f32; hypotheses.len() * dim];
     let inside = out
@@ -369,7 +369,7 @@ pub fn features(scene: &FeatureScene, layout: &Layout, hypotheses: &[Hypothesis]
 /// of points inside the expanded boxes.
 pub fn scores(
     scene: &FeatureScene,
-    layout: &Layout,
+    layout: &FeatureLayout,
     hypotheses: &[Hypothesis],
     weights: &[Vec<f32>],
 ) -> (Vec<f32>, u64) {

@@ -41,8 +41,10 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use super::cpu::{cog_frame, cog_position, dot, view_cosine, HypothesisRecord};
+use super::feature_layout::{
+    view_features, FeatureLayout, COG, COG_BINS, COG_EPSILON, DENSITY, NORMALS, PER_VOXEL, VIEW,
+};
 use super::hypotheses::Hypothesis;
-use super::layout::{view_features, Layout, COG, COG_BINS, COG_EPSILON, DENSITY, NORMALS, PER_VOXEL, VIEW};
 use super::preprocess::NORMAL_BINS;
 use super::scene::{FeatureScene, YawGrid, FIXED_PER_METRE};
 use crate::geometry::MIN_PROJECT_DEPTH;
@@ -101,7 +103,7 @@ pub struct LayerTable {
 /// The fast path over one scene and layout.
 pub struct FastEngine<'a> {
     scene: &'a FeatureScene,
-    layout: Layout,
+    layout: FeatureLayout,
     options: FastOptions,
     lattices: Vec<YawLattice>,
     /// COG units per unit of gradient magnitude.
@@ -110,7 +112,7 @@ pub struct FastEngine<'a> {
 
 impl<'a> FastEngine<'a> {
     /// Bins the points of every yaw of `scene` (step 1).
-    pub fn new(scene: &'a FeatureScene, layout: &Layout, options: FastOptions) -> FastEngine<'a> {
+    pub fn new(scene: &'a FeatureScene, layout: &FeatureLayout, options: FastOptions) -> FastEngine<'a> {
         let subdivisions = options.subdivisions.max(1);
         // Largest total of one COG channel: every point with the largest magnitude √2 in one voxel. The
         // scale keeps it below 2³², so wrapped differences equal the true sums.
@@ -134,7 +136,7 @@ impl<'a> FastEngine<'a> {
     }
 
     /// The feature layout the engine computes.
-    pub fn layout(&self) -> &Layout {
+    pub fn layout(&self) -> &FeatureLayout {
         &self.layout
     }
 
@@ -255,7 +257,7 @@ impl<'a> FastEngine<'a> {
     }
 
     /// The integer sums (count, 25 normal bins, 9 COG bins in units of 1/[`FastEngine::cog_scale`], pad)
-    /// of every voxel of `hyp`, indexed by ℓ ([`Layout::voxel_index`]). For tests and debugging.
+    /// of every voxel of `hyp`, indexed by ℓ ([`FeatureLayout::voxel_index`]). For tests and debugging.
     pub fn voxel_sums(&self, hyp: &Hypothesis) -> Vec<[u32; CHANNELS]> {
         let table = self.table(key_of(hyp));
         let record = HypothesisRecord::new(self.scene, &self.layout, hyp);
@@ -376,7 +378,13 @@ pub(crate) fn group_by_table(hypotheses: &[Hypothesis]) -> Vec<(TableKey, Vec<us
 }
 
 impl YawLattice {
-    fn build(scene: &FeatureScene, grid: &YawGrid, subdivisions: u32, cog_scale: f32, layout: &Layout) -> YawLattice {
+    fn build(
+        scene: &FeatureScene,
+        grid: &YawGrid,
+        subdivisions: u32,
+        cog_scale: f32,
+        layout: &FeatureLayout,
+    ) -> YawLattice {
         let cell = grid.step / subdivisions as f32;
         let cells = [0, 1].map(|a| (grid.cells[a] * subdivisions) as usize);
         let origin = grid.origin;
@@ -479,7 +487,7 @@ impl LayerTable {
 /// the point·voxel count (the fast path does not visit points per hypothesis; 0 is returned).
 pub fn scores(
     scene: &FeatureScene,
-    layout: &Layout,
+    layout: &FeatureLayout,
     hypotheses: &[Hypothesis],
     weights: &[Vec<f32>],
     options: FastOptions,
@@ -489,6 +497,11 @@ pub fn scores(
 }
 
 /// Convenience: features on the fast path (row-major).
-pub fn features(scene: &FeatureScene, layout: &Layout, hypotheses: &[Hypothesis], options: FastOptions) -> Vec<f32> {
+pub fn features(
+    scene: &FeatureScene,
+    layout: &FeatureLayout,
+    hypotheses: &[Hypothesis],
+    options: FastOptions,
+) -> Vec<f32> {
     FastEngine::new(scene, layout, options).features(hypotheses)
 }

@@ -8,13 +8,13 @@
 pub mod budget;
 pub mod cpu;
 pub mod fast;
+pub mod feature_layout;
 pub mod hypotheses;
-pub mod layout;
 pub mod preprocess;
 pub mod scene;
 
+pub use feature_layout::{FeatureLayout, Groups};
 pub use hypotheses::{default_yaws, sliding_window, Hypothesis, HypothesisSet, SizeQuantiles, WindowOptions};
-pub use layout::{Groups, Layout};
 pub use preprocess::{ImageGradients, Preprocessed};
 pub use scene::{FeatureScene, PointRecord, YawGrid};
 pub mod weights;

@@ -9,7 +9,7 @@
 //!              "groups": {"density": true, "normals": true, "cog": true, "view": true}},
 //!   "category": "bed",
 //!   "bias": 0.0,
-//!   "weights": [ ... layout.dim() numbers in the order of `features::layout` ... ]
+//!   "weights": [ ... layout.dim() numbers in the order of `features::feature_layout` ... ]
 //! }
 //! ```
 //! The score of a hypothesis is `weights · φ + bias`. Reading checks that `layout_id` is the id of
@@ -21,7 +21,7 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use super::layout::Layout;
+use super::feature_layout::FeatureLayout;
 use crate::error::{Error, Result};
 
 pub const WEIGHTS_FORMAT: &str = "cog-gpu-weights";
@@ -32,7 +32,7 @@ pub struct WeightsFile {
     pub format: String,
     pub version: u32,
     pub layout_id: String,
-    pub layout: Layout,
+    pub layout: FeatureLayout,
     pub category: String,
     #[serde(default)]
     pub bias: f32,
@@ -40,7 +40,7 @@ pub struct WeightsFile {
 }
 
 impl WeightsFile {
-    pub fn new(layout: Layout, category: &str, weights: Vec<f32>, bias: f32) -> Result<WeightsFile> {
+    pub fn new(layout: FeatureLayout, category: &str, weights: Vec<f32>, bias: f32) -> Result<WeightsFile> {
         let file = WeightsFile {
             format: WEIGHTS_FORMAT.into(),
             version: WEIGHTS_VERSION,

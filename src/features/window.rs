@@ -6,8 +6,8 @@ use std::time::Instant;
 
 use glam::Vec3;
 
+use super::feature_layout::FeatureLayout;
 use super::hypotheses::{default_yaws, sliding_window, HypothesisSet, SizeQuantiles, WindowOptions};
-use super::layout::Layout;
 use super::preprocess::Preprocessed;
 use super::scene::FeatureScene;
 use super::{cpu, Hypothesis};
@@ -37,7 +37,7 @@ impl Backend<'_> {
     pub fn scores(
         &self,
         scene: &FeatureScene,
-        layout: &Layout,
+        layout: &FeatureLayout,
         hypotheses: &[Hypothesis],
         weights: &[Vec<f32>],
     ) -> Result<(Vec<f32>, u64)> {

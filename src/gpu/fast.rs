@@ -37,7 +37,7 @@ use super::{BufferBinding, GpuContext, KernelSpec};
 use crate::error::{Error, Result};
 use crate::features::cpu::{dot, HypothesisRecord};
 use crate::features::fast::{group_by_table, FastEngine, LayerTable, CHANNELS};
-use crate::features::layout::{Layout, COG, COG_BINS, COG_EPSILON, NORMALS, PER_VOXEL, VIEW};
+use crate::features::feature_layout::{FeatureLayout, COG, COG_BINS, COG_EPSILON, NORMALS, PER_VOXEL, VIEW};
 use crate::features::preprocess::NORMAL_BINS;
 use crate::features::{Backend, Hypothesis};
 use crate::geometry::MIN_PROJECT_DEPTH;
@@ -100,7 +100,7 @@ const _: () =
     assert!(CHANNELS == 36 && PER_VOXEL == 35 && NORMALS == 1 && NORMAL_BINS == 25 && COG == 26 && COG_BINS == 9);
 
 /// Group bits of the shader (the view group is the CPU's, see the module doc).
-fn group_bits(layout: &Layout) -> u32 {
+fn group_bits(layout: &FeatureLayout) -> u32 {
     let g = layout.groups;
     u32::from(g.density) | (u32::from(g.normals) << 1) | (u32::from(g.cog) << 2)
 }

@@ -11,7 +11,7 @@ use bytemuck::{Pod, Zeroable};
 use super::{BufferBinding, GpuContext, KernelSpec};
 use crate::error::{Error, Result};
 use crate::features::cpu::HypothesisRecord;
-use crate::features::layout::{Layout, MAX_COLUMNS, MAX_GRID_Z};
+use crate::features::feature_layout::{FeatureLayout, MAX_COLUMNS, MAX_GRID_Z};
 use crate::features::{FeatureScene, Hypothesis};
 
 /// The kernel's spec (registered in [`super::Kernels`]).
@@ -52,12 +52,12 @@ const _: () = assert!(std::mem::size_of::<Params>() == 128);
 const _: () = assert!(std::mem::size_of::<HypothesisRecord>() == 64);
 const _: () = assert!(std::mem::size_of::<crate::features::PointRecord>() == 32);
 
-fn group_bits(layout: &Layout) -> u32 {
+fn group_bits(layout: &FeatureLayout) -> u32 {
     let g = layout.groups;
     u32::from(g.density) | (u32::from(g.normals) << 1) | (u32::from(g.cog) << 2) | (u32::from(g.view) << 3)
 }
 
-fn check_layout(layout: &Layout) -> Result<()> {
+fn check_layout(layout: &FeatureLayout) -> Result<()> {
     layout.validate()?;
     let g = layout.grid();
     debug_assert!(g[2] <= MAX_GRID_Z && g[0] * g[1] <= MAX_COLUMNS);
@@ -91,7 +91,7 @@ enum Mode<'a> {
 fn run(
     ctx: &GpuContext,
     scene: &FeatureScene,
-    layout: &Layout,
+    layout: &FeatureLayout,
     hypotheses: &[Hypothesis],
     mode: Mode,
 ) -> Result<(Vec<f32>, Vec<u32>)> {
@@ -181,7 +181,7 @@ fn run(
 pub fn features_gpu(
     ctx: &GpuContext,
     scene: &FeatureScene,
-    layout: &Layout,
+    layout: &FeatureLayout,
     hypotheses: &[Hypothesis],
 ) -> Result<(Vec<f32>, Vec<u32>)> {
     run(ctx, scene, layout, hypotheses, Mode::Write)
@@ -192,7 +192,7 @@ pub fn features_gpu(
 pub fn scores_gpu(
     ctx: &GpuContext,
     scene: &FeatureScene,
-    layout: &Layout,
+    layout: &FeatureLayout,
     hypotheses: &[Hypothesis],
     weights: &[Vec<f32>],
 ) -> Result<(Vec<f32>, u64)> {

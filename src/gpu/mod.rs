@@ -38,6 +38,7 @@
 pub mod depth_points;
 pub mod fast;
 pub mod features;
+pub mod room_layout;
 
 use std::borrow::Cow;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -167,6 +168,7 @@ pub struct Kernels {
     pub depth_points: Kernel,
     pub features: Kernel,
     pub fast_scores: Kernel,
+    pub room_layout: Kernel,
 }
 
 impl Kernels {
@@ -175,6 +177,7 @@ impl Kernels {
             depth_points: Kernel::new(device, &depth_points::KERNEL)?,
             features: Kernel::new(device, &features::KERNEL)?,
             fast_scores: Kernel::new(device, &fast::KERNEL)?,
+            room_layout: Kernel::new(device, &room_layout::KERNEL)?,
         })
     }
 }

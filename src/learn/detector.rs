@@ -43,7 +43,7 @@ use crate::error::{Error, Result};
 use crate::features::cpu;
 use crate::features::fast::{FastEngine, FastOptions};
 use crate::features::hypotheses::{default_yaws, sliding_window, HypothesisSet, WindowOptions, YAW_COUNT};
-use crate::features::{FeatureScene, Hypothesis, Layout, Preprocessed};
+use crate::features::{FeatureLayout, FeatureScene, Hypothesis, Preprocessed};
 use crate::geometry::{structured_loss, Cuboid};
 
 /// Which feature implementation training (and a model) uses.
@@ -58,7 +58,7 @@ pub enum FeatureEngine {
 /// Settings of the detector's output space during training.
 #[derive(Clone, Debug)]
 pub struct TrainingSettings {
-    pub layout: Layout,
+    pub layout: FeatureLayout,
     /// The 45 (or fewer) hypothesis sizes.
     pub sizes: Vec<Vec3>,
     /// Centre step of the training sliding window (metres).
@@ -188,7 +188,7 @@ pub fn without_points_in(pre: &Preprocessed, cuboids: &[Cuboid]) -> Preprocessed
 
 /// Features (row-major) and fused scores of hypotheses with the settings' engine on one scene.
 enum Scorer<'a> {
-    Exact(&'a FeatureScene, Layout),
+    Exact(&'a FeatureScene, FeatureLayout),
     Fast(FastEngine<'a>),
 }
 

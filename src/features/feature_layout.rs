@@ -1,5 +1,5 @@
 //! The feature layout: THE one place that fixes the order of a hypothesis' feature vector. Model files
-//! name it by [`Layout::id`] and must be rejected when the id differs.
+//! name it by [`FeatureLayout::id`] and must be rejected when the id differs.
 //!
 //! # Order of the feature vector
 //! ```text
@@ -49,7 +49,7 @@ pub const COG_EPSILON: f32 = 0.01;
 pub const LAYOUT_VERSION: u32 = 1;
 
 /// Feature groups that can be switched off (the paper's ablation, Table 1; "expanded" is
-/// [`Layout::expanded`]).
+/// [`FeatureLayout::expanded`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Groups {
     pub density: bool,
@@ -77,7 +77,7 @@ impl Groups {
 
 /// Grid, expansion and groups of a feature vector.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub struct Layout {
+pub struct FeatureLayout {
     /// Voxels of the cuboid itself along (width, depth, height).
     pub base_grid: [u32; 3],
     /// Add one voxel layer on each side (paper §3.3.2).
@@ -90,16 +90,16 @@ pub const MAX_GRID_Z: u32 = 9;
 /// Largest `nx·ny` the kernels accept (one invocation per voxel column, one workgroup per hypothesis).
 pub const MAX_COLUMNS: u32 = 64;
 
-impl Default for Layout {
+impl Default for FeatureLayout {
     /// The paper's: 5×5×5 expanded to 7×7×7, all groups (12017 dimensions).
     fn default() -> Self {
-        Layout { base_grid: [5, 5, 5], expanded: true, groups: Groups::ALL }
+        FeatureLayout { base_grid: [5, 5, 5], expanded: true, groups: Groups::ALL }
     }
 }
 
-impl Layout {
-    pub fn new(base_grid: [u32; 3], expanded: bool, groups: Groups) -> Result<Layout> {
-        let layout = Layout { base_grid, expanded, groups };
+impl FeatureLayout {
+    pub fn new(base_grid: [u32; 3], expanded: bool, groups: Groups) -> Result<FeatureLayout> {
+        let layout = FeatureLayout { base_grid, expanded, groups };
         layout.validate()?;
         Ok(layout)
     }
@@ -215,16 +215,16 @@ mod tests {
 
     #[test]
     fn default_layout_has_the_papers_dimension() {
-        assert_eq!(Layout::default().dim(), 343 * 35 + 12);
-        assert_eq!(Layout::default().dim(), 12017);
-        let small = Layout::new([3, 1, 3], true, Groups::ALL).unwrap();
+        assert_eq!(FeatureLayout::default().dim(), 343 * 35 + 12);
+        assert_eq!(FeatureLayout::default().dim(), 12017);
+        let small = FeatureLayout::new([3, 1, 3], true, Groups::ALL).unwrap();
         assert_eq!(small.grid(), [5, 3, 5]);
         assert_eq!(small.dim(), 75 * 35 + 12);
     }
 
     #[test]
     fn describe_inverts_the_index_order() {
-        let layout = Layout::default();
+        let layout = FeatureLayout::default();
         let idx = layout.voxel_index(2, 3, 4) * PER_VOXEL + COG + 5;
         assert_eq!(layout.describe(idx), "voxel (2,3,4) cog bin 5");
         assert_eq!(layout.describe(layout.dim() - 1), "view bias");
@@ -232,7 +232,7 @@ mod tests {
 
     #[test]
     fn mask_follows_groups() {
-        let layout = Layout::new([1, 1, 1], false, Groups::GEOM).unwrap();
+        let layout = FeatureLayout::new([1, 1, 1], false, Groups::GEOM).unwrap();
         let mask = layout.mask();
         assert_eq!(mask.len(), 35 + 12);
         assert_eq!(mask.iter().filter(|&&m| m).count(), 26);

@@ -1,0 +1,315 @@
+//! Room layout (paper §5): the room as a Manhattan cuboid — four walls at right angles, floor and ceiling —
+//! predicted from one RGB-D frame by scoring many cuboid hypotheses with "Manhattan voxel" features and a
+//! structural-SVM weight vector.
+//!
+//! Flow: [`LayoutScene::from_frame`] (a subsampled upright point cloud with normals, floor and ceiling) →
+//! [`hypotheses`] (cuboids per orientation) → [`voxels::YawCells`] (the points binned once per orientation)
+//! → [`voxels::scores_cpu`] or the GPU twin `crate::gpu::room_layout` → the best hypothesis. Evaluation:
+//! [`free_space`]; learning: [`learn`]; the model file: [`model`]; the plane-fitting baseline: [`baseline`].
+//!
+//! # Choices where the paper is terse (one place, used everywhere)
+//! - **Points**: the frame's point cloud subsampled on the pixel grid (every `s`-th column and row, the
+//!   smallest `s` giving at most [`MAX_LAYOUT_POINTS`]); walls are large, so a few thousand points place them
+//!   as well as 300 000 and the normals (15 nearest neighbours, as the detector) cost milliseconds.
+//! - **Floor and ceiling**: the 0.001 and 0.999 quantiles of all point heights (paper), shared by every
+//!   hypothesis of the frame — except that a camera pitched down often sees no ceiling at all, and the
+//!   0.999 quantile is then the top of the visible walls, far below the ceiling. When the points reach less
+//!   than [`MIN_ROOM_HEIGHT`] above the floor, the ceiling is put at floor + [`MIN_ROOM_HEIGHT`] (rooms are
+//!   at least that high; our deviation from the paper, which loses the free space above the visible walls).
+//! - **Orientations**: a rectangle turned by 90° is the same rectangle, so the paper's 18 orientations in
+//!   [0°, 180°) are only 9 distinct rooms. We keep 18 *distinct* ones: yaws `−45° + 5°·k`, k = 0..17, i.e.
+//!   [−45°, 45°) in 5° steps. The yaw is measured from the upright +x axis; the room's own axes are
+//!   `a = (cos φ, sin φ)` and `b = (−sin φ, cos φ)`, so `b` is the axis closest to the camera's forward
+//!   direction (+y upright) and the walls are named from the camera: wall 0 **front** (`v = v1`, outward
+//!   normal +b), 1 **left** (`u = u0`, −a), 2 **back** (`v = v0`, −b, usually behind the camera), 3
+//!   **right** (`u = u1`, +a). Features are indexed by these names, so they mean the same for every yaw.
+//! - **Wall positions** (paper: "capture at least 80 % of all 3D points, bounded by the farthest and
+//!   closest points"): in the room frame `(u, v)` in integer millimetres, each wall's candidates are (i) the
+//!   farthest point on its side, (ii) the [`PEAKS_PER_WALL`] strongest local maxima of the 5 cm histogram of
+//!   points whose normal faces that wall (planes show as peaks), searched between the farthest point and the
+//!   0.2 quantile (a wall closer than that would leave more than 20 % of the points outside), and (iii) the
+//!   camera's own coordinate when the camera lies beyond the farthest point (the camera is in the room; the
+//!   wall behind it is never seen). All combinations with sides ≥ [`MIN_SIDE_MM`] that contain the camera
+//!   (our addition: the camera is in the room; without it the learned model sometimes put the unseen back
+//!   wall in front of the camera) and whose cuboid holds ≥ 80 % of the points (cell centres, see
+//!   [`voxels`]) are kept.
+//! - **Positions are integers** (millimetres in the room frame of each yaw), so that region assignment is
+//!   exact and identical on the CPU and the GPU.
+
+pub mod baseline;
+pub mod free_space;
+pub mod learn;
+pub mod model;
+pub mod output;
+pub mod voxels;
+
+use glam::{Vec2, Vec3};
+
+use crate::error::{Error, Result};
+use crate::features::preprocess::{estimate_normals, NORMAL_NEIGHBOURS};
+use crate::frame::{quantile_of_unsorted, Frame, RoomLayout};
+use crate::geometry::Camera;
+
+/// Most points the layout uses (see the module doc: pixel-grid subsampling).
+pub const MAX_LAYOUT_POINTS: usize = 16_000;
+/// Floor at this quantile of the point heights (paper §5).
+pub const FLOOR_QUANTILE: f32 = 0.001;
+/// Ceiling at this quantile of the point heights (paper §5).
+pub const CEILING_QUANTILE: f32 = 0.999;
+/// Least floor-to-ceiling height of a room (metres); see the module doc.
+pub const MIN_ROOM_HEIGHT: f32 = 2.4;
+/// Number of distinct orientations (see the module doc).
+pub const ORIENTATIONS: usize = 18;
+/// First orientation (degrees) and step between orientations.
+pub const FIRST_YAW_DEG: f32 = -45.0;
+pub const YAW_STEP_DEG: f32 = 5.0;
+/// A hypothesis must hold at least this fraction of the points (paper §5).
+pub const MIN_INSIDE_FRACTION: f64 = 0.8;
+/// Histogram peaks kept as wall candidates per wall (besides the farthest point and the camera).
+pub const PEAKS_PER_WALL: usize = 8;
+/// Smallest room side, millimetres.
+pub const MIN_SIDE_MM: i32 = 1000;
+
+/// Yaw (radians) of orientation `k`.
+pub fn orientation_yaw(k: usize) -> f32 {
+    (FIRST_YAW_DEG + YAW_STEP_DEG * k as f32).to_radians()
+}
+
+/// The room frame's axes `(a, b)` of orientation `k` (see the module doc).
+pub fn room_axes(k: usize) -> (Vec2, Vec2) {
+    let (s, c) = orientation_yaw(k).sin_cos();
+    (Vec2::new(c, s), Vec2::new(-s, c))
+}
+
+/// Integer millimetres of a coordinate in metres (rounded to nearest).
+pub fn to_mm(metres: f32) -> i32 {
+    (metres * 1000.0).round() as i32
+}
+
+/// One room hypothesis: orientation `yaw_index` and the four wall positions in that orientation's room
+/// frame (`u` along `a`, `v` along `b`, millimetres); `u0 < u1`, `v0 < v1`. Floor and ceiling are the
+/// frame's.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+pub struct RoomBox {
+    pub yaw_index: u32,
+    pub u0: i32,
+    pub u1: i32,
+    pub v0: i32,
+    pub v1: i32,
+}
+
+impl RoomBox {
+    pub fn yaw(&self) -> f32 {
+        orientation_yaw(self.yaw_index as usize)
+    }
+
+    /// Floor corners (upright x, y), counter-clockwise seen from above, starting at (u0, v0).
+    pub fn corners(&self) -> [Vec2; 4] {
+        let (a, b) = room_axes(self.yaw_index as usize);
+        let at = |u: i32, v: i32| a * (u as f32 / 1000.0) + b * (v as f32 / 1000.0);
+        [at(self.u0, self.v0), at(self.u1, self.v0), at(self.u1, self.v1), at(self.u0, self.v1)]
+    }
+
+    /// The room annotation this hypothesis stands for, between `floor` and `ceiling`.
+    pub fn to_room(&self, floor: f32, ceiling: f32) -> RoomLayout {
+        RoomLayout { corners: self.corners().to_vec(), floor, ceiling }
+    }
+}
+
+/// What the layout reads of a frame (see the module doc for the choices).
+#[derive(Clone, Debug)]
+pub struct LayoutScene {
+    pub camera: Camera,
+    /// (width, height) in pixels.
+    pub image_size: [u32; 2],
+    /// Subsampled upright points and their unit normals.
+    pub points: Vec<Vec3>,
+    pub normals: Vec<Vec3>,
+    /// Height quantiles of all the frame's points.
+    pub floor: f32,
+    pub ceiling: f32,
+    /// Pixel stride of the subsampling.
+    pub stride: u32,
+}
+
+impl LayoutScene {
+    /// Reads the layout's view of a frame. Fails (naming the frame) without enough depth, or when the
+    /// points have no height extent.
+    pub fn from_frame(frame: &Frame) -> Result<LayoutScene> {
+        let cloud = frame.point_cloud();
+        let mut heights: Vec<f32> = cloud.points.iter().map(|p| p.z).collect();
+        let (floor, ceiling) = match (
+            quantile_of_unsorted(&mut heights, FLOOR_QUANTILE),
+            quantile_of_unsorted(&mut heights, CEILING_QUANTILE),
+        ) {
+            (Some(f), Some(c)) => (f, c),
+            _ => return Err(Error::Input(format!("frame '{}' has no points with depth", frame.name))),
+        };
+        let ceiling = ceiling.max(floor + MIN_ROOM_HEIGHT);
+        let stride = subsampling_stride(cloud.len());
+        let keep: Vec<usize> = (0..cloud.len())
+            .filter(|&i| {
+                let [col, row] = cloud.pixels[i];
+                col % stride == 0 && row % stride == 0
+            })
+            .collect();
+        let points: Vec<Vec3> = keep.iter().map(|&i| cloud.points[i]).collect();
+        if points.len() < NORMAL_NEIGHBOURS {
+            return Err(Error::Input(format!(
+                "frame '{}': {} points (subsampled); the room layout needs at least {NORMAL_NEIGHBOURS}",
+                frame.name,
+                points.len(),
+            )));
+        }
+        let normals = estimate_normals(&points);
+        let camera = Camera::new(frame.intrinsics(), frame.rtilt());
+        Ok(LayoutScene { camera, image_size: [frame.width(), frame.height()], points, normals, floor, ceiling, stride })
+    }
+}
+
+/// Smallest pixel stride `s` with `n / s² ≤ MAX_LAYOUT_POINTS`.
+pub fn subsampling_stride(n: usize) -> u32 {
+    let mut s = 1u32;
+    while n / (s as usize * s as usize) > MAX_LAYOUT_POINTS {
+        s += 1;
+    }
+    s
+}
+
+/// A predicted room: the chosen hypothesis, its room polygon and its score.
+#[derive(Clone, Debug)]
+pub struct PredictedLayout {
+    pub room_box: RoomBox,
+    pub room: RoomLayout,
+    pub score: f64,
+    /// Number of hypotheses scored.
+    pub hypotheses: usize,
+}
+
+/// Wall candidates of one side in one orientation, ascending, deduplicated.
+fn wall_candidates(coords: &[i32], facing: &[bool], low_side: bool, camera_mm: i32, cell_mm: i32) -> Vec<i32> {
+    let mut sorted = coords.to_vec();
+    sorted.sort_unstable();
+    let n = sorted.len();
+    // The farthest point, moved outward to its cell's edge so that its cell centre is inside the wall.
+    let farthest = if low_side {
+        sorted[0].div_euclid(cell_mm) * cell_mm
+    } else {
+        (sorted[n - 1].div_euclid(cell_mm) + 1) * cell_mm
+    };
+    let limit_index = ((1.0 - MIN_INSIDE_FRACTION) * (n - 1) as f64).round() as usize;
+    let limit = if low_side { sorted[limit_index] } else { sorted[n - 1 - limit_index] };
+    let (lo, hi) = if low_side { (farthest, limit) } else { (limit, farthest) };
+    // Histogram over cells (cell centres at `cell_index·cell_mm + cell_mm/2` from `lo` rounded down).
+    let origin = lo.div_euclid(cell_mm) * cell_mm;
+    let bins = ((hi - origin).div_euclid(cell_mm) + 1).max(1) as usize;
+    let mut histogram = vec![0u32; bins];
+    for (&c, &f) in coords.iter().zip(facing) {
+        if f && c >= lo && c <= hi {
+            histogram[((c - origin).div_euclid(cell_mm)) as usize] += 1;
+        }
+    }
+    let min_count = (n / 500).max(3) as u32;
+    let mut peaks: Vec<(u32, usize)> = (0..bins)
+        .filter(|&i| {
+            let h = histogram[i];
+            h >= min_count && (i == 0 || histogram[i - 1] <= h) && (i + 1 == bins || histogram[i + 1] < h)
+        })
+        .map(|i| (histogram[i], i))
+        .collect();
+    // Strongest first; ties by position so the order never depends on anything else.
+    peaks.sort_unstable_by(|x, y| y.0.cmp(&x.0).then(x.1.cmp(&y.1)));
+    let mut out: Vec<i32> =
+        peaks.iter().take(PEAKS_PER_WALL).map(|&(_, i)| origin + i as i32 * cell_mm + cell_mm / 2).collect();
+    out.push(farthest);
+    let camera_beyond = if low_side { camera_mm < farthest } else { camera_mm > farthest };
+    if camera_beyond {
+        out.push(camera_mm);
+    }
+    out.sort_unstable();
+    out.dedup();
+    out
+}
+
+/// The hypotheses of one orientation (see the module doc), given the binned points of that orientation.
+pub fn orientation_hypotheses(scene: &LayoutScene, cells: &voxels::YawCells) -> Vec<RoomBox> {
+    let k = cells.yaw_index as usize;
+    let (a, b) = room_axes(k);
+    let us: Vec<i32> = scene.points.iter().map(|p| to_mm(p.truncate().dot(a))).collect();
+    let vs: Vec<i32> = scene.points.iter().map(|p| to_mm(p.truncate().dot(b))).collect();
+    let faces_a: Vec<bool> = scene.normals.iter().map(|n| voxels::normal_class(*n, a, b) == voxels::ALONG_A).collect();
+    let faces_b: Vec<bool> = scene.normals.iter().map(|n| voxels::normal_class(*n, a, b) == voxels::ALONG_B).collect();
+    let cell = voxels::CELL_MM;
+    let u0s = wall_candidates(&us, &faces_a, true, 0, cell);
+    let u1s = wall_candidates(&us, &faces_a, false, 0, cell);
+    let v0s = wall_candidates(&vs, &faces_b, true, 0, cell);
+    let v1s = wall_candidates(&vs, &faces_b, false, 0, cell);
+    let needed = (MIN_INSIDE_FRACTION * cells.total_points as f64).ceil() as u64;
+    let mut out = Vec::new();
+    // The camera (the origin) is inside every hypothesis.
+    for &u0 in u0s.iter().filter(|&&u0| u0 <= 0) {
+        for &u1 in u1s.iter().filter(|&&u1| u1 >= 0 && u1 - u0 >= MIN_SIDE_MM) {
+            for &v0 in v0s.iter().filter(|&&v0| v0 <= 0) {
+                for &v1 in v1s.iter().filter(|&&v1| v1 >= 0 && v1 - v0 >= MIN_SIDE_MM) {
+                    let room_box = RoomBox { yaw_index: k as u32, u0, u1, v0, v1 };
+                    if cells.points_inside(&room_box) >= needed {
+                        out.push(room_box);
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Every orientation's binned points and hypotheses, orientation by orientation.
+pub fn hypotheses(scene: &LayoutScene) -> (Vec<voxels::YawCells>, Vec<RoomBox>) {
+    use rayon::prelude::*;
+    let per_yaw: Vec<(voxels::YawCells, Vec<RoomBox>)> = (0..ORIENTATIONS)
+        .into_par_iter()
+        .map(|k| {
+            let cells = voxels::YawCells::new(scene, k);
+            let boxes = orientation_hypotheses(scene, &cells);
+            (cells, boxes)
+        })
+        .collect();
+    let mut all_cells = Vec::with_capacity(ORIENTATIONS);
+    let mut all_boxes = Vec::new();
+    for (cells, boxes) in per_yaw {
+        all_cells.push(cells);
+        all_boxes.extend(boxes);
+    }
+    (all_cells, all_boxes)
+}
+
+/// Scores every hypothesis of a frame with a model's weights on `backend` and returns the best (the first
+/// of the highest integer score, so the answer is the same on every backend).
+pub fn predict(
+    scene: &LayoutScene,
+    model: &model::LayoutModel,
+    backend: crate::features::Backend,
+) -> Result<PredictedLayout> {
+    let (cells, boxes) = hypotheses(scene);
+    if boxes.is_empty() {
+        return Err(Error::Input("no room hypothesis holds 80 % of the points".into()));
+    }
+    let tables = voxels::ScoringTables::new(model.discretisation, &cells, &model.weights_f64());
+    let scores = match backend {
+        crate::features::Backend::Cpu => voxels::scores_cpu(&cells, &tables, &boxes),
+        crate::features::Backend::Gpu(ctx) => crate::gpu::room_layout::scores_gpu(ctx, &cells, &tables, &boxes)?,
+    };
+    let best = (0..boxes.len()).fold(0, |best, i| if scores[i] > scores[best] { i } else { best });
+    let room_box = boxes[best];
+    Ok(PredictedLayout {
+        room_box,
+        room: room_box.to_room(scene.floor, scene.ceiling),
+        score: scores[best] as f64 / tables.scale,
+        hypotheses: boxes.len(),
+    })
+}
+
+/// The heuristic baseline's room ([`baseline`]), with score 0.
+pub fn predict_heuristic(scene: &LayoutScene) -> PredictedLayout {
+    let room_box = baseline::heuristic_layout(scene);
+    PredictedLayout { room_box, room: room_box.to_room(scene.floor, scene.ceiling), score: 0.0, hypotheses: 1 }
+}

@@ -1,0 +1,75 @@
+//! The layout model file, `layout.json` in a models directory beside the detector models
+//! (`crate::model::read_models_dir` skips it by name, [`crate::model::LAYOUT_MODEL_FILE`]).
+//!
+//! ```json
+//! {"format": "cog-gpu-layout-model", "version": 1, "discretisation": "manhattan" | "cubical",
+//!  "weights": [288 or 384 numbers, in the order of room_layout::voxels::feature_index],
+//!  "provenance": {free-form: the training command, data, seeds, counts, solver figures}}
+//! ```
+
+use std::path::Path;
+
+use super::voxels::Discretisation;
+use crate::error::{Error, Result};
+
+pub const FORMAT: &str = "cog-gpu-layout-model";
+pub const VERSION: u32 = 1;
+/// Largest |weight| accepted (a larger one is no trained model and would overflow the fixed-point scores).
+pub const MAX_WEIGHT: f32 = 1e6;
+
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub struct LayoutModel {
+    pub format: String,
+    pub version: u32,
+    pub discretisation: Discretisation,
+    pub weights: Vec<f32>,
+    #[serde(default)]
+    pub provenance: serde_json::Value,
+}
+
+impl LayoutModel {
+    pub fn new(discretisation: Discretisation, weights: Vec<f32>, provenance: serde_json::Value) -> LayoutModel {
+        LayoutModel { format: FORMAT.into(), version: VERSION, discretisation, weights, provenance }
+    }
+
+    /// What is wrong with the model, if anything.
+    pub fn check(&self) -> std::result::Result<(), String> {
+        if self.format != FORMAT {
+            return Err(format!("format is '{}', expected '{FORMAT}'", self.format));
+        }
+        if self.version != VERSION {
+            return Err(format!("version {} (this build reads version {VERSION})", self.version));
+        }
+        let dim = self.discretisation.dim();
+        if self.weights.len() != dim {
+            return Err(format!(
+                "{} weights; a {} layout model has {dim}",
+                self.weights.len(),
+                self.discretisation.name()
+            ));
+        }
+        if let Some(i) = self.weights.iter().position(|w| !w.is_finite() || w.abs() > MAX_WEIGHT) {
+            return Err(format!("weight {i} is {} (must be finite, |w| <= {MAX_WEIGHT})", self.weights[i]));
+        }
+        Ok(())
+    }
+
+    pub fn read(path: &Path) -> Result<LayoutModel> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
+        let model: LayoutModel =
+            serde_json::from_str(text).map_err(|e| Error::invalid(path, format!("not a layout model file: {e}")))?;
+        model.check().map_err(|m| Error::invalid(path, m))?;
+        Ok(model)
+    }
+
+    pub fn write(&self, path: &Path) -> Result<()> {
+        self.check().map_err(|m| Error::invalid(path, m))?;
+        let text = serde_json::to_string_pretty(self).map_err(|e| Error::invalid(path, e.to_string()))?;
+        std::fs::write(path, text + "\n").map_err(|e| Error::io(path, e))
+    }
+
+    pub fn weights_f64(&self) -> Vec<f64> {
+        self.weights.iter().map(|&w| w as f64).collect()
+    }
+}

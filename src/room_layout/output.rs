@@ -1,0 +1,106 @@
+//! What the `layout` and `detect` commands write of a room: the JSON record, the overlay edges and the
+//! PLY line set.
+//!
+//! Layout file (`cog-gpu layout`, `<out>/<frame>.json`; `detect` puts the same record under `"layout"`):
+//!
+//! ```json
+//! {"frame": "NAME", "layout": {"method": "manhattan" | "cubical" | "heuristic",
+//!   "corners": [[x, y] × 4], "floor": z, "ceiling": z, "yaw_deg": d, "score": s, "hypotheses": n}}
+//! ```
+//! Corners are upright metres, counter-clockwise seen from above; `yaw_deg` is the direction of the first
+//! edge (corner 0 → 1) from +x, in [−45°, 45°); the heuristic's score is 0.
+
+use std::path::Path;
+
+use glam::Vec2;
+use image::RgbImage;
+
+use super::PredictedLayout;
+use crate::draw::{draw_line, project_segment, Colour};
+use crate::error::{Error, Result};
+use crate::frame::RoomLayout;
+use crate::geometry::Camera;
+use crate::ply::LineSet;
+
+/// Colour of the room's edges in overlays and PLY files.
+pub const ROOM_COLOUR: [u8; 3] = [255, 215, 0];
+
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct LayoutRecord {
+    pub method: String,
+    pub corners: Vec<[f32; 2]>,
+    pub floor: f32,
+    pub ceiling: f32,
+    pub yaw_deg: f32,
+    pub score: f64,
+    pub hypotheses: usize,
+}
+
+impl LayoutRecord {
+    pub fn new(method: &str, predicted: &PredictedLayout) -> LayoutRecord {
+        LayoutRecord {
+            method: method.to_string(),
+            corners: predicted.room.corners.iter().map(|c| c.to_array()).collect(),
+            floor: predicted.room.floor,
+            ceiling: predicted.room.ceiling,
+            yaw_deg: predicted.room_box.yaw().to_degrees(),
+            score: predicted.score,
+            hypotheses: predicted.hypotheses,
+        }
+    }
+
+    pub fn room(&self) -> RoomLayout {
+        RoomLayout {
+            corners: self.corners.iter().map(|&c| Vec2::from_array(c)).collect(),
+            floor: self.floor,
+            ceiling: self.ceiling,
+        }
+    }
+
+    /// What is wrong with a record read from a file, if anything.
+    fn check(&self) -> std::result::Result<(), String> {
+        let finite = self.corners.iter().flatten().chain([&self.floor, &self.ceiling]).all(|v| v.is_finite());
+        if self.corners.len() < 3 || !finite || self.floor >= self.ceiling {
+            return Err("layout needs at least 3 finite corners and floor < ceiling".into());
+        }
+        Ok(())
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct LayoutFile {
+    pub frame: String,
+    pub layout: LayoutRecord,
+}
+
+impl LayoutFile {
+    pub fn read(path: &Path) -> Result<LayoutFile> {
+        let text = crate::frame::read_text(path)?;
+        let file: LayoutFile =
+            serde_json::from_str(&text).map_err(|e| Error::invalid(path, format!("not a layout file: {e}")))?;
+        file.layout.check().map_err(|m| Error::invalid(path, m))?;
+        Ok(file)
+    }
+
+    pub fn write(&self, path: &Path) -> Result<()> {
+        let text = serde_json::to_string_pretty(self).map_err(|e| Error::invalid(path, e.to_string()))?;
+        std::fs::write(path, text + "\n").map_err(|e| Error::io(path, e))
+    }
+}
+
+/// Draws the room's edges (floor and ceiling polygons and the vertical corners), clipped at the near plane.
+pub fn draw_room(img: &mut RgbImage, camera: &Camera, room: &RoomLayout, thickness: u32) {
+    let lines = LineSet::from_prism(&room.corners, room.floor, room.ceiling, ROOM_COLOUR);
+    let colour: Colour = ROOM_COLOUR;
+    for e in &lines.edges {
+        let (a, b) = (lines.vertices[e[0] as usize], lines.vertices[e[1] as usize]);
+        if let Some((p, q)) = project_segment(camera, a, b) {
+            draw_line(img, p, q, colour, thickness);
+        }
+    }
+}
+
+/// The room's edges as a PLY line set.
+pub fn room_line_set(room: &RoomLayout) -> LineSet {
+    LineSet::from_prism(&room.corners, room.floor, room.ceiling, ROOM_COLOUR)
+}

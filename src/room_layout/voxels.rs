@@ -1,0 +1,353 @@
+//! Manhattan voxels (paper §5, Fig. "layout"), the cubical-voxel variant, and the scoring of hypotheses.
+//!
+//! # Cells
+//! Per orientation the points are binned once into 5 cm ground cells of the room frame (cell `i` spans
+//! `u ∈ [50·i, 50·i + 50)` mm, centre `50·i + 25`) × 6 height layers × 4 normal classes ([`YawCells`]). A
+//! hypothesis assigns each *cell* (by its centre) to a region, so a region boundary is exact to ±2.5 cm and
+//! every hypothesis of an orientation reuses the same bins: scoring is a sum over cells, not over points.
+//!
+//! # Height layers
+//! 6 equal layers between the frame's floor and ceiling (paper); points below the floor or above the
+//! ceiling count in the lowest or highest layer.
+//!
+//! # Regions, Manhattan (12 per layer)
+//! With the inward distances of a cell centre to the four walls `d = [v1 − v, u − u0, v − v0, u1 − u]`
+//! (front, left, back, right; negative outside), the region's wall is `w = argmin d` (first on ties) and
+//! `dmin = d[w]`: interior `R_w` (`dmin > 150 mm`), wall band `R_{4+w}` (`|dmin| ≤ 150 mm`: the paper's
+//! 0.15 m threshold, taken on both sides of the wall since the points of a wall scatter to both sides), or
+//! exterior `R_{8+w}` (`dmin < −150 mm`). Taking the nearest wall inside and the farthest-out wall outside
+//! is exactly "split at the corners by the diagonals": the borders are the 45° lines through the corners.
+//!
+//! # Regions, cubical (the comparison, 16 per layer)
+//! The inside of the cuboid split into a 4 × 4 grid along `a` (`i`, from the left wall) and `b` (`j`, from
+//! the back wall), region `4·j + i`; points outside the cuboid are ignored (the paper's criticism of it).
+//!
+//! # Descriptor per cell (our choice; paper: density, normals, COG)
+//! Four normal classes, counted per region and layer and divided by the number of points of the frame:
+//! for Manhattan regions relative to the region's wall — **facing** (|n·wall normal| ≥ cos 30°), **across**
+//! (|n·other horizontal axis| ≥ cos 30°: the orthogonal walls), **horizontal** (|n_z| ≥ cos 30°: floor,
+//! ceiling, table tops) and **other**; for cubical regions relative to the room axes (along a, along b,
+//! horizontal, other). The point density is the sum of the four classes, so a linear model has it without
+//! a separate entry. COG (image gradients) is not used by the layout (not implemented).
+//! Feature index: `(region·6 + layer)·4 + class`; Manhattan 12·6·4 = 288 dimensions, cubical 16·6·4 = 384.
+//!
+//! # Scoring (the GPU kernel's twin)
+//! `score(h) = w·φ(h)` is a sum over cells of a per-(cell, region) contribution, tabulated once per frame
+//! and weight vector ([`ScoringTables`]) in fixed point: `round(x·2^e)` as i32, with `2^e` the largest
+//! power of two such that, for every orientation, `Σ_cells max_region |x|·2^e ≤ 2^30`. A hypothesis's score
+//! is then an i32 sum that cannot overflow and does not depend on summation order; the real score is
+//! `sum / 2^e`. [`score_box`] is written like `shaders/room_layout.wgsl`.
+
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+
+use super::{room_axes, to_mm, LayoutScene, RoomBox};
+
+/// Ground-cell side, millimetres.
+pub const CELL_MM: i32 = 50;
+/// Half-width of the wall bands, millimetres (paper: 0.15 m).
+pub const BAND_MM: i32 = 150;
+/// Equal height layers between floor and ceiling (paper: 6).
+pub const LAYERS: usize = 6;
+/// Normal classes per layer and region.
+pub const NORMAL_CLASSES: usize = 4;
+/// Bins of one cell: layers × normal classes.
+pub const CELL_BINS: usize = LAYERS * NORMAL_CLASSES;
+/// Normal classes in the room frame: the normal is (anti)parallel to `a`, to `b`, vertical, or none.
+pub const ALONG_A: u32 = 0;
+pub const ALONG_B: u32 = 1;
+pub const HORIZONTAL: u32 = 2;
+pub const OTHER: u32 = 3;
+/// `cos 30°`: a normal within 30° of an axis belongs to that axis's class.
+const AXIS_COS: f32 = 0.866_025_4;
+/// Manhattan regions per layer; cubical regions per layer and splits per horizontal axis.
+pub const MANHATTAN_REGIONS: u32 = 12;
+pub const CUBICAL_SPLITS: i32 = 4;
+pub const CUBICAL_REGIONS: u32 = (CUBICAL_SPLITS * CUBICAL_SPLITS) as u32;
+/// A cell in no region (cubical voxels: outside the cuboid).
+pub const NO_REGION: u32 = u32::MAX;
+/// Fixed-point budget: per-orientation sums of the largest |contribution| stay below 2^30.
+const SCORE_BUDGET: f64 = (1u64 << 30) as f64;
+
+/// How a hypothesis's space is divided into feature cells.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Discretisation {
+    /// The paper's Manhattan voxels: 12 regions × 6 layers.
+    Manhattan,
+    /// Regular voxels inside the cuboid: 4 × 4 × 6.
+    Cubical,
+}
+
+impl Discretisation {
+    pub fn regions(self) -> u32 {
+        match self {
+            Discretisation::Manhattan => MANHATTAN_REGIONS,
+            Discretisation::Cubical => CUBICAL_REGIONS,
+        }
+    }
+
+    /// Length of the feature vector.
+    pub fn dim(self) -> usize {
+        self.regions() as usize * CELL_BINS
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Discretisation::Manhattan => "manhattan",
+            Discretisation::Cubical => "cubical",
+        }
+    }
+
+    /// The region of a cell centre `(u, v)` (millimetres) for `room_box`, or [`NO_REGION`].
+    pub fn region(self, u: i32, v: i32, room_box: &RoomBox) -> u32 {
+        match self {
+            Discretisation::Manhattan => manhattan_region(u, v, room_box),
+            Discretisation::Cubical => cubical_region(u, v, room_box),
+        }
+    }
+
+    /// The feature class of a point of room-frame class `class` in region `region`.
+    pub fn feature_class(self, region: u32, class: u32) -> u32 {
+        match self {
+            // Walls 0 and 2 (front, back) have normals ±b, walls 1 and 3 ±a: "facing" is class 0.
+            Discretisation::Manhattan => match (class, region.is_multiple_of(2)) {
+                (ALONG_B, true) | (ALONG_A, false) => 0,
+                (ALONG_A, true) | (ALONG_B, false) => 1,
+                (other, _) => other,
+            },
+            Discretisation::Cubical => class,
+        }
+    }
+}
+
+/// Manhattan region of a cell centre (see the module doc). Twin of `manhattan_region` in the shader.
+pub fn manhattan_region(u: i32, v: i32, b: &RoomBox) -> u32 {
+    let d = [b.v1 - v, u - b.u0, v - b.v0, b.u1 - u];
+    let mut wall = 0u32;
+    let mut dmin = d[0];
+    for (w, &dw) in d.iter().enumerate().skip(1) {
+        if dw < dmin {
+            dmin = dw;
+            wall = w as u32;
+        }
+    }
+    if dmin > BAND_MM {
+        wall
+    } else if dmin >= -BAND_MM {
+        4 + wall
+    } else {
+        8 + wall
+    }
+}
+
+/// Cubical region of a cell centre (see the module doc). Twin of `cubical_region` in the shader.
+pub fn cubical_region(u: i32, v: i32, b: &RoomBox) -> u32 {
+    if u < b.u0 || u > b.u1 || v < b.v0 || v > b.v1 {
+        return NO_REGION;
+    }
+    let i = (CUBICAL_SPLITS * (u - b.u0) / (b.u1 - b.u0)).min(CUBICAL_SPLITS - 1);
+    let j = (CUBICAL_SPLITS * (v - b.v0) / (b.v1 - b.v0)).min(CUBICAL_SPLITS - 1);
+    (j * CUBICAL_SPLITS + i) as u32
+}
+
+/// Room-frame class of a unit normal (see the module doc).
+pub fn normal_class(n: Vec3, a: Vec2, b: Vec2) -> u32 {
+    let h = n.truncate();
+    if n.z.abs() >= AXIS_COS {
+        HORIZONTAL
+    } else if h.dot(a).abs() >= AXIS_COS {
+        ALONG_A
+    } else if h.dot(b).abs() >= AXIS_COS {
+        ALONG_B
+    } else {
+        OTHER
+    }
+}
+
+/// Height layer of `z` between `floor` and `ceiling` (clamped to the end layers).
+pub fn layer(z: f32, floor: f32, ceiling: f32) -> usize {
+    let t = (z - floor) / (ceiling - floor) * LAYERS as f32;
+    (t.floor().max(0.0) as usize).min(LAYERS - 1)
+}
+
+/// Index of the cell containing coordinate `mm`.
+fn cell_index(mm: i32) -> i32 {
+    mm.div_euclid(CELL_MM)
+}
+
+/// Centre (mm) of cell `i`.
+pub fn cell_centre(i: i32) -> i32 {
+    i * CELL_MM + CELL_MM / 2
+}
+
+/// First cell whose centre is ≥ `mm`.
+fn first_cell_at_or_after(mm: i32) -> i32 {
+    -(-(mm - CELL_MM / 2)).div_euclid(CELL_MM)
+}
+
+/// One orientation's points binned into ground cells (see the module doc).
+#[derive(Clone, Debug)]
+pub struct YawCells {
+    pub yaw_index: u32,
+    /// Occupied cells' centres `(u, v)` in millimetres, sorted by (v, u).
+    pub centres: Vec<[i32; 2]>,
+    /// Per occupied cell, point counts by `layer·4 + class`.
+    pub bins: Vec<[u16; CELL_BINS]>,
+    /// Points of the frame (all of them land in some cell).
+    pub total_points: u32,
+    /// Dense summed-area table of point counts over cells `origin .. origin + size`, `(size + 1)²` entries.
+    origin: [i32; 2],
+    size: [usize; 2],
+    table: Vec<u32>,
+}
+
+impl YawCells {
+    pub fn new(scene: &LayoutScene, yaw_index: usize) -> YawCells {
+        let (a, b) = room_axes(yaw_index);
+        let mut keyed: Vec<([i32; 2], usize)> = scene
+            .points
+            .iter()
+            .zip(&scene.normals)
+            .map(|(p, n)| {
+                let cell = [cell_index(to_mm(p.truncate().dot(b))), cell_index(to_mm(p.truncate().dot(a)))];
+                let bin = layer(p.z, scene.floor, scene.ceiling) * NORMAL_CLASSES + normal_class(*n, a, b) as usize;
+                (cell, bin)
+            })
+            .collect();
+        keyed.sort_unstable();
+        let mut centres: Vec<[i32; 2]> = Vec::new();
+        let mut bins: Vec<[u16; CELL_BINS]> = Vec::new();
+        for &([j, i], bin) in &keyed {
+            let centre = [cell_centre(i), cell_centre(j)];
+            if centres.last() != Some(&centre) {
+                centres.push(centre);
+                bins.push([0; CELL_BINS]);
+            }
+            let last = bins.len() - 1;
+            bins[last][bin] = bins[last][bin].saturating_add(1);
+        }
+        let (lo_i, hi_i) = keyed.iter().fold((i32::MAX, i32::MIN), |(lo, hi), k| (lo.min(k.0[1]), hi.max(k.0[1])));
+        let (lo_j, hi_j) = (keyed.first().map_or(0, |k| k.0[0]), keyed.last().map_or(0, |k| k.0[0]));
+        let origin = if keyed.is_empty() { [0, 0] } else { [lo_i, lo_j] };
+        let size = if keyed.is_empty() { [0, 0] } else { [(hi_i - lo_i + 1) as usize, (hi_j - lo_j + 1) as usize] };
+        let stride = size[0] + 1;
+        let mut table = vec![0u32; stride * (size[1] + 1)];
+        for &([j, i], _) in &keyed {
+            table[(j - origin[1] + 1) as usize * stride + (i - origin[0] + 1) as usize] += 1;
+        }
+        for row in 1..=size[1] {
+            for col in 1..=size[0] {
+                table[row * stride + col] += table[(row - 1) * stride + col] + table[row * stride + col - 1]
+                    - table[(row - 1) * stride + col - 1];
+            }
+        }
+        YawCells { yaw_index: yaw_index as u32, centres, bins, total_points: keyed.len() as u32, origin, size, table }
+    }
+
+    /// Points whose cell centre lies inside the box's footprint (walls inclusive).
+    pub fn points_inside(&self, b: &RoomBox) -> u64 {
+        let clamp = |lo: i32, hi: i32, axis: usize| -> Option<(usize, usize)> {
+            let first = (first_cell_at_or_after(lo) - self.origin[axis]).max(0);
+            let last = (cell_index(hi - CELL_MM / 2) - self.origin[axis]).min(self.size[axis] as i32 - 1);
+            (first <= last).then_some((first as usize, last as usize + 1))
+        };
+        let (Some((i0, i1)), Some((j0, j1))) = (clamp(b.u0, b.u1, 0), clamp(b.v0, b.v1, 1)) else { return 0 };
+        let stride = self.size[0] + 1;
+        let at = |row: usize, col: usize| self.table[row * stride + col] as i64;
+        (at(j1, i1) - at(j0, i1) - at(j1, i0) + at(j0, i0)) as u64
+    }
+}
+
+/// The feature vector `φ(h)` of one hypothesis (see the module doc), length `disc.dim()`.
+pub fn features(disc: Discretisation, cells: &YawCells, room_box: &RoomBox) -> Vec<f32> {
+    let mut out = vec![0f64; disc.dim()];
+    let norm = 1.0 / cells.total_points.max(1) as f64;
+    for (centre, bins) in cells.centres.iter().zip(&cells.bins) {
+        let region = disc.region(centre[0], centre[1], room_box);
+        if region == NO_REGION {
+            continue;
+        }
+        for (bin, &count) in bins.iter().enumerate() {
+            if count > 0 {
+                let (layer, class) = (bin / NORMAL_CLASSES, bin % NORMAL_CLASSES);
+                let index = feature_index(region, layer, disc.feature_class(region, class as u32));
+                out[index] += count as f64 * norm;
+            }
+        }
+    }
+    out.into_iter().map(|x| x as f32).collect()
+}
+
+/// Index of (region, layer, feature class) in the feature vector.
+pub fn feature_index(region: u32, layer: usize, class: u32) -> usize {
+    (region as usize * LAYERS + layer) * NORMAL_CLASSES + class as usize
+}
+
+/// Per orientation, per occupied cell, per region: the fixed-point contribution to `w·φ` (see the module
+/// doc). `contributions[k][cell·regions + region]`.
+#[derive(Clone, Debug)]
+pub struct ScoringTables {
+    pub discretisation: Discretisation,
+    /// Real score = integer score / `scale`.
+    pub scale: f64,
+    pub contributions: Vec<Vec<i32>>,
+}
+
+impl ScoringTables {
+    pub fn new(disc: Discretisation, cells: &[YawCells], w: &[f64]) -> ScoringTables {
+        let regions = disc.regions() as usize;
+        let real: Vec<Vec<f64>> = cells
+            .par_iter()
+            .map(|yaw| {
+                let norm = 1.0 / yaw.total_points.max(1) as f64;
+                let mut out = vec![0.0; yaw.bins.len() * regions];
+                for (c, bins) in yaw.bins.iter().enumerate() {
+                    for r in 0..regions {
+                        let mut x = 0.0;
+                        for (bin, &count) in bins.iter().enumerate() {
+                            if count > 0 {
+                                let class = disc.feature_class(r as u32, (bin % NORMAL_CLASSES) as u32);
+                                x += count as f64 * w[feature_index(r as u32, bin / NORMAL_CLASSES, class)];
+                            }
+                        }
+                        out[c * regions + r] = x * norm;
+                    }
+                }
+                out
+            })
+            .collect();
+        let bound = real
+            .iter()
+            .map(|yaw| yaw.chunks(regions).map(|c| c.iter().fold(0f64, |m, x| m.max(x.abs()))).sum::<f64>())
+            .fold(0f64, f64::max);
+        let scale = if bound > 0.0 { 2f64.powi((SCORE_BUDGET / bound).log2().floor() as i32) } else { 1.0 };
+        let contributions = real.iter().map(|yaw| yaw.iter().map(|x| (x * scale).round() as i32).collect()).collect();
+        ScoringTables { discretisation: disc, scale, contributions }
+    }
+}
+
+/// Integer score of one hypothesis: the sum over its orientation's cells of the contribution of the cell's
+/// region (0 for no region). Twin of the shader's per-invocation loop.
+pub fn score_box(disc: Discretisation, centres: &[[i32; 2]], contributions: &[i32], room_box: &RoomBox) -> i32 {
+    let regions = disc.regions() as usize;
+    let mut total = 0i32;
+    for (cell, centre) in centres.iter().enumerate() {
+        let region = disc.region(centre[0], centre[1], room_box);
+        if region != NO_REGION {
+            total = total.wrapping_add(contributions[cell * regions + region as usize]);
+        }
+    }
+    total
+}
+
+/// Integer scores of many hypotheses on the CPU (rayon), in their order.
+pub fn scores_cpu(cells: &[YawCells], tables: &ScoringTables, boxes: &[RoomBox]) -> Vec<i32> {
+    boxes
+        .par_iter()
+        .map(|b| {
+            let k = b.yaw_index as usize;
+            score_box(tables.discretisation, &cells[k].centres, &tables.contributions[k], b)
+        })
+        .collect()
+}

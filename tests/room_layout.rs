@@ -1,0 +1,280 @@
+//! Room layout (`cog_gpu::room_layout`): free-space IoU against hand-computed boxes, the Manhattan and
+//! cubical region assignment of hand-placed points, the summed-area IoU against the direct count, the
+//! hypotheses' 80 % rule, the model file, and the PLY writer read back.
+
+use cog_gpu::frame::RoomLayout;
+use cog_gpu::geometry::Camera;
+use cog_gpu::ply::{write_ply, LineSet};
+use cog_gpu::room_layout::free_space::{free_space_counts, free_space_iou, YawFreeSpace};
+use cog_gpu::room_layout::learn::yaw_difference_mod_90;
+use cog_gpu::room_layout::voxels::{
+    cubical_region, features, manhattan_region, Discretisation, ScoringTables, YawCells, LAYERS,
+};
+use cog_gpu::room_layout::{room_axes, LayoutScene, RoomBox};
+use glam::{Mat3, Vec2, Vec3};
+
+/// A camera at the upright origin looking along +y with no tilt, with a very wide field of view (focal
+/// length 1 px on a 2000 × 2000 image: everything within 89.9° of the axis is in view), so that the view
+/// frustum is (almost) the half-space y > 0.
+fn wide_camera() -> (Camera, [u32; 2]) {
+    (Camera::new([1.0, 1.0, 1000.5, 1000.5], Mat3::IDENTITY), [2000, 2000])
+}
+
+fn rect(x0: f32, x1: f32, y0: f32, y1: f32, floor: f32, ceiling: f32) -> RoomLayout {
+    RoomLayout {
+        corners: vec![Vec2::new(x0, y0), Vec2::new(x1, y0), Vec2::new(x1, y1), Vec2::new(x0, y1)],
+        floor,
+        ceiling,
+    }
+}
+
+#[test]
+fn identical_rooms_have_free_space_iou_one() {
+    let (camera, size) = wide_camera();
+    let room = rect(-2.0, 2.0, 1.0, 5.0, -1.5, 1.0);
+    let counts = free_space_counts(&room, &room, &camera, size, (Vec2::X, Vec2::Y));
+    // 40 × 40 columns × 25 layers, all in view.
+    assert_eq!(counts.a, 40 * 40 * 25);
+    assert_eq!(free_space_iou(&room, &room, &camera, size), 1.0);
+}
+
+#[test]
+fn disjoint_rooms_have_free_space_iou_zero() {
+    let (camera, size) = wide_camera();
+    let a = rect(-2.0, 0.0, 1.0, 5.0, -1.5, 1.0);
+    let b = rect(0.0, 2.0, 1.0, 5.0, -1.5, 1.0);
+    assert_eq!(free_space_iou(&a, &b, &camera, size), 0.0);
+    // Same footprint, stacked heights: disjoint too.
+    let c = rect(-2.0, 0.0, 1.0, 5.0, 1.0, 2.0);
+    assert_eq!(free_space_iou(&a, &c, &camera, size), 0.0);
+}
+
+#[test]
+fn partial_overlap_matches_the_hand_computation() {
+    let (camera, size) = wide_camera();
+    // A: 4 m × 4 m × 2.5 m; B: shifted by 1 m in x and 0.5 m up. Intersection 3 × 4 × 2 = 24 m³, union
+    // 40 + 40 − 24 = 56 m³: IoU 24/56 = 3/7 (voxel boundaries fall on the box faces, so the voxel count
+    // is exact).
+    let a = rect(-2.0, 2.0, 1.0, 5.0, -1.5, 1.0);
+    let b = rect(-1.0, 3.0, 1.0, 5.0, -1.0, 1.5);
+    let iou = free_space_iou(&a, &b, &camera, size);
+    assert!((iou - 3.0 / 7.0).abs() < 1e-12, "{iou}");
+}
+
+#[test]
+fn only_the_space_in_view_counts() {
+    let (camera, size) = wide_camera();
+    // Behind the camera (y < 0) nothing is in view: two rooms differing only there are the same free space.
+    let a = rect(-2.0, 2.0, -3.0, 4.0, -1.5, 1.0);
+    let b = rect(-2.0, 2.0, 0.0, 4.0, -1.5, 1.0);
+    assert_eq!(free_space_iou(&a, &b, &camera, size), 1.0);
+    // A normal camera (fx = 500 on 640 × 480) sees a 65° wide cone: a room entirely beside it is not seen.
+    let narrow = Camera::new([500.0, 500.0, 320.5, 240.5], Mat3::IDENTITY);
+    let beside = rect(5.0, 9.0, 0.0, 1.0, -1.5, 1.0);
+    let counts = free_space_counts(&beside, &beside, &narrow, [640, 480], (Vec2::X, Vec2::Y));
+    assert_eq!(counts.a, 0);
+    assert_eq!(counts.iou(), 0.0);
+}
+
+/// A frame-like scene: the camera of `wide_camera`, points on the walls of a 4 × 6 m room.
+fn room_scene() -> LayoutScene {
+    let (camera, image_size) = wide_camera();
+    let mut points = Vec::new();
+    let mut normals = Vec::new();
+    for i in 0..80 {
+        for k in 0..25 {
+            let (t, z) = (i as f32 / 80.0, -1.4 + k as f32 * 0.1);
+            // Front wall y = 5, side walls x = ±2 (from y = 0.5 to 5), floor.
+            points.push(Vec3::new(-2.0 + 4.0 * t, 5.0, z));
+            normals.push(Vec3::NEG_Y);
+            points.push(Vec3::new(-2.0, 0.5 + 4.5 * t, z));
+            normals.push(Vec3::X);
+            points.push(Vec3::new(2.0, 0.5 + 4.5 * t, z));
+            normals.push(Vec3::NEG_X);
+            points.push(Vec3::new(-2.0 + 4.0 * t, 0.5 + 4.5 * (k as f32 / 25.0), -1.5));
+            normals.push(Vec3::Z);
+        }
+    }
+    LayoutScene { camera, image_size, points, normals, floor: -1.5, ceiling: 1.0, stride: 1 }
+}
+
+/// Index of the orientation with yaw 0 (the room frame is the upright frame).
+const YAW_ZERO: usize = 9;
+
+#[test]
+fn manhattan_regions_of_hand_placed_points() {
+    // Room u ∈ [−2000, 2000], v ∈ [0, 5000] mm. Regions: 0..3 interior of front/left/back/right,
+    // 4..7 their wall bands (±150 mm), 8..11 outside.
+    let b = RoomBox { yaw_index: YAW_ZERO as u32, u0: -2000, u1: 2000, v0: 0, v1: 5000 };
+    let cases = [
+        ((0, 4000), 0),     // nearest the front wall, 1000 mm from it
+        ((-1500, 2500), 1), // nearest the left wall
+        ((0, 800), 2),      // nearest the back wall
+        ((1500, 2500), 3),  // nearest the right wall
+        ((0, 4900), 4),     // 100 mm inside the front wall
+        ((0, 5100), 4),     // 100 mm outside it: still the band
+        ((-2150, 2500), 5), // exactly 150 mm outside the left wall: band (inclusive)
+        ((0, -150), 6),     // back band
+        ((1900, 2500), 7),  // right band
+        ((0, 5151), 8),     // 151 mm beyond the front wall: exterior
+        ((-3000, 2500), 9), // beyond the left wall
+        ((0, -1000), 10),   // behind the back wall
+        ((2500, 2500), 11), // beyond the right wall
+        // Corners: the 45° diagonals split them. 120 mm from the front, 100 mm from the right: right band.
+        ((1900, 4880), 7),
+        // 100 mm from the front, 120 mm from the right: front band.
+        ((1880, 4900), 4),
+        // 200 mm from the front, 160 mm from the right: nearest the right wall but beyond its band: right
+        // interior.
+        ((1840, 4800), 3),
+        // Outside the front-right corner, further out in u than in v: right exterior.
+        ((3000, 5500), 11),
+        // Further out in v than in u: front exterior.
+        ((2500, 6000), 8),
+        // Interior near the corner: 400 mm from the front, 600 from the right: front interior.
+        ((1400, 4600), 0),
+    ];
+    for ((u, v), expected) in cases {
+        assert_eq!(manhattan_region(u, v, &b), expected, "point ({u}, {v})");
+    }
+}
+
+#[test]
+fn cubical_regions_of_hand_placed_points() {
+    let b = RoomBox { yaw_index: YAW_ZERO as u32, u0: -2000, u1: 2000, v0: 0, v1: 4000 };
+    // 4 × 4 cells of 1 m: i along u from the left, j along v from the back; region 4j + i.
+    assert_eq!(cubical_region(-1999, 1, &b), 0);
+    assert_eq!(cubical_region(-500, 500, &b), 1);
+    assert_eq!(cubical_region(1500, 3500, &b), 15);
+    assert_eq!(cubical_region(2000, 4000, &b), 15); // the far walls belong to the last cell
+    assert_eq!(cubical_region(0, 2000, &b), 10);
+    assert_eq!(cubical_region(2001, 100, &b), u32::MAX);
+    assert_eq!(cubical_region(0, -1, &b), u32::MAX);
+}
+
+#[test]
+fn features_of_a_constructed_room_put_wall_points_in_their_bands() {
+    let scene = room_scene();
+    let cells = YawCells::new(&scene, YAW_ZERO);
+    assert_eq!(cells.total_points as usize, scene.points.len());
+    let truth = RoomBox { yaw_index: YAW_ZERO as u32, u0: -2000, u1: 2000, v0: 0, v1: 5000 };
+    let phi = features(Discretisation::Manhattan, &cells, &truth);
+    assert_eq!(phi.len(), 288);
+    // Everything sums to 1 (every point is in exactly one region, layer and class).
+    assert!((phi.iter().sum::<f32>() - 1.0).abs() < 1e-5);
+    let n = scene.points.len() as f32;
+    // Front wall band (region 4), "facing" class 0, summed over the layers: the 2000 front-wall points.
+    let front_facing: f32 = (0..LAYERS).map(|l| phi[(4 * LAYERS + l) * 4]).sum();
+    assert!((front_facing * n - 2000.0).abs() < 0.5, "{}", front_facing * n);
+    // The left and right walls' points are "facing" in their own bands 5 and 7, except the ones in the
+    // front corners within 150 mm (cells of the front band by the diagonal split): nothing is exterior.
+    let exterior: f32 = phi[8 * LAYERS * 4..].iter().sum();
+    assert_eq!(exterior, 0.0);
+    // A room 1 m too narrow on the left puts the left wall's points outside, in region 9.
+    let narrow = RoomBox { u0: -1000, ..truth };
+    let phi = features(Discretisation::Manhattan, &cells, &narrow);
+    let left_exterior: f32 =
+        (0..LAYERS).flat_map(|l| (0..4).map(move |c| (9 * LAYERS + l) * 4 + c)).map(|i| phi[i]).sum();
+    assert!(left_exterior * n > 1500.0, "{}", left_exterior * n);
+}
+
+#[test]
+fn scoring_tables_give_the_dot_product_with_the_features() {
+    let scene = room_scene();
+    let cells: Vec<YawCells> = (0..18).map(|k| YawCells::new(&scene, k)).collect();
+    for disc in [Discretisation::Manhattan, Discretisation::Cubical] {
+        let w: Vec<f64> = (0..disc.dim()).map(|i| ((i * 37 % 101) as f64 - 50.0) / 7.0).collect();
+        let tables = ScoringTables::new(disc, &cells, &w);
+        let boxes = [
+            RoomBox { yaw_index: 9, u0: -2000, u1: 2000, v0: 0, v1: 5000 },
+            RoomBox { yaw_index: 3, u0: -2600, u1: 1500, v0: -300, v1: 4000 },
+        ];
+        let scores = cog_gpu::room_layout::voxels::scores_cpu(&cells, &tables, &boxes);
+        for (b, s) in boxes.iter().zip(scores) {
+            let phi = features(disc, &cells[b.yaw_index as usize], b);
+            let dot: f64 = phi.iter().zip(&w).map(|(&x, &w)| x as f64 * w).sum();
+            // Fixed point: each cell's contribution is rounded to 1/scale.
+            let cells_of_yaw = cells[b.yaw_index as usize].centres.len() as f64;
+            assert!((s as f64 / tables.scale - dot).abs() < 1e-5 + cells_of_yaw / tables.scale, "{disc:?} {b:?}");
+        }
+    }
+}
+
+#[test]
+fn summed_area_iou_equals_the_direct_count() {
+    let (camera, size) = wide_camera();
+    let truth = RoomLayout {
+        corners: vec![Vec2::new(-2.0, 0.5), Vec2::new(2.5, 0.2), Vec2::new(2.9, 5.0), Vec2::new(-1.8, 5.3)],
+        floor: -1.4,
+        ceiling: 1.2,
+    };
+    for k in [0usize, 4, 9, 13] {
+        let boxes = [
+            RoomBox { yaw_index: k as u32, u0: -2000, u1: 2000, v0: 100, v1: 5000 },
+            RoomBox { yaw_index: k as u32, u0: -1200, u1: 2600, v0: -800, v1: 3900 },
+        ];
+        let table = YawFreeSpace::new(k, &camera, size, -1.5, 1.0, &truth, [-3.0, 3.0, -1.0, 5.5]);
+        for b in &boxes {
+            let direct = free_space_counts(&b.to_room(-1.5, 1.0), &truth, &camera, size, room_axes(k));
+            assert_eq!(table.counts(b), direct, "orientation {k}, {b:?}");
+        }
+    }
+}
+
+#[test]
+fn hypotheses_hold_eighty_percent_and_include_the_room() {
+    let scene = room_scene();
+    let (cells, boxes) = cog_gpu::room_layout::hypotheses(&scene);
+    assert!(!boxes.is_empty());
+    for b in &boxes {
+        let inside = cells[b.yaw_index as usize].points_inside(b);
+        assert!(inside as f64 >= 0.8 * scene.points.len() as f64, "{b:?} holds {inside}");
+        assert!(b.u1 - b.u0 >= 1000 && b.v1 - b.v0 >= 1000);
+        // The camera (the origin) is in the room.
+        assert!(b.u0 <= 0 && b.u1 >= 0 && b.v0 <= 0 && b.v1 >= 0, "{b:?}");
+    }
+    // The walls are at u = ±2000 (cells centred at ±1975 / ±2025), v = 5000; the back at the camera (0).
+    let truth = RoomLayout { corners: rect(-2.0, 2.0, 0.0, 5.0, -1.5, 1.0).corners, floor: -1.5, ceiling: 1.0 };
+    let best = boxes
+        .iter()
+        .map(|b| free_space_iou(&b.to_room(-1.5, 1.0), &truth, &scene.camera, scene.image_size))
+        .fold(0.0, f64::max);
+    assert!(best > 0.97, "best hypothesis IoU {best}");
+}
+
+#[test]
+fn orientation_difference_is_taken_modulo_ninety_degrees() {
+    let d = |a: f32, b: f32| yaw_difference_mod_90(a.to_radians(), b.to_radians()).to_degrees();
+    assert!((d(10.0, 0.0) - 10.0).abs() < 1e-4);
+    assert!((d(100.0, 0.0) - 10.0).abs() < 1e-4);
+    assert!((d(-40.0, 40.0) - 10.0).abs() < 1e-4);
+    assert!((d(44.0, -44.0) - (-2.0)).abs() < 1e-4);
+}
+
+#[test]
+fn ply_reads_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("scene.ply");
+    let points = [Vec3::new(1.0, 2.0, 3.0), Vec3::new(-0.5, 4.25, -1.5)];
+    let colours = [[10u8, 20, 30], [200, 100, 0]];
+    let room = LineSet::from_prism(&rect(0.0, 4.0, 0.0, 3.0, -1.5, 1.0).corners, -1.5, 1.0, [255, 215, 0]);
+    write_ply(&path, "test", &points, &colours, &[room]).unwrap();
+    let text = std::fs::read_to_string(&path).unwrap();
+    let (header, body) = text.split_once("end_header\n").unwrap();
+    assert!(header.starts_with("ply\nformat ascii 1.0\n"));
+    assert!(header.contains("element vertex 10\n") && header.contains("element edge 12\n"), "{header}");
+    let rows: Vec<Vec<f64>> =
+        body.lines().map(|l| l.split_whitespace().map(|x| x.parse().unwrap()).collect()).collect();
+    assert_eq!(rows.len(), 10 + 12);
+    assert_eq!(rows[1], vec![-0.5, 4.25, -1.5, 200.0, 100.0, 0.0]);
+    // The room's vertex 2 (after the 2 points) is the floor corner (4, 3, −1.5).
+    assert_eq!(rows[2 + 2][..3], [4.0, 3.0, -1.5]);
+    // Every edge joins two room vertices (indices 2..10), 4 m, 3 m or 2.5 m apart.
+    for e in &rows[10..] {
+        let (i, j) = (e[0] as usize, e[1] as usize);
+        assert!((2..10).contains(&i) && (2..10).contains(&j), "{e:?}");
+        let (p, q) = (&rows[i], &rows[j]);
+        let length = ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt();
+        assert!([4.0, 3.0, 2.5].iter().any(|l| (length - l).abs() < 1e-6), "edge {e:?} length {length}");
+    }
+}

@@ -1,0 +1,118 @@
+//! The room-layout commands through the binary on small synthetic frames: `train-layout` → `layout`
+//! (JSON, overlay, PLY) → `eval --layout`; `detect` with a layout model beside the detector models; and
+//! bad inputs, which must exit with status 1 naming the file, never panic.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+use serde_json::Value;
+
+fn run(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_cog-gpu"))
+        .arg("--cpu")
+        .args(args)
+        .env("RUST_BACKTRACE", "0")
+        .env("RUST_LOG", "warn")
+        .output()
+        .expect("run cog-gpu")
+}
+
+fn ok(args: &[&str]) -> String {
+    let out = run(args);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{args:?} failed: {err}");
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+fn rejected(args: &[&str], needle: &str) {
+    let out = run(args);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{args:?} should fail: {err}");
+    assert!(!err.contains("panicked"), "{args:?} panicked: {err}");
+    assert!(err.contains(needle), "{args:?}: expected '{needle}' in: {err}");
+}
+
+fn json(path: &Path) -> Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+#[test]
+fn train_layout_eval_and_detect_end_to_end() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |s: &str| dir.path().join(s).to_string_lossy().into_owned();
+    ok(&[
+        "synth",
+        "--out",
+        &p("data"),
+        "--frames",
+        "3",
+        "--seed",
+        "5",
+        "--width",
+        "160",
+        "--height",
+        "120",
+        "--sensor",
+        "xtion",
+    ]);
+    ok(&["train-layout", "--data", &p("data"), "--out", &p("layout.json"), "--max-iterations", "3"]);
+    let model = json(&dir.path().join("layout.json"));
+    assert_eq!(model["format"], "cog-gpu-layout-model");
+    assert_eq!(model["weights"].as_array().unwrap().len(), 288);
+    assert_eq!(model["provenance"]["data_seed"], 5);
+
+    ok(&["layout", &p("data"), "--model", &p("layout.json"), "--out", &p("out"), "--ply"]);
+    let frame = "synth-000000";
+    let record = json(&dir.path().join(format!("out/{frame}.json")));
+    assert_eq!(record["frame"], frame);
+    assert_eq!(record["layout"]["corners"].as_array().unwrap().len(), 4);
+    assert!(record["layout"]["floor"].as_f64().unwrap() < record["layout"]["ceiling"].as_f64().unwrap());
+    assert!(dir.path().join(format!("out/{frame}.png")).is_file());
+    let ply = std::fs::read_to_string(dir.path().join(format!("out/{frame}.ply"))).unwrap();
+    assert!(ply.starts_with("ply\nformat ascii 1.0\n") && ply.contains("element edge 12\n"));
+
+    let report: Value =
+        serde_json::from_str(&ok(&["eval", "--layout", "--data", &p("data"), "--detections", &p("out"), "--json"]))
+            .unwrap();
+    assert_eq!(report["frames"], 3);
+    for f in report["per_frame"].as_array().unwrap() {
+        let iou = f["iou"].as_f64().unwrap();
+        assert!((0.0..=1.0).contains(&iou), "{f}");
+    }
+    // The heuristic baseline writes the same files.
+    ok(&["layout", &p("data"), "--heuristic", "--out", &p("heuristic"), "--no-overlay"]);
+    assert_eq!(json(&dir.path().join(format!("heuristic/{frame}.json")))["layout"]["method"], "heuristic");
+
+    // A models directory with a detector and the layout model: detect reads both.
+    let models = dir.path().join("models");
+    std::fs::create_dir(&models).unwrap();
+    let bed = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/models/bed.json");
+    std::fs::copy(&bed, models.join("bed.json")).unwrap();
+    std::fs::copy(dir.path().join("layout.json"), models.join("layout.json")).unwrap();
+    ok(&["detect", &p(&format!("data/{frame}")), "--models", &p("models"), "--out", &p("det"), "--ply"]);
+    let detections = json(&dir.path().join(format!("det/{frame}.json")));
+    assert!(detections["detections"].is_array());
+    assert_eq!(detections["layout"]["method"], "manhattan");
+    assert!(std::fs::read_to_string(dir.path().join(format!("det/{frame}.ply"))).unwrap().contains("element edge"));
+}
+
+#[test]
+fn bad_layout_inputs_are_errors_naming_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |s: &str| dir.path().join(s).to_string_lossy().into_owned();
+    rejected(&["layout", &p("nowhere"), "--heuristic", "--out", &p("out")], "nowhere");
+    std::fs::write(dir.path().join("garbage.json"), "{not json").unwrap();
+    rejected(&["layout", "--model", &p("garbage.json"), "--out", &p("out")], "garbage.json");
+    let short =
+        r#"{"format": "cog-gpu-layout-model", "version": 1, "discretisation": "manhattan", "weights": [1.0, 2.0]}"#;
+    std::fs::write(dir.path().join("short.json"), short).unwrap();
+    rejected(&["layout", "--model", &p("short.json"), "--out", &p("out")], "short.json");
+    let nan = format!(
+        r#"{{"format": "cog-gpu-layout-model", "version": 1, "discretisation": "cubical", "weights": [{}]}}"#,
+        vec!["1e30"; 384].join(",")
+    );
+    std::fs::write(dir.path().join("huge.json"), nan).unwrap();
+    rejected(&["layout", "--model", &p("huge.json"), "--out", &p("out")], "huge.json");
+    rejected(&["eval", "--layout", "--data", &p("nowhere"), "--detections", &p("out")], "nowhere");
+    rejected(&["train-layout", "--data", &p("nowhere"), "--out", &p("m.json")], "nowhere");
+}
