@@ -146,11 +146,12 @@ impl Cascade {
     /// (stable). Detections must be the first stage's, calibrated (`raw_score` present) and not rescored.
     pub fn rescore(&self, detections: &mut [Detection]) -> Result<()> {
         check_first_stage(detections)?;
+        let features = frame_context_features(detections, &self.categories);
         let rescored: Vec<Option<(f32, f32)>> = (0..detections.len())
             .map(|i| {
                 let stage = self.stages.get(&detections[i].category)?;
-                let psi = context_features(detections, i, &self.categories);
-                let context = LinearSvm { weights: stage.weights.clone(), bias: stage.bias }.decision(&psi) as f32;
+                let decision: f64 = stage.weights.iter().zip(&features[i]).map(|(w, v)| w * v).sum::<f64>();
+                let context = (decision + stage.bias) as f32;
                 Some((context, stage.calibration.probability(combined(&detections[i], context))))
             })
             .collect();
@@ -190,15 +191,20 @@ fn check_first_stage(detections: &[Detection]) -> Result<()> {
     Ok(())
 }
 
-/// ψ of detection `i` among its frame's first-stage `detections` (module doc); `p` is each detection's
-/// `score` (the first stage's calibrated probability).
-pub fn context_features(detections: &[Detection], i: usize, categories: &[String]) -> Vec<f64> {
-    let own = detections[i].cuboid();
+/// ψ of every detection of one frame's first-stage `detections` (module doc), in their order; `p` is each
+/// detection's `score` (the first stage's calibrated probability).
+pub fn frame_context_features(detections: &[Detection], categories: &[String]) -> Vec<Vec<f64>> {
+    let boxes: Vec<Cuboid> = detections.iter().map(Detection::cuboid).collect();
+    (0..detections.len()).map(|i| context_features(detections, &boxes, i, categories)).collect()
+}
+
+/// ψ of detection `i`; `boxes` are the detections' cuboids.
+fn context_features(detections: &[Detection], boxes: &[Cuboid], i: usize, categories: &[String]) -> Vec<f64> {
+    let own = boxes[i];
     let p_i = f64::from(detections[i].score);
     let mut psi = vec![0.0; feature_dim(categories.len())];
     psi[0] = p_i;
     psi[1] = p_i * p_i;
-    let boxes: Vec<Cuboid> = detections.iter().map(Detection::cuboid).collect();
     for (k, category) in categories.iter().enumerate() {
         // (p_j, overlap volume, j) of the most confident overlapping detection of the category.
         let mut best: Option<(f64, f64, usize)> = None;
@@ -247,8 +253,9 @@ fn samples_of(
     let mut boxes = Vec::new();
     for (f, (objects, detections)) in frames.iter().enumerate() {
         s.truth.push(objects.iter().filter(|o| o.category == category).map(|o| o.cuboid).collect());
+        let features = frame_context_features(detections, categories);
         for (i, d) in detections.iter().enumerate().filter(|(_, d)| d.category == category) {
-            s.psi.push(context_features(detections, i, categories));
+            s.psi.push(features[i].clone());
             s.raw.push(d.raw_score.unwrap_or(d.score));
             s.frame.push(f);
             s.cuboids.push(d.cuboid());

@@ -6,7 +6,7 @@ use std::process::Command;
 
 mod common;
 
-use cog_gpu::cascade::{context_features, feature_dim, train_cascade, Cascade, CascadeTraining};
+use cog_gpu::cascade::{feature_dim, frame_context_features, train_cascade, Cascade, CascadeTraining};
 use cog_gpu::eval::{average_precision, Detection, FrameDetections, ScoredBox};
 use cog_gpu::frame::Object;
 use cog_gpu::geometry::Cuboid;
@@ -71,7 +71,7 @@ fn context_features_match_a_hand_computation() {
         detection("chair", [0.0, 6.0, 0.5], [0.5, 0.5, 1.0], 0.7, 0.0),
     ];
     let categories = names(&["bed", "chair", "table"]);
-    let psi = context_features(&detections, 0, &categories);
+    let psi = &frame_context_features(&detections, &categories)[0];
     assert_eq!(psi.len(), feature_dim(3));
     // S1 = O/V_i = 1, S2 = O/V_j = 0.5, S3 = O/U = 1/(1 + 2 − 1) = 0.5.
     let expected = [
