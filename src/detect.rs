@@ -21,7 +21,7 @@ use crate::error::{Error, Result};
 use crate::eval::{Detection, FrameDetections};
 use crate::features::budget;
 use crate::features::fast::FastEngine;
-use crate::features::hypotheses::{default_yaws, sliding_window, WindowOptions};
+use crate::features::hypotheses::{sliding_window, window_yaws, WindowOptions, YawAnchor};
 use crate::features::{Backend, FeatureScene, Hypothesis, Preprocessed};
 use crate::frame::Frame;
 use crate::geometry::Camera;
@@ -132,14 +132,17 @@ pub fn detect_frame(
 pub fn check_budget(pre: &Preprocessed, models: &[Model]) -> Result<()> {
     let mut checked = Vec::new();
     for model in models {
-        let key = (model.window.step.to_bits(), model.sizes().len(), model.features.path, model.layout.grid()[2]);
+        let anchor = model.window.yaw_anchor;
+        let key =
+            (model.window.step.to_bits(), anchor, model.sizes().len(), model.features.path, model.layout.grid()[2]);
         if checked.contains(&key) {
             continue;
         }
         checked.push(key);
-        budget::check_window(pre, model.window.step, model.sizes().len())?;
+        let yaws = window_yaws(pre, anchor);
+        budget::check_window(pre, &yaws, model.window.step, model.sizes().len())?;
         if model.features.path == FeaturePath::Fast {
-            budget::check_fast(pre, model.window.step, &model.layout, model.features.subdivisions)?;
+            budget::check_fast(pre, &yaws, model.window.step, &model.layout, model.features.subdivisions)?;
         }
     }
     Ok(())
@@ -154,17 +157,18 @@ pub fn detect_preprocessed(
     options: &DetectOptions,
 ) -> Result<FrameDetections> {
     check_budget(&pre, models)?;
-    // One scene per distinct window step (the yaw grids' cell is the step).
-    let mut scenes: BTreeMap<u32, FeatureScene> = BTreeMap::new();
+    // One scene per distinct window step and yaw anchor (the yaw grids' cell is the step).
+    let mut scenes: BTreeMap<(u32, YawAnchor), FeatureScene> = BTreeMap::new();
     for model in models {
+        let (step, anchor) = (model.window.step, model.window.yaw_anchor);
         scenes
-            .entry(model.window.step.to_bits())
-            .or_insert_with(|| FeatureScene::new(pre.clone(), &default_yaws(), model.window.step));
+            .entry((step.to_bits(), anchor))
+            .or_insert_with(|| FeatureScene::new(pre.clone(), &window_yaws(&pre, anchor), step));
     }
     let mut candidates = Vec::new();
     let mut engines = FastEngines::new();
     for model in models {
-        let scene = &scenes[&model.window.step.to_bits()];
+        let scene = &scenes[&(model.window.step.to_bits(), model.window.yaw_anchor)];
         let window =
             sliding_window(scene, &WindowOptions { sizes: model.sizes(), min_points: model.window.min_points });
         let hypotheses = &window.hypotheses;

@@ -33,7 +33,7 @@ use serde::Serialize;
 
 use crate::detect::overlay_selection;
 use crate::eval::{average_precision, scored_boxes, Detection, PrecisionRecall, ScoredBox};
-use crate::features::hypotheses::{default_yaws, sliding_window, WindowOptions};
+use crate::features::hypotheses::{sliding_window, window_yaws, WindowOptions, YawAnchor};
 use crate::features::{FeatureScene, Hypothesis, Preprocessed};
 use crate::frame::Object;
 use crate::geometry::{iou_3d, Cuboid};
@@ -77,7 +77,8 @@ pub fn best_window_ious(scene: &FeatureScene, hypotheses: &[Hypothesis], truths:
 /// `objects`, the best window IoU ([`best_window_ious`]) of each of those boxes, in `objects` order.
 ///
 /// The window is the one [`crate::detect::detect_preprocessed`] enumerates: one [`FeatureScene`] per
-/// distinct `model.window.step` (shared by the models with that step) with [`default_yaws`], and
+/// distinct `(model.window.step, model.window.yaw_anchor)` (shared by the models with both) with
+/// [`window_yaws`], and
 /// [`sliding_window`] with the model's sizes and `min_points`. Categories without a model, or without
 /// ground truth in the frame, are absent from the result; no scene is built when no model has ground truth.
 pub fn frame_window_best_ious(pre: &Preprocessed, models: &[Model], objects: &[Object]) -> BTreeMap<String, Vec<f32>> {
@@ -85,15 +86,16 @@ pub fn frame_window_best_ious(pre: &Preprocessed, models: &[Model], objects: &[O
         objects.iter().filter(|o| o.category == category).map(|o| o.cuboid).collect()
     };
     let wanted: Vec<&Model> = models.iter().filter(|m| objects.iter().any(|o| o.category == m.category)).collect();
-    let mut scenes: BTreeMap<u32, FeatureScene> = BTreeMap::new();
+    let mut scenes: BTreeMap<(u32, YawAnchor), FeatureScene> = BTreeMap::new();
     for model in &wanted {
+        let (step, anchor) = (model.window.step, model.window.yaw_anchor);
         scenes
-            .entry(model.window.step.to_bits())
-            .or_insert_with(|| FeatureScene::new(pre.clone(), &default_yaws(), model.window.step));
+            .entry((step.to_bits(), anchor))
+            .or_insert_with(|| FeatureScene::new(pre.clone(), &window_yaws(pre, anchor), step));
     }
     let mut out = BTreeMap::new();
     for model in wanted {
-        let scene = &scenes[&model.window.step.to_bits()];
+        let scene = &scenes[&(model.window.step.to_bits(), model.window.yaw_anchor)];
         let window =
             sliding_window(scene, &WindowOptions { sizes: model.sizes(), min_points: model.window.min_points });
         let truths = truths_of(&model.category);

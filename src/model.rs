@@ -7,7 +7,7 @@
 //!   "layout": {"base_grid": [5, 5, 5], "expanded": true,
 //!              "groups": {"density": true, "normals": true, "cog": true, "view": true}},
 //!   "sizes": {"widths": [5 numbers], "depths": [3], "heights": [3]},
-//!   "window": {"step": 0.1, "min_points": 50},
+//!   "window": {"step": 0.1, "min_points": 50, "yaw_anchor": "walls"},
 //!   "features": {"path": "fast", "subdivisions": 2},
 //!   "bias": 0.0, "threshold": 0.0,
 //!   "weights": [layout.dim() numbers, in the order of `features::feature_layout`],
@@ -38,6 +38,7 @@ use crate::calibration::Calibration;
 use crate::category::{normalise_name, CATEGORIES};
 use crate::error::{Error, Result};
 use crate::features::fast::FastOptions;
+use crate::features::hypotheses::YawAnchor;
 use crate::features::{FeatureLayout, SizeQuantiles};
 use crate::limits::{check_step, check_subdivisions, MAX_OBJECT_SIZE_M, MIN_OBJECT_SIZE_M};
 
@@ -82,6 +83,11 @@ pub struct WindowSettings {
     pub step: f32,
     /// Hypotheses with fewer points inside are skipped.
     pub min_points: u32,
+    /// Where the 16 yaws start ([`YawAnchor`]): `"walls"` (the frame's wall direction) or `"camera"`. The
+    /// model was trained on that window and detection searches the same one. Absent in files written
+    /// before the anchor existed, which were trained with `"camera"`.
+    #[serde(default)]
+    pub yaw_anchor: YawAnchor,
 }
 
 /// One category's detector.

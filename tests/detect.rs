@@ -5,6 +5,7 @@ use std::process::Command;
 
 use cog_gpu::detect::{detect_frame, overlay, DetectOptions};
 use cog_gpu::eval::FrameDetections;
+use cog_gpu::features::YawAnchor;
 use cog_gpu::features::{Backend, FeatureLayout, Groups, Preprocessed, SizeQuantiles};
 use cog_gpu::frame::{DepthSource, Frame};
 use cog_gpu::geometry::{iou_3d, projected_hull_area, Camera};
@@ -25,7 +26,7 @@ fn density_model(path: FeaturePath, step: f32) -> Model {
         "bed",
         layout,
         bed_sizes(),
-        WindowSettings { step, min_points: 500 },
+        WindowSettings { step, min_points: 500, yaw_anchor: YawAnchor::Walls },
         FeatureSettings { path, subdivisions: 2 },
         weights,
         serde_json::Value::Null,

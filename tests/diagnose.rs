@@ -10,7 +10,8 @@ use cog_gpu::diagnose::{
     overlay_precision, rank_average_precision, WindowRecall,
 };
 use cog_gpu::eval::{Detection, FrameDetections};
-use cog_gpu::features::hypotheses::{default_yaws, sliding_window, WindowOptions};
+use cog_gpu::features::hypotheses::{sliding_window, window_yaws, WindowOptions};
+use cog_gpu::features::YawAnchor;
 use cog_gpu::features::{FeatureLayout, FeatureScene, Groups, Preprocessed, SizeQuantiles};
 use cog_gpu::frame::{Frame, Object};
 use cog_gpu::geometry::{iou_3d, Cuboid};
@@ -205,7 +206,8 @@ fn window_recall_on_a_synthetic_frame() {
     assert!(!frame.objects.is_empty());
     let pre = Preprocessed::from_frame(&frame).unwrap();
     let step = 0.25;
-    let scene = FeatureScene::new(pre.clone(), &default_yaws(), step);
+    // The window detection searches: the 16 yaws anchored at the frame's wall direction.
+    let scene = FeatureScene::new(pre.clone(), &window_yaws(&pre, YawAnchor::Walls), step);
     let sizes = SizeQuantiles {
         widths: vec![0.5, 0.8, 1.1, 1.4, 1.8],
         depths: vec![0.5, 1.0, 2.0],
@@ -237,7 +239,7 @@ fn window_recall_on_a_synthetic_frame() {
         &category,
         layout,
         sizes,
-        WindowSettings { step, min_points },
+        WindowSettings { step, min_points, yaw_anchor: YawAnchor::Walls },
         FeatureSettings { path: FeaturePath::Fast, subdivisions: 2 },
         vec![0.0; layout.dim()],
         serde_json::Value::Null,
@@ -352,7 +354,7 @@ fn cli_window_recall_with_models() {
             depths: vec![0.5, 1.0, 2.0],
             heights: vec![0.4, 0.8, 1.6],
         },
-        WindowSettings { step: 0.1, min_points: 20 },
+        WindowSettings { step: 0.1, min_points: 20, yaw_anchor: YawAnchor::Walls },
         FeatureSettings { path: FeaturePath::Fast, subdivisions: 2 },
         vec![0.0; layout.dim()],
         serde_json::Value::Null,

@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
+use cog_gpu::features::YawAnchor;
 use cog_gpu::features::{FeatureLayout, Groups, SizeQuantiles};
 use cog_gpu::frame::{Frame, Object, RoomLayout};
 use cog_gpu::geometry::Cuboid;
@@ -108,7 +109,7 @@ fn model(category: &str) -> Model {
         category,
         layout,
         sizes,
-        WindowSettings { step: 0.2, min_points: 5 },
+        WindowSettings { step: 0.2, min_points: 5, yaw_anchor: YawAnchor::Walls },
         FeatureSettings { path: FeaturePath::Fast, subdivisions: 2 },
         weights,
         Value::Null,

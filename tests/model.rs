@@ -2,6 +2,7 @@
 
 use std::path::Path;
 
+use cog_gpu::features::YawAnchor;
 use cog_gpu::features::{FeatureLayout, Groups, SizeQuantiles};
 use cog_gpu::model::{read_models_dir, FeaturePath, FeatureSettings, Model, WindowSettings};
 
@@ -17,7 +18,7 @@ fn model(category: &str) -> Model {
         category,
         layout,
         sizes(),
-        WindowSettings { step: 0.1, min_points: 50 },
+        WindowSettings { step: 0.1, min_points: 50, yaw_anchor: YawAnchor::Walls },
         FeatureSettings { path: FeaturePath::Fast, subdivisions: 2 },
         weights,
         serde_json::json!({"note": "test"}),
@@ -34,6 +35,26 @@ fn a_model_survives_a_round_trip() {
     assert_eq!(Model::read(&path).unwrap(), m);
     let text = std::fs::read_to_string(&path).unwrap();
     assert!(text.contains("\"format\":\"cog-gpu-model\"") && text.contains("\"path\":\"fast\""));
+}
+
+#[test]
+fn the_yaw_anchor_is_stored_and_old_files_mean_camera() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("chair.json");
+    let m = model("chair");
+    assert_eq!(m.window.yaw_anchor, YawAnchor::Walls);
+    m.write(&path).unwrap();
+    let text = std::fs::read_to_string(&path).unwrap();
+    assert!(text.contains("\"yaw_anchor\":\"walls\""), "{text}");
+    // A file written before the anchor existed: no field, trained on the camera's yaws.
+    let mut value: serde_json::Value = serde_json::from_str(&text).unwrap();
+    value["window"].as_object_mut().unwrap().remove("yaw_anchor");
+    std::fs::write(&path, serde_json::to_string(&value).unwrap()).unwrap();
+    assert_eq!(Model::read(&path).unwrap().window.yaw_anchor, YawAnchor::Camera);
+    // An unknown anchor is rejected, naming the file.
+    value["window"]["yaw_anchor"] = "north".into();
+    std::fs::write(&path, serde_json::to_string(&value).unwrap()).unwrap();
+    assert!(Model::read(&path).unwrap_err().to_string().contains("chair.json"));
 }
 
 /// Writes `m` as JSON, applies `edit` to the JSON value, and returns the read error message.

@@ -6,12 +6,12 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use cog_gpu::features::fast::{FastEngine, FastOptions};
-use cog_gpu::features::{FeatureLayout, Groups, Preprocessed, SizeQuantiles};
+use cog_gpu::features::hypotheses::{anchored_yaws, default_yaws, nearest_yaw_index};
+use cog_gpu::features::{FeatureLayout, Groups, Preprocessed, SizeQuantiles, YawAnchor};
 use cog_gpu::frame::{DepthSource, Frame};
 use cog_gpu::geometry::{structured_loss, Cuboid};
 use cog_gpu::learn::detector::{
-    nearest_yaw_index, without_points_in, Answer, DetectorOracle, FeatureEngine, PositiveTarget, TrainingExample,
-    TrainingSettings,
+    without_points_in, Answer, DetectorOracle, FeatureEngine, PositiveTarget, TrainingExample, TrainingSettings,
 };
 
 const FRAME: &str = "../shared/data/sunrgbd/kv1-b3dodata-img_0063";
@@ -27,13 +27,21 @@ fn run(args: &[&str]) -> std::process::Output {
 #[test]
 fn nearest_yaw_wraps_around_the_circle() {
     let step = std::f32::consts::TAU / 16.0;
-    assert_eq!(nearest_yaw_index(0.0), 0);
-    assert_eq!(nearest_yaw_index(0.49 * step), 0);
-    assert_eq!(nearest_yaw_index(0.51 * step), 1);
-    assert_eq!(nearest_yaw_index(-0.4 * step), 0);
-    assert_eq!(nearest_yaw_index(-step), 15);
-    assert_eq!(nearest_yaw_index(std::f32::consts::TAU - 0.1 * step), 0);
-    assert_eq!(nearest_yaw_index(3.0 * std::f32::consts::PI), 8);
+    let yaws = default_yaws();
+    assert_eq!(nearest_yaw_index(&yaws, 0.0), 0);
+    assert_eq!(nearest_yaw_index(&yaws, 0.49 * step), 0);
+    assert_eq!(nearest_yaw_index(&yaws, 0.51 * step), 1);
+    assert_eq!(nearest_yaw_index(&yaws, -0.4 * step), 0);
+    assert_eq!(nearest_yaw_index(&yaws, -step), 15);
+    assert_eq!(nearest_yaw_index(&yaws, std::f32::consts::TAU - 0.1 * step), 0);
+    assert_eq!(nearest_yaw_index(&yaws, 3.0 * std::f32::consts::PI), 8);
+    // Anchored at 10°: yaw k is 10° + 22.5°·k.
+    let anchored = anchored_yaws(10f32.to_radians());
+    assert_eq!(nearest_yaw_index(&anchored, 10f32.to_radians()), 0);
+    assert_eq!(nearest_yaw_index(&anchored, 21f32.to_radians()), 0);
+    assert_eq!(nearest_yaw_index(&anchored, 22f32.to_radians()), 1);
+    assert_eq!(nearest_yaw_index(&anchored, (-10f32).to_radians()), 15);
+    assert_eq!(nearest_yaw_index(&anchored, 190f32.to_radians()), 8);
 }
 
 fn real_frame() -> (Frame, Preprocessed) {
@@ -72,6 +80,7 @@ fn small_oracle_with(target: PositiveTarget) -> DetectorOracle {
         min_points: 50,
         engine: FeatureEngine::Fast(FastOptions::default()),
         target,
+        yaw_anchor: YawAnchor::Walls,
     };
     let positive = TrainingExample::new("chair".into(), &pre, Some(chairs[0]), &chairs[1..]);
     let negative = TrainingExample::new("none".into(), &pre, None, &[]);

@@ -108,7 +108,13 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     let run_fast = args.features != PathChoice::Exact;
     let fast_options = FastOptions { subdivisions: args.subdivisions };
     if run_fast {
-        budget::check_fast(&window.scene.pre, args.step, &layout, fast_options.subdivisions)?;
+        budget::check_fast(
+            &window.scene.pre,
+            &window.scene.yaw_angles(),
+            args.step,
+            &layout,
+            fast_options.subdivisions,
+        )?;
     }
     // Both feature paths have a GPU twin (exact: gpu::features, fast: gpu::fast).
     let gpu = if want_gpu { cog_gpu::gpu::acquire(false) } else { None };

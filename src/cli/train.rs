@@ -24,6 +24,9 @@
 //!   find nothing, a full pass checks the whole window; at most `--max-full-passes` (2) full passes (the
 //!   first, at w = 0, scores nothing and caches random hypotheses plus the boxes nearest the truth; the
 //!   second mines the hard negatives of the trained w);
+//! * the window's 16 yaws start at the frame's wall direction (`--yaw-anchor walls`; `camera` for the
+//!   fixed `2πk/16`; see `cog_gpu::features::hypotheses`), written into the model so detection searches
+//!   the same yaws;
 //! * a checkpoint `<out>.ckpt` after every iteration; `--resume` continues from it (same data and options);
 //! * at most `--max-iterations 300` cutting-plane iterations;
 //! * constraints whose α stayed 0 for `--prune-after 10` solves leave the working set.
@@ -35,7 +38,7 @@ use anyhow::{bail, Context};
 use cog_gpu::category::{normalise_name, CATEGORIES};
 use cog_gpu::features::fast::{FastOptions, DEFAULT_SUBDIVISIONS};
 use cog_gpu::features::hypotheses::DEFAULT_MIN_POINTS;
-use cog_gpu::features::{budget, FeatureLayout, Groups, SizeQuantiles};
+use cog_gpu::features::{budget, FeatureLayout, Groups, SizeQuantiles, YawAnchor};
 use cog_gpu::frame::Dataset;
 use cog_gpu::learn::detector::{
     cached_rows_per_example, collect_examples, instances_of, read_all_annotations, train_detector, DetectorOracle,
@@ -126,6 +129,26 @@ pub struct Args {
     /// annotated cuboid itself (exact, the paper's choice).
     #[arg(long, value_enum, default_value_t = TargetArg::BestWindow)]
     pub target: TargetArg,
+    /// Where the window's 16 yaws start: the frame's wall direction (walls) or the camera's heading
+    /// (camera, `2πk/16`).
+    #[arg(long, value_enum, default_value_t = AnchorArg::Walls)]
+    pub yaw_anchor: AnchorArg,
+}
+
+/// `--yaw-anchor` values.
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum AnchorArg {
+    Walls,
+    Camera,
+}
+
+impl From<AnchorArg> for YawAnchor {
+    fn from(arg: AnchorArg) -> YawAnchor {
+        match arg {
+            AnchorArg::Walls => YawAnchor::Walls,
+            AnchorArg::Camera => YawAnchor::Camera,
+        }
+    }
 }
 
 /// `--target` values.
@@ -159,10 +182,11 @@ fn check_examples(
         bail!("no positive example has points inside its box: nothing to train on");
     }
     for ex in examples.iter() {
-        budget::check_window(&ex.pre, settings.step, settings.sizes.len())
+        let yaws = ex.yaws(settings.yaw_anchor);
+        budget::check_window(&ex.pre, &yaws, settings.step, settings.sizes.len())
             .with_context(|| format!("training example {}", ex.name))?;
         if let FeatureEngine::Fast(options) = settings.engine {
-            budget::check_fast(&ex.pre, settings.step, &settings.layout, options.subdivisions)
+            budget::check_fast(&ex.pre, &yaws, settings.step, &settings.layout, options.subdivisions)
                 .with_context(|| format!("training example {}", ex.name))?;
         }
     }
@@ -235,8 +259,15 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         TargetArg::BestWindow => PositiveTarget::BestWindow,
         TargetArg::Exact => PositiveTarget::Exact,
     };
-    let settings =
-        TrainingSettings { layout, sizes: sizes.sizes(), step: args.step, min_points: args.min_points, engine, target };
+    let settings = TrainingSettings {
+        layout,
+        sizes: sizes.sizes(),
+        step: args.step,
+        min_points: args.min_points,
+        engine,
+        target,
+        yaw_anchor: args.yaw_anchor.into(),
+    };
     let limits = ExampleLimits { positives: args.positives, negatives: args.negatives };
     log::info!(
         "{category}: {} instances in {} frames; preparing up to {} positive and {} negative examples",
@@ -327,7 +358,8 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         },
         subdivisions: args.subdivisions.max(1),
     };
-    let window = WindowSettings { step: args.detect_step, min_points: args.min_points };
+    let window =
+        WindowSettings { step: args.detect_step, min_points: args.min_points, yaw_anchor: args.yaw_anchor.into() };
     let model = Model::new(&category, layout, sizes, window, features, weights, training)?;
     model.write(&out)?;
     println!(

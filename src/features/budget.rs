@@ -11,7 +11,7 @@ use rayon::prelude::*;
 
 use super::fast::CHANNELS;
 use super::feature_layout::FeatureLayout;
-use super::hypotheses::{default_yaws, Hypothesis};
+use super::hypotheses::Hypothesis;
 use super::preprocess::Preprocessed;
 use super::scene::{extent, grid_cells, rotate, PointRecord};
 use crate::error::Result;
@@ -29,13 +29,13 @@ struct YawSize {
     layers: f64,
 }
 
-/// Per-yaw grid sizes of `pre` at centre step `step`, as `YawGrid::build` and the count table compute them.
-fn yaw_sizes(pre: &Preprocessed, step: f32) -> Vec<YawSize> {
+/// Per-yaw grid sizes of `pre` at centre step `step` for the window's `yaws`, as `YawGrid::build` and the
+/// count table compute them.
+fn yaw_sizes(pre: &Preprocessed, yaws: &[f32], step: f32) -> Vec<YawSize> {
     let top = pre.points.iter().fold(pre.floor, |m, p| m.max(p.z));
     let layers = (((top - pre.floor) / step).floor() as f64 + 1.0).max(1.0);
-    default_yaws()
-        .into_par_iter()
-        .map(|yaw| {
+    yaws.par_iter()
+        .map(|&yaw| {
             let (sin, cos) = (yaw as f64).sin_cos();
             let rotated: Vec<[f32; 2]> = pre.points.iter().map(|p| rotate(p, sin as f32, cos as f32)).collect();
             YawSize { cells: grid_cells(extent(&rotated), step).1, layers }
@@ -51,11 +51,11 @@ fn hint(step: f32) -> String {
     )
 }
 
-/// Checks the yaw grids, the count tables and the hypotheses of a sliding window with `sizes` box sizes
-/// and centre step `step` on `pre` against [`crate::limits::MEMORY_BUDGET_BYTES`].
-pub fn check_window(pre: &Preprocessed, step: f32, sizes: usize) -> Result<()> {
+/// Checks the yaw grids, the count tables and the hypotheses of a sliding window with `sizes` box sizes,
+/// the yaws `yaws` and centre step `step` on `pre` against [`crate::limits::MEMORY_BUDGET_BYTES`].
+pub fn check_window(pre: &Preprocessed, yaws: &[f32], step: f32, sizes: usize) -> Result<()> {
     check_step("the centre step", step)?;
-    let yaws = yaw_sizes(pre, step);
+    let yaws = yaw_sizes(pre, yaws, step);
     let hint = hint(step);
     let cells: f64 = yaws.iter().map(|y| y.cells[0] * y.cells[1]).sum();
     let records = (pre.len() * yaws.len()) as f64 * std::mem::size_of::<PointRecord>() as f64;
@@ -80,11 +80,17 @@ pub fn check_window(pre: &Preprocessed, step: f32, sizes: usize) -> Result<()> {
 }
 
 /// Checks the fast path's lattices and the layer tables built at once (one per rayon thread) for `layout`
-/// with `subdivisions` lattice cells per step `step` on `pre`.
-pub fn check_fast(pre: &Preprocessed, step: f32, layout: &FeatureLayout, subdivisions: u32) -> Result<()> {
+/// with `subdivisions` lattice cells per step `step` and the window's `yaws` on `pre`.
+pub fn check_fast(
+    pre: &Preprocessed,
+    yaws: &[f32],
+    step: f32,
+    layout: &FeatureLayout,
+    subdivisions: u32,
+) -> Result<()> {
     check_step("the centre step", step)?;
     check_subdivisions("the fast path's subdivisions", subdivisions)?;
-    let yaws = yaw_sizes(pre, step);
+    let yaws = yaw_sizes(pre, yaws, step);
     let lattice_points = (pre.len() * yaws.len()) as f64;
     let hint = format!("{}; or fewer subdivisions", hint(step));
     check_memory("the fast path's lattices", lattice_points, LATTICE_POINT_BYTES, &hint)?;

@@ -14,7 +14,9 @@ pub mod preprocess;
 pub mod scene;
 
 pub use feature_layout::{FeatureLayout, Groups};
-pub use hypotheses::{default_yaws, sliding_window, Hypothesis, HypothesisSet, SizeQuantiles, WindowOptions};
+pub use hypotheses::{
+    default_yaws, sliding_window, window_yaws, Hypothesis, HypothesisSet, SizeQuantiles, WindowOptions, YawAnchor,
+};
 pub use preprocess::{ImageGradients, Preprocessed};
 pub use scene::{FeatureScene, PointRecord, YawGrid};
 pub mod weights;

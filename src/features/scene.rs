@@ -209,4 +209,9 @@ impl FeatureScene {
         let grids = yaws.iter().map(|&yaw| YawGrid::build(&pre, yaw, step)).collect();
         FeatureScene { pre, yaws: grids }
     }
+
+    /// The angles of the yaw grids, in order.
+    pub fn yaw_angles(&self) -> Vec<f32> {
+        self.yaws.iter().map(|g| g.yaw).collect()
+    }
 }

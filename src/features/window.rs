@@ -62,7 +62,7 @@ impl PreparedWindow {
     pub fn new(frame: &Frame, sizes: Vec<Vec3>, step: f32, min_points: u32) -> Result<PreparedWindow> {
         let start = Instant::now();
         let pre = Preprocessed::from_frame(frame)?;
-        super::budget::check_window(&pre, step, sizes.len())?;
+        super::budget::check_window(&pre, &default_yaws(), step, sizes.len())?;
         let scene = FeatureScene::new(pre, &default_yaws(), step);
         let set = sliding_window(&scene, &WindowOptions { sizes, min_points });
         Ok(PreparedWindow { scene, set, preprocess_s: start.elapsed().as_secs_f64() })

@@ -18,7 +18,7 @@
 //!   hypothesis nearest the annotation, with every other hypothesis's loss taken as its regret against
 //!   it: the detector is taught to rank the boxes it can actually output, not the exact annotated cuboid
 //!   it never sees at test time. [`PositiveTarget::Exact`] (the paper's choice) uses the annotated cuboid
-//!   at the nearest of the 16 hypothesis yaws (the feature engine bins points per yaw).
+//!   at the nearest of the window's 16 yaws (the feature engine bins points per yaw).
 //! * Loss (eq. 5): `1 − IoU·(1 + cos Δθ)/2` ([`structured_loss`]). Hypotheses whose footprints cannot
 //!   overlap the truth's have loss 1 without an IoU computation.
 //!
@@ -42,7 +42,10 @@ use super::{Constraint, CuttingPlane, SeparationOracle, Solution};
 use crate::error::{Error, Result};
 use crate::features::cpu;
 use crate::features::fast::{FastEngine, FastOptions};
-use crate::features::hypotheses::{default_yaws, sliding_window, HypothesisSet, WindowOptions, YAW_COUNT};
+use crate::features::hypotheses::{
+    anchored_yaws, default_yaws, frame_wall_direction, nearest_yaw_index, sliding_window, HypothesisSet, WindowOptions,
+    YawAnchor,
+};
 use crate::features::{FeatureLayout, FeatureScene, Hypothesis, Preprocessed};
 use crate::geometry::{structured_loss, Cuboid};
 
@@ -67,6 +70,8 @@ pub struct TrainingSettings {
     pub engine: FeatureEngine,
     /// What a positive example's ground-truth output is (see [`PositiveTarget`]).
     pub target: PositiveTarget,
+    /// Where the window's 16 yaws start (see [`crate::features::hypotheses`]).
+    pub yaw_anchor: YawAnchor,
 }
 
 /// The output a positive example's margin is enforced for.
@@ -96,6 +101,9 @@ pub struct TrainingExample {
     pub truth: Option<Cuboid>,
     /// The frame's points without those inside the other instances of the category.
     pub pre: Preprocessed,
+    /// The window's yaws under [`YawAnchor::Walls`], from the whole frame's wall direction (as detection
+    /// sees the frame, before the other instances' points are removed).
+    pub wall_yaws: Vec<f32>,
 }
 
 /// The parts of an example that do not depend on w, rebuilt by every full pass (see the module doc).
@@ -111,12 +119,21 @@ pub struct ExampleWindow {
 impl TrainingExample {
     /// Builds the example: removes the points inside `others`.
     pub fn new(name: String, pre: &Preprocessed, truth: Option<Cuboid>, others: &[Cuboid]) -> TrainingExample {
-        TrainingExample { name, truth, pre: without_points_in(pre, others) }
+        let wall_yaws = anchored_yaws(frame_wall_direction(pre).unwrap_or(0.0));
+        TrainingExample { name, truth, pre: without_points_in(pre, others), wall_yaws }
+    }
+
+    /// The window's 16 yaws under `anchor`.
+    pub fn yaws(&self, anchor: YawAnchor) -> Vec<f32> {
+        match anchor {
+            YawAnchor::Camera => default_yaws(),
+            YawAnchor::Walls => self.wall_yaws.clone(),
+        }
     }
 
     /// The example's yaw grids, sliding window and losses under `settings`.
     pub fn window(&self, settings: &TrainingSettings) -> ExampleWindow {
-        let scene = FeatureScene::new(self.pre.clone(), &default_yaws(), settings.step);
+        let scene = FeatureScene::new(self.pre.clone(), &self.yaws(settings.yaw_anchor), settings.step);
         let hypotheses =
             sliding_window(&scene, &WindowOptions { sizes: settings.sizes.clone(), min_points: settings.min_points });
         let truth = self.truth;
@@ -137,7 +154,7 @@ impl TrainingExample {
 impl ExampleWindow {
     /// The ground truth `truth` as a hypothesis of the nearest yaw.
     pub fn truth_hypothesis(&self, truth: &Cuboid) -> Hypothesis {
-        Hypothesis::from_cuboid(&self.scene, nearest_yaw_index(truth.yaw), truth)
+        Hypothesis::from_cuboid(&self.scene, nearest_yaw_index(&self.scene.yaw_angles(), truth.yaw), truth)
     }
 }
 
@@ -161,12 +178,6 @@ pub fn hypothesis_loss(truth: Option<&Cuboid>, estimate: &Cuboid) -> f32 {
         }
     }
     structured_loss(truth, Some(estimate))
-}
-
-/// Index of the hypothesis yaw `2πk/16` nearest to `yaw`.
-pub fn nearest_yaw_index(yaw: f32) -> usize {
-    let k = (yaw / std::f32::consts::TAU * YAW_COUNT as f32).round() as i64;
-    k.rem_euclid(YAW_COUNT as i64) as usize
 }
 
 /// A copy of `pre` without the points inside any of `cuboids`.
@@ -309,8 +320,9 @@ impl DetectorOracle {
                     Scorer::new(&settings, &window.scene).features(&[hypothesis])
                 }
                 Some(truth) => {
-                    let scene = FeatureScene::new(ex.pre.clone(), &default_yaws(), settings.step);
-                    let hypothesis = Hypothesis::from_cuboid(&scene, nearest_yaw_index(truth.yaw), truth);
+                    let yaws = ex.yaws(settings.yaw_anchor);
+                    let scene = FeatureScene::new(ex.pre.clone(), &yaws, settings.step);
+                    let hypothesis = Hypothesis::from_cuboid(&scene, nearest_yaw_index(&yaws, truth.yaw), truth);
                     Scorer::new(&settings, &scene).features(&[hypothesis])
                 }
                 None => vec![0.0; dim],
