@@ -10,7 +10,7 @@ use cog_gpu::room_layout::learn::yaw_difference_mod_90;
 use cog_gpu::room_layout::voxels::{
     cubical_region, features, manhattan_region, Discretisation, ScoringTables, YawCells, LAYERS,
 };
-use cog_gpu::room_layout::{room_axes, LayoutScene, RoomBox};
+use cog_gpu::room_layout::{orientation_yaw, room_axes, LayoutScene, RoomBox, ORIENTATIONS};
 use glam::{Mat3, Vec2, Vec3};
 
 /// A camera at the upright origin looking along +y with no tilt, with a very wide field of view (focal
@@ -98,8 +98,26 @@ fn room_scene() -> LayoutScene {
     LayoutScene { camera, image_size, points, normals, floor: -1.5, ceiling: 1.0, stride: 1 }
 }
 
+/// Index of the orientation with yaw `degrees` (panics when there is none: a test set-up error).
+fn orientation_at(degrees: f32) -> usize {
+    (0..ORIENTATIONS).find(|&k| (orientation_yaw(k).to_degrees() - degrees).abs() < 1e-3).expect("no such yaw")
+}
+
 /// Index of the orientation with yaw 0 (the room frame is the upright frame).
-const YAW_ZERO: usize = 9;
+const YAW_ZERO: usize = 22;
+
+#[test]
+fn orientations_are_evenly_spaced_modulo_ninety_degrees_and_include_zero() {
+    assert_eq!(orientation_at(0.0), YAW_ZERO);
+    let mut degrees: Vec<f32> = (0..ORIENTATIONS).map(|k| orientation_yaw(k).to_degrees()).collect();
+    assert!(degrees.iter().all(|d| (-45.0..45.0).contains(d)), "{degrees:?}");
+    // Around the circle modulo 90° (the wrap from the last back to the first included), every gap is the
+    // same: 90° / ORIENTATIONS.
+    degrees.push(degrees[0] + 90.0);
+    for pair in degrees.windows(2) {
+        assert!((pair[1] - pair[0] - 90.0 / ORIENTATIONS as f32).abs() < 1e-3, "{pair:?}");
+    }
+}
 
 #[test]
 fn manhattan_regions_of_hand_placed_points() {
@@ -181,13 +199,13 @@ fn features_of_a_constructed_room_put_wall_points_in_their_bands() {
 #[test]
 fn scoring_tables_give_the_dot_product_with_the_features() {
     let scene = room_scene();
-    let cells: Vec<YawCells> = (0..18).map(|k| YawCells::new(&scene, k)).collect();
+    let cells: Vec<YawCells> = (0..ORIENTATIONS).map(|k| YawCells::new(&scene, k)).collect();
     for disc in [Discretisation::Manhattan, Discretisation::Cubical] {
         let w: Vec<f64> = (0..disc.dim()).map(|i| ((i * 37 % 101) as f64 - 50.0) / 7.0).collect();
         let tables = ScoringTables::new(disc, &cells, &w);
         let boxes = [
-            RoomBox { yaw_index: 9, u0: -2000, u1: 2000, v0: 0, v1: 5000 },
-            RoomBox { yaw_index: 3, u0: -2600, u1: 1500, v0: -300, v1: 4000 },
+            RoomBox { yaw_index: YAW_ZERO as u32, u0: -2000, u1: 2000, v0: 0, v1: 5000 },
+            RoomBox { yaw_index: orientation_at(-30.0) as u32, u0: -2600, u1: 1500, v0: -300, v1: 4000 },
         ];
         let scores = cog_gpu::room_layout::voxels::scores_cpu(&cells, &tables, &boxes);
         for (b, s) in boxes.iter().zip(scores) {
@@ -208,7 +226,7 @@ fn summed_area_iou_equals_the_direct_count() {
         floor: -1.4,
         ceiling: 1.2,
     };
-    for k in [0usize, 4, 9, 13] {
+    for k in [0usize, orientation_at(-36.0), YAW_ZERO, orientation_at(20.0), ORIENTATIONS - 1] {
         let boxes = [
             RoomBox { yaw_index: k as u32, u0: -2000, u1: 2000, v0: 100, v1: 5000 },
             RoomBox { yaw_index: k as u32, u0: -1200, u1: 2600, v0: -800, v1: 3900 },

@@ -94,6 +94,24 @@ fn train_layout_eval_and_detect_end_to_end() {
     assert!(detections["detections"].is_array());
     assert_eq!(detections["layout"]["method"], "manhattan");
     assert!(std::fs::read_to_string(dir.path().join(format!("det/{frame}.ply"))).unwrap().contains("element edge"));
+
+    // `detect --json` prints the same entry on stdout: the detections and the room, which is the room the
+    // `layout` command found with the same model.
+    let frame_dir = p(&format!("data/{frame}"));
+    let detect_json = |out: &str| -> Value {
+        let args = ["detect", &frame_dir, "--models", &p("models"), "--out", &p(out), "--json", "--no-overlay"];
+        serde_json::from_str(&ok(&args)).unwrap()
+    };
+    let printed = detect_json("det-json");
+    assert_eq!(printed.as_array().unwrap().len(), 1);
+    assert_eq!(printed[0], detections);
+    assert_eq!(printed[0]["layout"], record["layout"]);
+    // Without a layout model the entries have no "layout".
+    std::fs::remove_file(models.join("layout.json")).unwrap();
+    let printed = detect_json("det-plain");
+    assert_eq!(printed[0]["frame"], frame);
+    assert!(printed[0]["detections"].is_array());
+    assert!(printed[0].get("layout").is_none(), "{}", printed[0]);
 }
 
 #[test]

@@ -2,7 +2,7 @@
 //! with trained models and writes, per frame, `<out>/<frame>.json` (detections) and `<out>/<frame>.png`
 //! (overlay). See `cog_gpu::detect` for what happens per frame. When the models directory also holds
 //! `layout.json` (`cog_gpu::room_layout`), the room is laid out too: its record goes under `"layout"` in
-//! `<frame>.json` and its edges on the overlay. `--ply` writes `<out>/<frame>.ply`: the coloured upright
+//! `<frame>.json` (and in the frame's entry of the `--json` array on stdout) and its edges on the overlay. `--ply` writes `<out>/<frame>.ply`: the coloured upright
 //! point cloud with the overlay's cuboids and the room as line sets (`cog_gpu::ply`).
 //!
 //! Defaults: every frame under `assets/sample/`, the models of `assets/models/`, output `detections/`.
@@ -25,6 +25,7 @@ use cog_gpu::features::Backend;
 use cog_gpu::frame::{is_frame_dir, DepthSource, Frame};
 use cog_gpu::model::read_models_dir;
 use cog_gpu::nms::DEFAULT_NMS_IOU;
+use cog_gpu::room_layout::output::LayoutRecord;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use super::{options, GlobalOptions};
@@ -63,7 +64,8 @@ pub struct Args {
     /// all of them); a picture with every box above the threshold is unreadable.
     #[arg(long, default_value_t = 8)]
     pub overlay_top: usize,
-    /// Print the detections of all frames as one JSON array on stdout.
+    /// Print the detections of all frames as one JSON array on stdout (each entry as the frame's detections
+    /// file, with the room under "layout" when there is a layout model).
     #[arg(long)]
     pub json: bool,
     /// Do not apply the context cascade (`<models>/cascade.json`) even when the models directory has one:
@@ -226,6 +228,17 @@ fn cascade_for(
     Ok(Some(cascade))
 }
 
+/// What `detect` reports of one frame: the detections file `{"frame", "detections"}`, plus `"layout"` (the
+/// layout file's record) when the room was laid out. Written to `<frame>.json` and, with `--json`, as one
+/// entry of the array on stdout.
+#[derive(serde::Serialize)]
+struct FrameReport {
+    #[serde(flatten)]
+    detections: FrameDetections,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    layout: Option<LayoutRecord>,
+}
+
 /// Reads one frame, detects (rescores with `cascade`, lays out the room with `layout_model`), and writes
 /// its detections file, overlay and PLY.
 fn detect_one(
@@ -236,7 +249,7 @@ fn detect_one(
     backend: Backend,
     detect_options: &DetectOptions,
     args: &Args,
-) -> anyhow::Result<FrameDetections> {
+) -> anyhow::Result<FrameReport> {
     let frame = Frame::read(dir, DepthSource::Raw)?;
     let mut detections = detect_frame(&frame, models, backend, detect_options)
         .with_context(|| format!("detecting in {}", dir.display()))?;
@@ -247,21 +260,14 @@ fn detect_one(
         Some(model) => Some(super::layout::frame_layout(&frame, Some(model), backend)?),
         None => None,
     };
+    let report = FrameReport { detections, layout: layout.as_ref().map(|(_, record)| record.clone()) };
     let json_path = args.out.join(format!("{}.json", frame.name));
-    match &layout {
-        // The detections file with the room under "layout" (the layout file's record).
-        Some((_, record)) => {
-            let mut value = serde_json::to_value(&detections)?;
-            value["layout"] = serde_json::to_value(record)?;
-            std::fs::write(&json_path, serde_json::to_string_pretty(&value)?)
-                .with_context(|| format!("writing {}", json_path.display()))?;
-        }
-        None => detections.write(&json_path)?,
-    }
+    std::fs::write(&json_path, serde_json::to_string_pretty(&report)?)
+        .with_context(|| format!("writing {}", json_path.display()))?;
     // The best detections over all categories, one category per object.
     let best = FrameDetections {
-        frame: detections.frame.clone(),
-        detections: overlay_selection(&detections.detections, args.overlay_top),
+        frame: report.detections.frame.clone(),
+        detections: overlay_selection(&report.detections.detections, args.overlay_top),
     };
     let room = layout.as_ref().map(|(predicted, _)| &predicted.room);
     if !args.no_overlay {
@@ -281,12 +287,12 @@ fn detect_one(
             .collect();
         super::layout::write_scene_ply(&args.out.join(format!("{}.ply", frame.name)), &frame, boxes, room)?;
     }
-    Ok(detections)
+    Ok(report)
 }
 
 /// One line per frame: detections per category and the best score.
-fn print_summary(results: &[FrameDetections], out: &Path, seconds: f64) {
-    for r in results {
+fn print_summary(results: &[FrameReport], out: &Path, seconds: f64) {
+    for r in results.iter().map(|r| &r.detections) {
         let mut counts: Vec<(String, usize, f32)> = Vec::new();
         for d in &r.detections {
             match counts.iter_mut().find(|c| c.0 == d.category) {

@@ -17,8 +17,13 @@
 //!   than [`MIN_ROOM_HEIGHT`] above the floor, the ceiling is put at floor + [`MIN_ROOM_HEIGHT`] (rooms are
 //!   at least that high; our deviation from the paper, which loses the free space above the visible walls).
 //! - **Orientations**: a rectangle turned by 90° is the same rectangle, so the paper's 18 orientations in
-//!   [0°, 180°) are only 9 distinct rooms. We keep 18 *distinct* ones: yaws `−45° + 5°·k`, k = 0..17, i.e.
-//!   [−45°, 45°) in 5° steps. The yaw is measured from the upright +x axis; the room's own axes are
+//!   [0°, 180°) are only 9 distinct rooms. We keep 45 *distinct* ones: yaws `−44° + 2°·k`, k = 0..44, i.e.
+//!   [−44°, 44°] in 2° steps, evenly spaced modulo 90° and including 0° (walls square to the camera's
+//!   heading). A room is then at most 1° from an orientation: on the validation frames (seed 13) the
+//!   first version's 18 orientations in 5° steps left the best hypothesis at mean free-space IoU 95.7 for
+//!   rooms within 1° of an orientation and 89.6 for rooms 2–2.5° from one; 2° steps (measured with yaws
+//!   `−45° + 2°·k`, before the grid was shifted by 1° to include 0°) raised the mean of the best hypothesis
+//!   from 93.4 to 94.5 and the learned model's (C = 10 000) from 90.8 to 91.1. The yaw is measured from the upright +x axis; the room's own axes are
 //!   `a = (cos φ, sin φ)` and `b = (−sin φ, cos φ)`, so `b` is the axis closest to the camera's forward
 //!   direction (+y upright) and the walls are named from the camera: wall 0 **front** (`v = v1`, outward
 //!   normal +b), 1 **left** (`u = u0`, −a), 2 **back** (`v = v0`, −b, usually behind the camera), 3
@@ -59,10 +64,10 @@ pub const CEILING_QUANTILE: f32 = 0.999;
 /// Least floor-to-ceiling height of a room (metres); see the module doc.
 pub const MIN_ROOM_HEIGHT: f32 = 2.4;
 /// Number of distinct orientations (see the module doc).
-pub const ORIENTATIONS: usize = 18;
+pub const ORIENTATIONS: usize = 45;
 /// First orientation (degrees) and step between orientations.
-pub const FIRST_YAW_DEG: f32 = -45.0;
-pub const YAW_STEP_DEG: f32 = 5.0;
+pub const FIRST_YAW_DEG: f32 = -44.0;
+pub const YAW_STEP_DEG: f32 = 2.0;
 /// A hypothesis must hold at least this fraction of the points (paper §5).
 pub const MIN_INSIDE_FRACTION: f64 = 0.8;
 /// Histogram peaks kept as wall candidates per wall (besides the farthest point and the camera).
