@@ -22,9 +22,8 @@
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
-use crate::eval::{average_precision, Detection, ScoredBox};
+use crate::eval::{average_precision, category_truth, Detection, ScoredBox};
 use crate::frame::Object;
-use crate::geometry::Cuboid;
 
 /// Smallest slope: keeps `p` strictly increasing in the raw score.
 pub const MIN_SLOPE: f64 = 1e-3;
@@ -177,10 +176,7 @@ pub fn label_detections(
         .collect();
     // The benchmark's matching (eval::average_precision) labels the boxes in its score order: a stable
     // descending sort, which the scores are put in here too.
-    let ground_truth: Vec<Vec<Cuboid>> = truth
-        .iter()
-        .map(|objects| objects.iter().filter(|o| o.category == category).map(|o| o.cuboid).collect())
-        .collect();
+    let ground_truth = category_truth(truth, category);
     let labels = average_precision(&boxes, &ground_truth, iou_threshold).true_positive;
     let mut scores: Vec<f32> = boxes.iter().map(|b| b.score).collect();
     scores.sort_by(|x, y| y.total_cmp(x));

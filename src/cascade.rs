@@ -45,7 +45,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::calibration::{fit_logistic, Calibration};
 use crate::error::{Error, Result};
-use crate::eval::{average_precision, score_order, Detection, ScoredBox};
+use crate::eval::{average_precision, true_positives_in_input_order, Detection, ScoredBox};
 use crate::frame::Object;
 use crate::geometry::{intersection_volume, Cuboid};
 use crate::learn::binary_svm::{balanced_costs, train_linear_svm, LinearSvm};
@@ -262,11 +262,7 @@ fn samples_of(
             boxes.push(ScoredBox { image: f, score: d.raw_score.unwrap_or(d.score), cuboid: d.cuboid() });
         }
     }
-    let pr = average_precision(&boxes, &s.truth, iou_threshold);
-    s.labels = vec![false; boxes.len()];
-    for (&n, &hit) in score_order(&boxes).iter().zip(&pr.true_positive) {
-        s.labels[n] = hit;
-    }
+    s.labels = true_positives_in_input_order(&boxes, &s.truth, iou_threshold);
     s
 }
 

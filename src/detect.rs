@@ -21,7 +21,7 @@ use crate::error::{Error, Result};
 use crate::eval::{Detection, FrameDetections};
 use crate::features::budget;
 use crate::features::fast::FastEngine;
-use crate::features::hypotheses::{sliding_window, window_yaws, WindowOptions, YawAnchor};
+use crate::features::hypotheses::{sliding_window, FrameYaws, WindowOptions, YawAnchor};
 use crate::features::{Backend, FeatureScene, Hypothesis, Preprocessed};
 use crate::frame::Frame;
 use crate::geometry::Camera;
@@ -130,6 +130,11 @@ pub fn detect_frame(
 /// Checks the memory of every model's sliding window and fast-path tables on `pre` (see
 /// [`crate::features::budget`]) before any of them is built; each distinct setting is checked once.
 pub fn check_budget(pre: &Preprocessed, models: &[Model]) -> Result<()> {
+    check_budget_with(pre, &FrameYaws::new(pre), models)
+}
+
+/// [`check_budget`] with the frame's yaws (shared with the scenes that follow).
+fn check_budget_with(pre: &Preprocessed, frame_yaws: &FrameYaws, models: &[Model]) -> Result<()> {
     let mut checked = Vec::new();
     for model in models {
         let anchor = model.window.yaw_anchor;
@@ -139,7 +144,7 @@ pub fn check_budget(pre: &Preprocessed, models: &[Model]) -> Result<()> {
             continue;
         }
         checked.push(key);
-        let yaws = window_yaws(pre, anchor);
+        let yaws = frame_yaws.yaws(anchor);
         budget::check_window(pre, &yaws, model.window.step, model.sizes().len())?;
         if model.features.path == FeaturePath::Fast {
             budget::check_fast(pre, &yaws, model.window.step, &model.layout, model.features.subdivisions)?;
@@ -156,14 +161,15 @@ pub fn detect_preprocessed(
     backend: Backend,
     options: &DetectOptions,
 ) -> Result<FrameDetections> {
-    check_budget(&pre, models)?;
+    let frame_yaws = FrameYaws::new(&pre);
+    check_budget_with(&pre, &frame_yaws, models)?;
     // One scene per distinct window step and yaw anchor (the yaw grids' cell is the step).
     let mut scenes: BTreeMap<(u32, YawAnchor), FeatureScene> = BTreeMap::new();
     for model in models {
         let (step, anchor) = (model.window.step, model.window.yaw_anchor);
         scenes
             .entry((step.to_bits(), anchor))
-            .or_insert_with(|| FeatureScene::new(pre.clone(), &window_yaws(&pre, anchor), step));
+            .or_insert_with(|| FeatureScene::new(pre.clone(), &frame_yaws.yaws(anchor), step));
     }
     let mut candidates = Vec::new();
     let mut engines = FastEngines::new();

@@ -32,8 +32,8 @@ use std::collections::BTreeMap;
 use serde::Serialize;
 
 use crate::detect::overlay_selection;
-use crate::eval::{average_precision, scored_boxes, Detection, PrecisionRecall, ScoredBox};
-use crate::features::hypotheses::{sliding_window, window_yaws, WindowOptions, YawAnchor};
+use crate::eval::{average_precision, category_truth, scored_boxes, Detection, PrecisionRecall, ScoredBox};
+use crate::features::hypotheses::{sliding_window, FrameYaws, WindowOptions, YawAnchor};
 use crate::features::{FeatureScene, Hypothesis, Preprocessed};
 use crate::frame::Object;
 use crate::geometry::{iou_3d, Cuboid};
@@ -77,21 +77,22 @@ pub fn best_window_ious(scene: &FeatureScene, hypotheses: &[Hypothesis], truths:
 /// `objects`, the best window IoU ([`best_window_ious`]) of each of those boxes, in `objects` order.
 ///
 /// The window is the one [`crate::detect::detect_preprocessed`] enumerates: one [`FeatureScene`] per
-/// distinct `(model.window.step, model.window.yaw_anchor)` (shared by the models with both) with
-/// [`window_yaws`], and
-/// [`sliding_window`] with the model's sizes and `min_points`. Categories without a model, or without
-/// ground truth in the frame, are absent from the result; no scene is built when no model has ground truth.
+/// distinct `(model.window.step, model.window.yaw_anchor)` (shared by the models with both) with the
+/// frame's [`FrameYaws`], and [`sliding_window`] with the model's sizes and `min_points`. Categories
+/// without a model, or without ground truth in the frame, are absent from the result; no scene is built
+/// when no model has ground truth.
 pub fn frame_window_best_ious(pre: &Preprocessed, models: &[Model], objects: &[Object]) -> BTreeMap<String, Vec<f32>> {
     let truths_of = |category: &str| -> Vec<Cuboid> {
         objects.iter().filter(|o| o.category == category).map(|o| o.cuboid).collect()
     };
     let wanted: Vec<&Model> = models.iter().filter(|m| objects.iter().any(|o| o.category == m.category)).collect();
+    let frame_yaws = FrameYaws::new(pre);
     let mut scenes: BTreeMap<(u32, YawAnchor), FeatureScene> = BTreeMap::new();
     for model in &wanted {
         let (step, anchor) = (model.window.step, model.window.yaw_anchor);
         scenes
             .entry((step.to_bits(), anchor))
-            .or_insert_with(|| FeatureScene::new(pre.clone(), &window_yaws(pre, anchor), step));
+            .or_insert_with(|| FeatureScene::new(pre.clone(), &frame_yaws.yaws(anchor), step));
     }
     let mut out = BTreeMap::new();
     for model in wanted {
@@ -230,12 +231,7 @@ pub fn rank_average_precision(
         .iter()
         .map(|&(image, _, i)| ScoredBox { image, score: 0.0, cuboid: detections[image][i].cuboid() })
         .collect();
-    average_precision(&boxes, &ground_truth(truth, category), iou_threshold)
-}
-
-/// The category's ground-truth cuboids of each image.
-fn ground_truth(truth: &[Vec<Object>], category: &str) -> Vec<Vec<Cuboid>> {
-    truth.iter().map(|objects| objects.iter().filter(|o| o.category == category).map(|o| o.cuboid).collect()).collect()
+    average_precision(&boxes, &category_truth(truth, category), iou_threshold)
 }
 
 // ---------------------------------------------------------------------------------------------------------
@@ -336,7 +332,7 @@ pub fn false_positive_kinds(
     category: &str,
     iou_threshold: f32,
 ) -> FalsePositiveKinds {
-    let ground_truth = ground_truth(truth, category);
+    let ground_truth = category_truth(truth, category);
     let scored = scored_boxes(detections, category);
     let pr = average_precision(&scored, &ground_truth, iou_threshold);
     let mut out = FalsePositiveKinds::default();
@@ -427,7 +423,7 @@ pub fn diagnose_categories(
     categories
         .iter()
         .map(|category| {
-            let ground_truth = ground_truth(truth, category);
+            let ground_truth = category_truth(truth, category);
             let scored = scored_boxes(detections, category);
             let pr = average_precision(&scored, &ground_truth, iou_threshold);
             let ranking = in_frame_ranking(truth, detections, category, iou_threshold);

@@ -242,6 +242,26 @@ pub fn scored_boxes(detections: &[Vec<Detection>], category: &str) -> Vec<Scored
         .collect()
 }
 
+/// Each image's ground-truth cuboids of `category` (`truth[i]`: image `i`'s annotated objects).
+pub fn category_truth(truth: &[Vec<crate::frame::Object>], category: &str) -> Vec<Vec<Cuboid>> {
+    truth.iter().map(|objects| objects.iter().filter(|o| o.category == category).map(|o| o.cuboid).collect()).collect()
+}
+
+/// Whether each of `boxes`, **in input order**, is a true positive under [`average_precision`]'s
+/// matching (which visits them in score order).
+pub fn true_positives_in_input_order(
+    boxes: &[ScoredBox],
+    ground_truth: &[Vec<Cuboid>],
+    iou_threshold: f32,
+) -> Vec<bool> {
+    let pr = average_precision(boxes, ground_truth, iou_threshold);
+    let mut labels = vec![false; boxes.len()];
+    for (&n, &hit) in score_order(boxes).iter().zip(&pr.true_positive) {
+        labels[n] = hit;
+    }
+    labels
+}
+
 /// Evaluates each of `categories` over the same images: `truth[i]` holds the annotated objects of image
 /// `i` and `detections[i]` its detections (both of any category; the others are ignored). A missing
 /// `detections[i]` (shorter slice) counts as no detections.
@@ -254,15 +274,108 @@ pub fn evaluate_categories(
     categories
         .iter()
         .map(|category| {
-            let ground_truth: Vec<Vec<Cuboid>> = truth
-                .iter()
-                .map(|objects| objects.iter().filter(|o| &o.category == category).map(|o| o.cuboid).collect())
-                .collect();
+            let ground_truth = category_truth(truth, category);
             let scored = scored_boxes(detections, category);
             let pr = average_precision(&scored, &ground_truth, iou_threshold);
             CategoryEvaluation { category: category.clone(), ground_truth: pr.positives, detections: scored.len(), pr }
         })
         .collect()
+}
+
+// ---------------------------------------------------------------------------------------------------------
+// Bootstrap intervals over frames
+
+/// How [`bootstrap_aps`] resamples: `resamples` draws of as many frames as the set has, with replacement,
+/// from a SplitMix64 stream seeded by `seed` ([`crate::synth::rng::Rng`], written in the crate so that an
+/// interval never changes with a dependency's version).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Bootstrap {
+    pub resamples: usize,
+    pub seed: u64,
+}
+
+/// The frames of each resample: `resamples` lists of `frames` indices drawn uniformly with replacement.
+/// Frames, not boxes, are the unit: a frame's detections and ground truth stay together (their matching
+/// is within the frame), and a frame drawn twice counts as two frames.
+pub fn bootstrap_frames(frames: usize, bootstrap: Bootstrap) -> Vec<Vec<usize>> {
+    let mut rng = crate::synth::rng::Rng::new(bootstrap.seed);
+    (0..bootstrap.resamples)
+        .map(|_| (0..frames).map(|_| if frames == 0 { 0 } else { rng.int(0, frames - 1) }).collect())
+        .collect()
+}
+
+/// The APs of every resample ([`bootstrap_frames`]) for each of several detection sets of the same frames,
+/// with the same resamples for every set (so that differences between sets are paired):
+/// `result[set][resample][category]`, `None` where a resample holds no ground truth of the category.
+/// Each resample is evaluated exactly as [`evaluate_categories`] evaluates a dataset made of the drawn
+/// frames in draw order.
+pub fn bootstrap_aps(
+    truth: &[Vec<crate::frame::Object>],
+    detection_sets: &[&[Vec<Detection>]],
+    categories: &[String],
+    iou_threshold: f32,
+    bootstrap: Bootstrap,
+) -> Vec<Vec<Vec<Option<f32>>>> {
+    use rayon::prelude::*;
+    let draws = bootstrap_frames(truth.len(), bootstrap);
+    // Per category, each frame's ground truth and (per set) its scored boxes, gathered once.
+    let truth_of: Vec<Vec<Vec<Cuboid>>> = categories.iter().map(|category| category_truth(truth, category)).collect();
+    detection_sets
+        .iter()
+        .map(|detections| {
+            let boxes_of: Vec<Vec<Vec<ScoredBox>>> = categories
+                .iter()
+                .map(|category| {
+                    (0..truth.len())
+                        .map(|f| {
+                            let frame = detections.get(f).map(Vec::as_slice).unwrap_or(&[]);
+                            frame
+                                .iter()
+                                .filter(|d| &d.category == category)
+                                .map(|d| ScoredBox { image: f, score: d.score, cuboid: d.cuboid() })
+                                .collect()
+                        })
+                        .collect()
+                })
+                .collect();
+            draws
+                .par_iter()
+                .map(|draw| {
+                    (0..categories.len())
+                        .map(|c| {
+                            let ground_truth: Vec<Vec<Cuboid>> = draw.iter().map(|&f| truth_of[c][f].clone()).collect();
+                            let scored: Vec<ScoredBox> = draw
+                                .iter()
+                                .enumerate()
+                                .flat_map(|(image, &f)| boxes_of[c][f].iter().map(move |b| ScoredBox { image, ..*b }))
+                                .collect();
+                            average_precision(&scored, &ground_truth, iou_threshold).ap
+                        })
+                        .collect()
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// The central `level` interval of `values` by percentiles (the percentile bootstrap): the
+/// `(1 − level)/2` and `(1 + level)/2` quantiles, each interpolated linearly between the two nearest
+/// order statistics (position `q · (n − 1)` in the sorted values, the usual "type 7" definition).
+/// `None` for no values.
+pub fn percentile_interval(values: &[f32], level: f32) -> Option<(f32, f32)> {
+    if values.is_empty() {
+        return None;
+    }
+    let mut sorted = values.to_vec();
+    sorted.sort_by(f32::total_cmp);
+    let quantile = |q: f32| {
+        let position = q * (sorted.len() - 1) as f32;
+        let below = position.floor() as usize;
+        let above = (below + 1).min(sorted.len() - 1);
+        let t = position - below as f32;
+        sorted[below] + (sorted[above] - sorted[below]) * t
+    };
+    Some((quantile((1.0 - level) / 2.0), quantile((1.0 + level) / 2.0)))
 }
 
 // ---------------------------------------------------------------------------------------------------------

@@ -90,3 +90,100 @@ fn detections_file_round_trip_and_errors() {
     let err = FrameDetections::read(&path).unwrap_err().to_string();
     assert!(err.contains("frame.json") && err.contains("detections"), "{err}");
 }
+
+// ---------------------------------------------------------------------------------------------------------
+// Bootstrap intervals
+
+use cog_gpu::eval::{bootstrap_aps, bootstrap_frames, evaluate_categories, percentile_interval, Bootstrap};
+use cog_gpu::frame::Object;
+
+fn object(category: &str, cuboid: Cuboid) -> Object {
+    Object { category: category.into(), label: None, cuboid }
+}
+
+/// Six frames with one bed each; the detections hit the bed in frames 0, 2 and 4 (scores 0.9, 0.7, 0.5)
+/// and miss it in frames 1, 3 and 5 (scores 0.8, 0.6, 0.4), so the resamples' APs differ.
+fn six_frames() -> (Vec<Vec<Object>>, Vec<Vec<Detection>>) {
+    let truth: Vec<Vec<Object>> = (0..6).map(|_| vec![object("bed", unit_box(0.0, 0.0))]).collect();
+    let detections = (0..6)
+        .map(|f| {
+            let place = if f % 2 == 0 { unit_box(0.0, 0.0) } else { unit_box(9.0, 0.0) };
+            vec![Detection::new("bed", &place, 0.9 - 0.1 * f as f32)]
+        })
+        .collect();
+    (truth, detections)
+}
+
+#[test]
+fn percentile_interval_by_hand() {
+    // Sorted 1..=11: the 5 % quantile sits at position 0.05·10 = 0.5 → 1.5; the 95 % at 9.5 → 10.5.
+    let values: Vec<f32> = [7, 3, 11, 1, 9, 5, 2, 10, 4, 8, 6].iter().map(|&v| v as f32).collect();
+    let (lo, hi) = percentile_interval(&values, 0.9).unwrap();
+    assert!((lo - 1.5).abs() < 1e-6 && (hi - 10.5).abs() < 1e-6, "{lo} {hi}");
+    // Level 0 is the median from both sides; one value is its own interval; none has none.
+    assert_eq!(percentile_interval(&values, 0.0), Some((6.0, 6.0)));
+    assert_eq!(percentile_interval(&[2.5], 0.9), Some((2.5, 2.5)));
+    assert_eq!(percentile_interval(&[], 0.9), None);
+}
+
+#[test]
+fn bootstrap_draws_are_reproducible_and_uniform() {
+    let settings = Bootstrap { resamples: 2000, seed: 7 };
+    let draws = bootstrap_frames(5, settings);
+    assert_eq!(draws, bootstrap_frames(5, settings));
+    assert_ne!(draws, bootstrap_frames(5, Bootstrap { seed: 8, ..settings }));
+    assert!(draws.iter().all(|d| d.len() == 5 && d.iter().all(|&f| f < 5)));
+    // Each frame is drawn with probability 1/5: 2 000 · 5 / 5 = 2 000 times, binomial sd ≈ 40.
+    for frame in 0..5 {
+        let count = draws.iter().flatten().filter(|&&f| f == frame).count();
+        assert!((1800..=2200).contains(&count), "frame {frame} drawn {count} times");
+    }
+}
+
+#[test]
+fn each_resample_is_the_ap_of_its_drawn_frames() {
+    // Reference: the dataset made of the drawn frames, copied, evaluated by evaluate_categories.
+    let (truth, detections) = six_frames();
+    let categories = vec!["bed".to_string(), "chair".to_string()];
+    let settings = Bootstrap { resamples: 40, seed: 3 };
+    let aps = bootstrap_aps(&truth, &[&detections], &categories, 0.25, settings);
+    let draws = bootstrap_frames(truth.len(), settings);
+    let mut distinct = std::collections::BTreeSet::new();
+    for (draw, resample) in draws.iter().zip(&aps[0]) {
+        let drawn_truth: Vec<Vec<Object>> = draw.iter().map(|&f| truth[f].clone()).collect();
+        let drawn_detections: Vec<Vec<Detection>> = draw.iter().map(|&f| detections[f].clone()).collect();
+        let reference = evaluate_categories(&drawn_truth, &drawn_detections, &categories, 0.25);
+        assert_eq!(resample[0], reference[0].pr.ap);
+        // No chair anywhere: never an AP.
+        assert_eq!(resample[1], None);
+        distinct.insert(resample[0].unwrap().to_bits());
+    }
+    assert!(distinct.len() > 3, "the resamples should not all agree: {distinct:?}");
+}
+
+#[test]
+fn identical_frames_give_a_point_interval_and_paired_differences_cancel() {
+    // Every frame the same (a hit at 0.9, a miss at 0.8 in a frame with two beds): every resample has
+    // the full set's AP, so the interval is that point.
+    let frame_truth = vec![object("bed", unit_box(0.0, 0.0)), object("bed", unit_box(5.0, 0.0))];
+    let frame_dets =
+        vec![Detection::new("bed", &unit_box(0.0, 0.0), 0.9), Detection::new("bed", &unit_box(9.0, 0.0), 0.8)];
+    let truth = vec![frame_truth; 8];
+    let detections = vec![frame_dets; 8];
+    let categories = vec!["bed".to_string()];
+    let full = evaluate_categories(&truth, &detections, &categories, 0.25)[0].pr.ap.unwrap();
+    let aps =
+        bootstrap_aps(&truth, &[&detections, &detections], &categories, 0.25, Bootstrap { resamples: 50, seed: 1 });
+    let values: Vec<f32> = aps[0].iter().map(|r| r[0].unwrap()).collect();
+    let (lo, hi) = percentile_interval(&values, 0.9).unwrap();
+    assert!((lo - full).abs() < 1e-6 && (hi - full).abs() < 1e-6, "{lo} {hi} vs {full}");
+    // The same detections on the same resamples: paired differences are exactly 0.
+    assert!(aps[0].iter().zip(&aps[1]).all(|(a, b)| a == b));
+    // The other way round, the six-frame set's interval must hold its own AP and be wider than a point.
+    let (truth, detections) = six_frames();
+    let aps = bootstrap_aps(&truth, &[&detections], &categories, 0.25, Bootstrap { resamples: 500, seed: 2 });
+    let values: Vec<f32> = aps[0].iter().map(|r| r[0].unwrap()).collect();
+    let (lo, hi) = percentile_interval(&values, 0.9).unwrap();
+    let full = evaluate_categories(&truth, &detections, &categories, 0.25)[0].pr.ap.unwrap();
+    assert!(lo < full && full < hi, "{lo} < {full} < {hi}");
+}

@@ -211,3 +211,56 @@ fn annotations_read_without_images_match_the_full_reader() {
     assert_eq!(layout, frame.layout);
     assert!(cog_gpu::frame::read_annotations(&dir.join("missing")).is_err());
 }
+
+#[test]
+fn bootstrap_intervals_and_paired_differences() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (data, dets) = dataset(tmp.path());
+    let empty = tmp.path().join("empty");
+    std::fs::create_dir_all(&empty).unwrap();
+    let (data, dets, empty) = (data.to_str().unwrap(), dets.to_str().unwrap(), empty.to_str().unwrap());
+    let args = ["--data", data, "--detections", dets, "--categories", "bed,chair,sofa", "--bootstrap", "300"];
+
+    let report = run_json(&args);
+    let boot = &report["bootstrap"];
+    assert_eq!(boot["resamples"], 300);
+    assert!(close(&boot["level"], 0.9));
+    for category in ["bed", "chair"] {
+        let interval = boot["ap_interval"][category].as_array().expect("an interval");
+        let (lo, hi) = (interval[0].as_f64().unwrap(), interval[1].as_f64().unwrap());
+        assert!((0.0..=1.0).contains(&lo) && lo <= hi && hi <= 1.0, "{category}: {interval:?}");
+    }
+    assert!(boot["ap_interval"]["sofa"].is_null(), "no sofa ground truth, no interval");
+    // Same seed, same intervals; the plain AP report is unchanged by --bootstrap.
+    assert_eq!(run_json(&args)["bootstrap"], *boot);
+    assert!(close(&report["ap"]["bed"], 0.6) && close(&report["map"], 0.55));
+
+    // Against itself: every paired difference is exactly 0.
+    let same = run_json(&[&args[..], &["--versus", dets]].concat());
+    let versus = &same["bootstrap"]["versus"];
+    assert!(close(&versus["ap"]["bed"], 0.6));
+    for category in ["bed", "chair"] {
+        assert_eq!(versus["difference_interval"][category], serde_json::json!([0.0, 0.0]));
+    }
+    // Against no detections (AP 0 in every resample): the difference's interval is the AP's own.
+    let nothing = run_json(&[&args[..], &["--versus", empty]].concat());
+    let versus = &nothing["bootstrap"]["versus"];
+    assert!(close(&versus["ap"]["bed"], 0.0) && close(&versus["map"], 0.0));
+    for category in ["bed", "chair"] {
+        assert_eq!(versus["difference_interval"][category], boot["ap_interval"][category], "{category}");
+    }
+    assert_eq!(versus["map_difference_interval"], boot["map_interval"]);
+
+    // The table prints the intervals; --versus needs --bootstrap; one resample is not a bootstrap (bad
+    // options exit with 1, as every error).
+    let out = run(&args);
+    let table = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        table.contains("90 % percentile intervals") && table.lines().any(|l| l.starts_with("bed ") && l.contains('[')),
+        "{table}"
+    );
+    let out = run(&["--data", data, "--detections", dets, "--versus", empty]);
+    assert_eq!(out.status.code(), Some(1), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = run(&["--data", data, "--detections", dets, "--bootstrap", "1"]);
+    assert_eq!(out.status.code(), Some(1), "{}", String::from_utf8_lossy(&out.stderr));
+}

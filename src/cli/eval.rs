@@ -29,7 +29,10 @@ use cog_gpu::diagnose::{
     diagnose_categories, frame_window_best_ious, overlay_precision, CategoryDiagnosis, OverlayPrecision,
 };
 use cog_gpu::draw::category_colour;
-use cog_gpu::eval::{evaluate_categories, mean_ap, CategoryEvaluation, Detection, FrameDetections};
+use cog_gpu::eval::{
+    bootstrap_aps, evaluate_categories, mean_ap, percentile_interval, Bootstrap, CategoryEvaluation, Detection,
+    FrameDetections,
+};
 use cog_gpu::features::Preprocessed;
 use cog_gpu::frame::{read_annotations, Dataset, DepthSource, Frame, Object};
 use cog_gpu::model::{read_models_dir, Model};
@@ -83,6 +86,49 @@ pub struct Args {
     /// (see `eval_layout`).
     #[arg(long, conflicts_with_all = ["diagnose", "plots", "categories"])]
     pub layout: bool,
+    /// Add a 90 % bootstrap interval to every AP and the mAP: N resamples of the evaluated frames with
+    /// replacement (percentile intervals; see `cog_gpu::eval::bootstrap_aps`). 1 000 is a good N.
+    #[arg(long, value_name = "N", conflicts_with_all = ["diagnose", "layout"], value_parser = clap::value_parser!(u32).range(2..=100_000))]
+    pub bootstrap: Option<u32>,
+    /// Seed of the bootstrap's resampling (same seed, same frames drawn, same interval).
+    #[arg(long, default_value_t = 0, requires = "bootstrap")]
+    pub bootstrap_seed: u64,
+    /// With --bootstrap: a second detections directory of the same frames (e.g. another model); prints
+    /// its APs and the paired 90 % interval of the difference (--detections minus --versus), both sets
+    /// evaluated on the same resamples.
+    #[arg(long, value_name = "DIR", requires = "bootstrap")]
+    pub versus: Option<PathBuf>,
+}
+
+/// A (low, high) bootstrap interval of an AP or of a difference of APs (fractions).
+type Interval = (f32, f32);
+
+/// The central probability of the `--bootstrap` intervals.
+const BOOTSTRAP_LEVEL: f32 = 0.9;
+
+/// The `--bootstrap` part of the report.
+#[derive(Serialize)]
+struct BootstrapSummary {
+    resamples: usize,
+    seed: u64,
+    level: f32,
+    /// Per category, the interval of its AP (fractions); `null` without ground truth.
+    ap_interval: BTreeMap<String, Option<(f32, f32)>>,
+    /// The interval of the mAP (each resample's mean of its defined APs).
+    map_interval: Option<(f32, f32)>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    versus: Option<VersusSummary>,
+}
+
+/// `--versus`: the second set's APs and the paired intervals of the differences.
+#[derive(Serialize)]
+struct VersusSummary {
+    detections: PathBuf,
+    ap: BTreeMap<String, Option<f32>>,
+    map: Option<f32>,
+    /// Per category, the interval of AP(--detections) − AP(--versus) over the shared resamples.
+    difference_interval: BTreeMap<String, Option<(f32, f32)>>,
+    map_difference_interval: Option<(f32, f32)>,
 }
 
 /// One frame's ground truth and its detections (`None`: no detections file).
@@ -108,6 +154,8 @@ struct Report {
     missing_detection_files: usize,
     ground_truth: BTreeMap<String, usize>,
     detections: BTreeMap<String, usize>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    bootstrap: Option<BootstrapSummary>,
 }
 
 /// The requested categories, checked against the 19 known ones.
@@ -288,6 +336,17 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     }
     let results = evaluate_categories(&truth, &detections, &categories, args.iou);
     let map = mean_ap(results.iter().map(|r| &r.pr.ap));
+    let bootstrap = match args.bootstrap {
+        Some(resamples) => {
+            let versus = match &args.versus {
+                Some(dir) => Some((dir.clone(), read_detection_dir(dir, &frames)?)),
+                None => None,
+            };
+            let settings = Bootstrap { resamples: resamples as usize, seed: args.bootstrap_seed };
+            Some(bootstrap_summary(&truth, &detections, versus, &categories, args.iou, settings))
+        }
+        None => None,
+    };
 
     if let Some(dir) = &args.plots {
         write_plots(dir, &results)?;
@@ -301,10 +360,14 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
             missing_detection_files: missing,
             ground_truth: results.iter().map(|r| (r.category.clone(), r.ground_truth)).collect(),
             detections: results.iter().map(|r| (r.category.clone(), r.detections)).collect(),
+            bootstrap,
         };
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
         print_table(&args, &results, map, evaluated, missing);
+        if let Some(summary) = &bootstrap {
+            print_bootstrap(&results, map, summary);
+        }
     }
     super::batch_result(&failures, names.len())
 }
@@ -326,6 +389,126 @@ fn print_table(args: &Args, results: &[CategoryEvaluation], map: Option<f32>, fr
     }
     let defined = results.iter().filter(|r| r.pr.ap.is_some()).count();
     println!("{:<12} {:>27}", format!("mAP ({defined})"), percent(map));
+}
+
+/// The detections of `frames` read from another detections directory (`--versus`): a frame without a
+/// file has no detections (counted in a warning); an unreadable file is an error naming it.
+fn read_detection_dir(dir: &Path, frames: &[PathBuf]) -> anyhow::Result<Vec<Vec<Detection>>> {
+    let files = detection_files(dir)?;
+    let mut missing = 0;
+    let mut out = Vec::with_capacity(frames.len());
+    for frame in frames {
+        match files.get(&frame_name(frame)) {
+            Some(path) => out.push(FrameDetections::read(path)?.detections),
+            None => {
+                missing += 1;
+                out.push(Vec::new());
+            }
+        }
+    }
+    if missing > 0 {
+        log::warn!(
+            "{missing} of {} frames have no detections file in {}; counted as no detections",
+            frames.len(),
+            dir.display()
+        );
+    }
+    Ok(out)
+}
+
+/// The percentile intervals of every category's AP and of the mAP over the resamples (and, with a
+/// `versus` set, its APs and the paired intervals of the differences).
+fn bootstrap_summary(
+    truth: &[Vec<Object>],
+    detections: &[Vec<Detection>],
+    versus: Option<(PathBuf, Vec<Vec<Detection>>)>,
+    categories: &[String],
+    iou: f32,
+    settings: Bootstrap,
+) -> BootstrapSummary {
+    let mut sets: Vec<&[Vec<Detection>]> = vec![detections];
+    if let Some((_, other)) = &versus {
+        sets.push(other);
+    }
+    let aps = bootstrap_aps(truth, &sets, categories, iou, settings);
+    let interval_of = |values: Vec<f32>| percentile_interval(&values, BOOTSTRAP_LEVEL);
+    // Per resample of one set: its category APs and its mAP.
+    let column = |set: usize, c: usize| -> Vec<Option<f32>> { aps[set].iter().map(|r| r[c]).collect() };
+    let maps = |set: usize| -> Vec<Option<f32>> { aps[set].iter().map(mean_ap).collect() };
+    let ap_interval = categories
+        .iter()
+        .enumerate()
+        .map(|(c, name)| (name.clone(), interval_of(column(0, c).into_iter().flatten().collect())))
+        .collect();
+    let map_interval = interval_of(maps(0).into_iter().flatten().collect());
+    let differences = |a: Vec<Option<f32>>, b: Vec<Option<f32>>| -> Vec<f32> {
+        a.into_iter().zip(b).filter_map(|(x, y)| Some(x? - y?)).collect()
+    };
+    let versus = versus.map(|(dir, other)| {
+        let results = evaluate_categories(truth, &other, categories, iou);
+        VersusSummary {
+            detections: dir,
+            map: mean_ap(results.iter().map(|r| &r.pr.ap)),
+            ap: results.iter().map(|r| (r.category.clone(), r.pr.ap)).collect(),
+            difference_interval: categories
+                .iter()
+                .enumerate()
+                .map(|(c, name)| (name.clone(), interval_of(differences(column(0, c), column(1, c)))))
+                .collect(),
+            map_difference_interval: interval_of(differences(maps(0), maps(1))),
+        }
+    });
+    BootstrapSummary {
+        resamples: settings.resamples,
+        seed: settings.seed,
+        level: BOOTSTRAP_LEVEL,
+        ap_interval,
+        map_interval,
+        versus,
+    }
+}
+
+fn interval_text(interval: Option<(f32, f32)>) -> String {
+    interval.map(|(lo, hi)| format!("[{:.1}, {:.1}]", 100.0 * lo, 100.0 * hi)).unwrap_or_else(|| "-".into())
+}
+
+fn print_bootstrap(results: &[CategoryEvaluation], map: Option<f32>, summary: &BootstrapSummary) {
+    println!(
+        "bootstrap: {} resamples of the frames (seed {}), {:.0} % percentile intervals",
+        summary.resamples,
+        summary.seed,
+        100.0 * summary.level
+    );
+    let difference = |name: &str| {
+        summary
+            .versus
+            .as_ref()
+            .map(|v| (v.ap.get(name).copied().flatten(), v.difference_interval.get(name).copied().flatten()))
+    };
+    match &summary.versus {
+        None => println!("{:<12} {:>7} {:>16}", "category", "AP", "interval"),
+        Some(v) => {
+            println!("versus: {} (difference = --detections minus --versus, paired resamples)", v.detections.display());
+            println!(
+                "{:<12} {:>7} {:>16} {:>8} {:>7} {:>16}",
+                "category", "AP", "interval", "versus", "diff", "interval of diff"
+            );
+        }
+    }
+    let row =
+        |name: &str, ap: Option<f32>, interval: Option<Interval>, other: Option<(Option<f32>, Option<Interval>)>| {
+            let mut line = format!("{:<12} {:>7} {:>16}", name, percent(ap), interval_text(interval));
+            if let Some((other_ap, diff_interval)) = other {
+                let diff = ap.zip(other_ap).map(|(a, b)| a - b);
+                line += &format!(" {:>8} {:>7} {:>16}", percent(other_ap), percent(diff), interval_text(diff_interval));
+            }
+            println!("{line}");
+        };
+    for r in results {
+        row(&r.category, r.pr.ap, summary.ap_interval.get(&r.category).copied().flatten(), difference(&r.category));
+    }
+    let map_other = summary.versus.as_ref().map(|v| (v.map, v.map_difference_interval));
+    row("mAP", map, summary.map_interval, map_other);
 }
 
 fn write_plots(dir: &Path, results: &[CategoryEvaluation]) -> anyhow::Result<()> {

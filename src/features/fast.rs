@@ -169,40 +169,69 @@ impl<'a> FastEngine<'a> {
 
     /// Fused scores `scores[h·W + w] = weights[w] · φ(h)` (each weight vector of length `layout.dim()`).
     pub fn scores(&self, hypotheses: &[Hypothesis], weights: &[Vec<f32>]) -> Vec<f32> {
-        let count = weights.len();
-        let mut scores = vec![0.0f32; hypotheses.len() * count];
-        let groups = group_by_table(hypotheses);
-        let per_group: Vec<Vec<(usize, Vec<f32>)>> = groups
+        self.rows(hypotheses, weights.len(), |table, hyp, row| {
+            self.hypothesis(table, hyp, |voxel, values| {
+                let offset = voxel * PER_VOXEL;
+                for (score, w) in row.iter_mut().zip(weights) {
+                    *score += dot(&w[offset..offset + PER_VOXEL], values);
+                }
+            });
+            if self.layout.groups.view {
+                let view = self.view(hyp);
+                let offset = self.layout.view_offset();
+                for (score, w) in row.iter_mut().zip(weights) {
+                    *score += dot(&w[offset..offset + VIEW], &view);
+                }
+            }
+        })
+    }
+
+    /// Per-layer scores: `scores[h·nz + k] = Σ_{i,j} w[(j·nx + i)·35 ..][..35] · φ_{(i,j,k)}(h)`, one weight
+    /// block of `nx·ny` voxels (a layer's voxels in [`FeatureLayout::voxel_index`] order) applied to every
+    /// layer `k` of the grid. The support-surface part of the paper's §4 scores the `h`-th horizontal slice
+    /// of a 5×5×7 grid with one weight vector for whichever slice holds the surface
+    /// ([`super::surface`]). Voxels are summed in the fixed order of the visit (k, then j, then i), so the
+    /// result is the same on every run.
+    pub fn layer_scores(&self, hypotheses: &[Hypothesis], layer_weights: &[f32]) -> Vec<f32> {
+        let g = self.layout.grid();
+        let (columns, layers) = ((g[0] * g[1]) as usize, g[2] as usize);
+        assert_eq!(layer_weights.len(), columns * PER_VOXEL, "one weight block per voxel of a layer");
+        self.rows(hypotheses, layers, |table, hyp, row| {
+            self.hypothesis(table, hyp, |voxel, values| {
+                let (layer, column) = (voxel / columns, voxel % columns);
+                let offset = column * PER_VOXEL;
+                row[layer] += dot(&layer_weights[offset..offset + PER_VOXEL], values);
+            });
+        })
+    }
+
+    /// `width` numbers per hypothesis, row-major: `fill(table, hypothesis, zeroed row)` for each, in
+    /// parallel over the hypotheses' table groups (each table built once).
+    fn rows(
+        &self,
+        hypotheses: &[Hypothesis],
+        width: usize,
+        fill: impl Fn(&LayerTable, &Hypothesis, &mut [f32]) + Sync,
+    ) -> Vec<f32> {
+        let mut out = vec![0.0f32; hypotheses.len() * width];
+        let per_group: Vec<Vec<(usize, Vec<f32>)>> = group_by_table(hypotheses)
             .into_par_iter()
             .map(|(key, members)| {
                 let table = self.table(key);
                 members
                     .into_par_iter()
                     .map(|n| {
-                        let hyp = &hypotheses[n];
-                        let mut row = vec![0.0f32; count];
-                        self.hypothesis(&table, hyp, |voxel, values| {
-                            let offset = voxel * PER_VOXEL;
-                            for (score, w) in row.iter_mut().zip(weights) {
-                                *score += dot(&w[offset..offset + PER_VOXEL], values);
-                            }
-                        });
-                        if self.layout.groups.view {
-                            let view = self.view(hyp);
-                            let offset = self.layout.view_offset();
-                            for (score, w) in row.iter_mut().zip(weights) {
-                                *score += dot(&w[offset..offset + VIEW], &view);
-                            }
-                        }
+                        let mut row = vec![0.0f32; width];
+                        fill(&table, &hypotheses[n], &mut row);
                         (n, row)
                     })
                     .collect()
             })
             .collect();
         for (n, row) in per_group.into_iter().flatten() {
-            scores[n * count..(n + 1) * count].copy_from_slice(&row);
+            out[n * width..(n + 1) * width].copy_from_slice(&row);
         }
-        scores
+        out
     }
 
     /// The 12 view features of `hyp` (shared with the GPU twin, which adds them on the CPU).

@@ -170,11 +170,45 @@ impl YawAnchor {
     }
 }
 
-/// The sliding window's 16 yaws for `pre` under `anchor`.
-pub fn window_yaws(pre: &Preprocessed, anchor: YawAnchor) -> Vec<f32> {
+/// The sliding window's 16 yaws under `anchor`, given the frame's wall direction (`None`: no dominant
+/// direction, so the walls anchor falls back to the camera's yaws).
+pub fn yaws_under(anchor: YawAnchor, wall_direction: Option<f32>) -> Vec<f32> {
     match anchor {
         YawAnchor::Camera => default_yaws(),
-        YawAnchor::Walls => anchored_yaws(frame_wall_direction(pre).unwrap_or(0.0)),
+        YawAnchor::Walls => anchored_yaws(wall_direction.unwrap_or(0.0)),
+    }
+}
+
+/// The sliding window's 16 yaws for `pre` under `anchor` (for several anchors of one frame use
+/// [`FrameYaws`], which estimates the wall direction once).
+pub fn window_yaws(pre: &Preprocessed, anchor: YawAnchor) -> Vec<f32> {
+    FrameYaws::new(pre).yaws(anchor)
+}
+
+/// One frame's window yaws under any anchor: the wall direction ([`frame_wall_direction`], a histogram
+/// over every normal) is estimated on first use and kept, so that a frame searched by many models,
+/// checked by the memory budget first, pays for it once.
+pub struct FrameYaws<'a> {
+    pre: &'a Preprocessed,
+    wall_direction: std::sync::OnceLock<Option<f32>>,
+}
+
+impl<'a> FrameYaws<'a> {
+    pub fn new(pre: &'a Preprocessed) -> Self {
+        Self { pre, wall_direction: std::sync::OnceLock::new() }
+    }
+
+    /// The frame's wall direction (estimated on the first call).
+    pub fn wall_direction(&self) -> Option<f32> {
+        *self.wall_direction.get_or_init(|| frame_wall_direction(self.pre))
+    }
+
+    /// The window's 16 yaws under `anchor` ([`yaws_under`]); the camera anchor never estimates walls.
+    pub fn yaws(&self, anchor: YawAnchor) -> Vec<f32> {
+        match anchor {
+            YawAnchor::Camera => default_yaws(),
+            YawAnchor::Walls => yaws_under(anchor, self.wall_direction()),
+        }
     }
 }
 

@@ -43,8 +43,7 @@ use crate::error::{Error, Result};
 use crate::features::cpu;
 use crate::features::fast::{FastEngine, FastOptions};
 use crate::features::hypotheses::{
-    anchored_yaws, default_yaws, frame_wall_direction, nearest_yaw_index, sliding_window, HypothesisSet, WindowOptions,
-    YawAnchor,
+    frame_wall_direction, nearest_yaw_index, sliding_window, yaws_under, HypothesisSet, WindowOptions, YawAnchor,
 };
 use crate::features::{FeatureLayout, FeatureScene, Hypothesis, Preprocessed};
 use crate::geometry::{structured_loss, Cuboid};
@@ -101,9 +100,9 @@ pub struct TrainingExample {
     pub truth: Option<Cuboid>,
     /// The frame's points without those inside the other instances of the category.
     pub pre: Preprocessed,
-    /// The window's yaws under [`YawAnchor::Walls`], from the whole frame's wall direction (as detection
-    /// sees the frame, before the other instances' points are removed).
-    pub wall_yaws: Vec<f32>,
+    /// The whole frame's wall direction (as detection sees the frame, before the other instances' points
+    /// are removed), which places the window's yaws under [`YawAnchor::Walls`].
+    pub wall_direction: Option<f32>,
 }
 
 /// The parts of an example that do not depend on w, rebuilt by every full pass (see the module doc).
@@ -119,16 +118,13 @@ pub struct ExampleWindow {
 impl TrainingExample {
     /// Builds the example: removes the points inside `others`.
     pub fn new(name: String, pre: &Preprocessed, truth: Option<Cuboid>, others: &[Cuboid]) -> TrainingExample {
-        let wall_yaws = anchored_yaws(frame_wall_direction(pre).unwrap_or(0.0));
-        TrainingExample { name, truth, pre: without_points_in(pre, others), wall_yaws }
+        let wall_direction = frame_wall_direction(pre);
+        TrainingExample { name, truth, pre: without_points_in(pre, others), wall_direction }
     }
 
     /// The window's 16 yaws under `anchor`.
     pub fn yaws(&self, anchor: YawAnchor) -> Vec<f32> {
-        match anchor {
-            YawAnchor::Camera => default_yaws(),
-            YawAnchor::Walls => self.wall_yaws.clone(),
-        }
+        yaws_under(anchor, self.wall_direction)
     }
 
     /// The example's yaw grids, sliding window and losses under `settings`.

@@ -16,18 +16,17 @@
 //! `max Σ_k α_k Δ_k − ½ αᵀGα` s.t. `α ≥ 0`, `Σ_{k∈W_i} α_k ≤ C/n`, with `G_kl = ψ_kᵀψ_l`, and
 //! `w = Σ_k α_k ψ_k`. See [`ssvm`] for the outer loop and [`checkpoint`] for the file format.
 //!
-//! # Latent extension (paper §4.1, not implemented)
-//! The latent structural SVM with CCCP (Yu & Joachims 2009) reuses this solver unchanged: an outer
-//! loop alternates (1) imputing the latent support height of every ground truth with the current
-//! `w` (`h_i = argmax_h wᵀφ(x_i, y_i, h)`), which fixes [`SeparationOracle::ground_truth_features`],
-//! and (2) a full [`CuttingPlane::train`] run whose oracle maximises over `(ȳ, h̄)` jointly. Because
-//! the ground-truth features change between rounds, each round needs a fresh [`CuttingPlane`]
-//! (a checkpoint records a hash of the ground-truth features and refuses to resume on other ones).
-//! Stop when the primal objective decreases by less than a tolerance.
+//! # Latent extension (paper §4.1)
+//! The latent structural SVM with CCCP (Yu & Joachims 2009) is [`latent`]: an outer loop alternates (1)
+//! imputing the latent (the paper's support height) of every ground truth with the current `w`
+//! (`h_i = argmax_h wᵀφ(x_i, y_i, h)`), which fixes [`SeparationOracle::ground_truth_features`], and (2) a
+//! fresh [`CuttingPlane::train`] run whose oracle maximises over `(ȳ, h̄)` jointly. The detector's
+//! surface features that would feed it are not built yet (issue "latent support surfaces").
 
 pub mod binary_svm;
 pub mod checkpoint;
 pub mod detector;
+pub mod latent;
 pub mod one_slack;
 pub mod qp;
 pub mod ssvm;

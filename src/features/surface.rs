@@ -1,0 +1,141 @@
+//! Support-surface features (paper §4.1): besides its own features, a cuboid is cut into 5×5×7 voxels and
+//! the `h`-th horizontal slice from the bottom (`h = 0..7`) describes a support surface at that height;
+//! with a one-hot indicator of `h`,
+//!
+//! ```text
+//! φ(I, B, h) = [φ_cuboid(I, B), φ_surface(I, B, h), e_h],   score(B) = max_h wᵀφ(I, B, h),
+//! ```
+//!
+//! so that `score(B) = w_cuboidᵀφ_cuboid(B) + max_h (w_sliceᵀφ_surface(B, h) + u_h)`: one weight vector
+//! `w_slice` for the surface, wherever it is, and a bias `u_h` per height. Learning (the latent S-SVM
+//! solved by CCCP, [`crate::learn::latent`]) imputes `h` for the ground truth.
+//!
+//! Choices where the paper is terse (kept everywhere the surface is used):
+//! * a slice's 25 voxels carry the same 35 features per voxel as the cuboid's (density, 25 normal bins,
+//!   9 COG bins; [`super::feature_layout`]), computed by the fast path ([`super::fast`]) on a 5×5×7 grid of
+//!   the cuboid itself — **not expanded** (a support surface lies inside its object) and without view
+//!   features (the cuboid part has them). The feature groups switched on are the cuboid model's, so an
+//!   ablation switches both parts together;
+//! * within the slice the order is the layout's voxel order, `(j·5 + i)·35 + entry` (`i` along the width
+//!   from the left, `j` along the depth from the front);
+//! * the height reported for slice `h` is its centre, `bottom + (h + ½)·height/7`: within `height/14` of a
+//!   surface inside the slice (at most 5.4 cm for a 0.75 m table);
+//! * ties between slices go to the lowest `h`, as in [`crate::learn::latent::impute`];
+//! * the paper initialises the surface weights from "the center slice of pre-trained cuboid descriptors":
+//!   [`centre_slice_weights`] copies the cuboid model's weights of the middle layer of its base grid.
+
+use super::fast::{FastEngine, FastOptions};
+use super::feature_layout::{FeatureLayout, Groups, PER_VOXEL};
+use super::hypotheses::Hypothesis;
+use super::scene::FeatureScene;
+use crate::error::{Error, Result};
+
+/// Number of slices, i.e. of latent surface heights.
+pub const SLICES: usize = 7;
+/// The surface grid: 5×5 voxels in each of the [`SLICES`] slices.
+pub const SURFACE_GRID: [u32; 3] = [5, 5, SLICES as u32];
+/// Voxels in one slice.
+pub const SLICE_VOXELS: usize = 25;
+/// Length of `φ_surface(I, B, h)`: the 35 features of each of the slice's 25 voxels.
+pub const SLICE_DIM: usize = SLICE_VOXELS * PER_VOXEL;
+
+/// The layout the slices are computed with: the surface grid, not expanded, the given groups without view.
+pub fn surface_layout(groups: Groups) -> FeatureLayout {
+    FeatureLayout { base_grid: SURFACE_GRID, expanded: false, groups: Groups { view: false, ..groups } }
+}
+
+/// The surface part of a latent model's weights: `w_slice` ([`SLICE_DIM`] entries) and the height biases
+/// `u_h` (the weights of the indicator `e_h`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SurfaceWeights {
+    pub slice: Vec<f32>,
+    pub indicator: [f32; SLICES],
+}
+
+impl SurfaceWeights {
+    /// Checks the length of `slice` and that every weight is finite.
+    pub fn new(slice: Vec<f32>, indicator: [f32; SLICES]) -> Result<SurfaceWeights> {
+        if slice.len() != SLICE_DIM {
+            return Err(Error::Input(format!(
+                "surface weights have {} slice entries, expected {SLICE_DIM} (5×5 voxels × {PER_VOXEL})",
+                slice.len()
+            )));
+        }
+        if !slice.iter().chain(&indicator).all(|w| w.is_finite()) {
+            return Err(Error::Input("surface weights contain a non-finite value".into()));
+        }
+        Ok(SurfaceWeights { slice, indicator })
+    }
+}
+
+/// Slice features and slice scores of hypotheses of one scene (the fast path on the surface grid).
+pub struct SurfaceEngine<'a> {
+    engine: FastEngine<'a>,
+}
+
+impl<'a> SurfaceEngine<'a> {
+    /// Bins the scene's points for the surface grid (the fast path's step 1, once per yaw).
+    pub fn new(scene: &'a FeatureScene, groups: Groups, options: FastOptions) -> SurfaceEngine<'a> {
+        SurfaceEngine { engine: FastEngine::new(scene, &surface_layout(groups), options) }
+    }
+
+    /// `φ_surface(I, B, h)` of every hypothesis and slice: row-major `hypotheses × SLICES × SLICE_DIM`.
+    pub fn slices(&self, hypotheses: &[Hypothesis]) -> Vec<f32> {
+        let layout = self.engine.layout();
+        let dim = layout.dim();
+        let features = self.engine.features(hypotheses);
+        // The surface layout orders voxels by layer first, so slice h is one contiguous block.
+        features.chunks(dim).flat_map(|row| row[..SLICES * SLICE_DIM].iter().copied()).collect()
+    }
+
+    /// `w_sliceᵀφ_surface(I, B, h) + u_h` for every hypothesis and slice.
+    pub fn slice_scores(&self, hypotheses: &[Hypothesis], weights: &SurfaceWeights) -> Vec<[f32; SLICES]> {
+        let layers = self.engine.layer_scores(hypotheses, &weights.slice);
+        layers.chunks(SLICES).map(|row| std::array::from_fn(|h| row[h] + weights.indicator[h])).collect()
+    }
+}
+
+/// The best slice and its score; ties go to the lowest `h`.
+pub fn best_slice(scores: &[f32; SLICES]) -> (usize, f32) {
+    let mut best = (0, scores[0]);
+    for (h, &s) in scores.iter().enumerate().skip(1) {
+        if s > best.1 {
+            best = (h, s);
+        }
+    }
+    best
+}
+
+/// The reported surface height (upright z, metres) of slice `h` of a hypothesis: the slice's centre.
+pub fn surface_height(hyp: &Hypothesis, h: usize) -> f32 {
+    hyp.bottom + (h as f32 + 0.5) * hyp.size.z / SLICES as f32
+}
+
+/// The paper's initialisation of `w_slice`: the cuboid model's weights of the middle voxel layer of its
+/// base grid (layer `⌊nz/2⌋` of the 5×5×5 base; of an expanded grid, the same layer shifted by one), voxel
+/// (i, j) of the slice taking the base grid's voxel (i, j). The base grid must be 5×5 across.
+pub fn centre_slice_weights(layout: &FeatureLayout, cuboid_weights: &[f32]) -> Result<Vec<f32>> {
+    let [bx, by, bz] = layout.base_grid;
+    if [bx, by] != [SURFACE_GRID[0], SURFACE_GRID[1]] {
+        return Err(Error::Input(format!(
+            "the centre slice needs a base grid 5×5 across, the model's is {bx}×{by}×{bz}"
+        )));
+    }
+    if cuboid_weights.len() != layout.dim() {
+        return Err(Error::Input(format!(
+            "{} cuboid weights for a layout of {} features ({})",
+            cuboid_weights.len(),
+            layout.dim(),
+            layout.id()
+        )));
+    }
+    let shift = u32::from(layout.expanded);
+    let mut slice = Vec::with_capacity(SLICE_DIM);
+    for j in 0..by {
+        for i in 0..bx {
+            let voxel = layout.voxel_index(i + shift, j + shift, bz / 2 + shift);
+            slice.extend_from_slice(&cuboid_weights[voxel * PER_VOXEL..(voxel + 1) * PER_VOXEL]);
+        }
+    }
+    Ok(slice)
+}
