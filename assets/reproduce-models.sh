@@ -11,11 +11,13 @@
 # to assets/models/ to ship new models).
 # Data (all 320x240, seeds never shared between sets):
 #   train        1000 frames, seed 1000, synth's default room mix;
-#   calibration    70 frames (held out: fits each model's score calibration): 40 of the default mix (seed
-#                 1500), 20 bathrooms (1501), 10 bedrooms (1502), so that bathtubs and toilets occur;
-#   test          200 frames: 80 of the default mix (seed 2000), 40 bathrooms (2001), 40 bedrooms (2002),
-#                 40 living rooms (2003), so that the rarer categories have more test boxes;
-#   ablation-test: 30 bedrooms (seed 3001), 40 bathrooms (3002), 15 offices (3003);
+#   calibration   220 frames (held out: fits each model's score calibration): 40 of the default mix (seed
+#                 1500), 20 bathrooms (1501), 10 bedrooms (1502), so that bathtubs and toilets occur, and the
+#                 150-frame validation set (default mix, seed 1600) on which training settings were chosen;
+#   test          325 frames: 80 of the default mix (seed 2000), 40 bathrooms (2001), 40 bedrooms (2002),
+#                 40 living rooms (2003) -- the first 200, listed in WORK/test-first200.txt -- and 60
+#                 bathrooms (2004), 45 bedrooms (2005), 20 offices (2006), so that every one of the ten
+#                 categories has at least 30 test boxes (bathtub and dresser 30, bookshelf 33);
 #   cascade-set  200 frames (held out: trains the context cascade): 80 of the default mix (seed 1700),
 #                 40 bathrooms (1701), 40 bedrooms (1702), 40 living rooms (1703), as the test set.
 # Timings in the README were measured with this script on the 2-core machine.
@@ -48,20 +50,17 @@ synth_set "$WORK/train" "$all_rooms" 1000 1000
 synth_set "$WORK/calibration/mixed" "$all_rooms" 40 1500 calib
 synth_set "$WORK/calibration/bathroom" bathroom 20 1501 calib-bathroom
 synth_set "$WORK/calibration/bedroom" bedroom 10 1502 calib-bedroom
+synth_set "$WORK/calibration/validation" "$all_rooms" 150 1600 calib-val
 synth_set "$WORK/test/mixed" "$all_rooms" 80 2000 mixed
 synth_set "$WORK/test/bathroom" bathroom 40 2001 bathroom
 synth_set "$WORK/test/bedroom" bedroom 40 2002 bedroom
 synth_set "$WORK/test/living_room" living_room 40 2003 living
-if [ ! -d "$WORK/ablation-test" ]; then
-    for room_frames_seed in bedroom:30:3001 bathroom:40:3002 office:15:3003; do
-        IFS=: read -r room frames seed <<< "$room_frames_seed"
-        "$BIN" synth --out "$WORK/ablation-test/$room" --frames "$frames" --seed "$seed" --width 320 --height 240 \
-            --rooms "$room"
-        # Frame names must be unique in a data set (one detections file per name): synth-N -> ROOM-N.
-        for frame in "$WORK/ablation-test/$room"/synth-*; do mv "$frame" "${frame/synth-/$room-}"; done
-    done
-fi
-
+synth_set "$WORK/test/bathroom-2" bathroom 60 2004 bathroom2
+synth_set "$WORK/test/bedroom-2" bedroom 45 2005 bedroom2
+synth_set "$WORK/test/office" office 20 2006 office
+# The test set of the earlier READMEs (before the last three subsets): `eval --split` compares with them.
+(cd "$WORK/test" && find mixed bathroom bedroom living_room -mindepth 1 -maxdepth 1 -type d | sort) \
+    > "$WORK/test-first200.txt"
 # train_and_eval NAME CATEGORIES TEST CALIBRATE TRAIN_ARGS...: trains each category into WORK/NAME/models/;
 # when CALIBRATE is "yes", detects on WORK/calibration and fits the models' calibrations; then detects on
 # WORK/TEST and writes WORK/NAME/ap.txt, ap.json, diagnosis.txt and precision-recall plots.
@@ -82,10 +81,14 @@ train_and_eval() {
     done
     if [ "$calibrate" = yes ]; then
         local started=$SECONDS
-        if [ ! -f "$dir/calibration-detections/.done" ]; then
+        # The marker holds the number of calibration frames detected, so that a WORK made before the
+        # calibration set grew is detected again.
+        local frames
+        frames=$(find "$WORK/calibration" -mindepth 2 -maxdepth 2 -type d | wc -l)
+        if [ "$(cat "$dir/calibration-detections/.done" 2>/dev/null)" != "$frames" ]; then
             "$BIN" detect "$WORK/calibration" --models "$dir/models" --out "$dir/calibration-detections" \
                 --min-score -3 --no-overlay > /dev/null
-            touch "$dir/calibration-detections/.done"
+            echo "$frames" > "$dir/calibration-detections/.done"
         fi
         "$BIN" calibrate --data "$WORK/calibration" --detections "$dir/calibration-detections" \
             --models "$dir/models" | tee "$dir/calibration.txt"
@@ -95,8 +98,13 @@ train_and_eval() {
     "$BIN" detect "$WORK/$test" --models "$dir/models" --out "$dir/detections" --min-score -3 --no-overlay \
         > /dev/null
     echo "$name detect $((SECONDS - started)) s" >> "$dir/times.txt"
+    # AP with 90 % bootstrap intervals over the test frames (1 000 resamples, seed 0).
     "$BIN" eval --data "$WORK/$test" --detections "$dir/detections" --categories "$categories" \
-        --plots "$dir/pr" | tee "$dir/ap.txt"
+        --plots "$dir/pr" --bootstrap 1000 | tee "$dir/ap.txt"
+    if [ "$test" = test ]; then
+        "$BIN" eval --data "$WORK/$test" --detections "$dir/detections" --categories "$categories" \
+            --split "$WORK/test-first200.txt" | tee "$dir/ap-first200.txt"
+    fi
     "$BIN" eval --data "$WORK/$test" --detections "$dir/detections" --categories "$categories" --json \
         > "$dir/ap.json"
     "$BIN" eval --data "$WORK/$test" --detections "$dir/detections" --categories "$categories" --diagnose \
@@ -110,13 +118,22 @@ case "$mode" in
         ;;
     ablation)
         five=bed,bathtub,nightstand,chair,toilet
-        # Smaller training runs (30 instances, 15 negative frames, 0.3 m training step, 2 full passes).
+        # Smaller training runs (30 instances, 15 negative frames, 0.3 m training step, 2 full passes),
+        # evaluated on the full 325-frame test set (bed 83, chair 183, toilet 45, nightstand 51, bathtub 30
+        # boxes), so that paired differences of a few points are beyond the bootstrap's noise.
         small=(--positives 30 --negatives 15 --max-full-passes 2 --step 0.3)
-        train_and_eval ablation-geom "$five" ablation-test no "${small[@]}" --groups geom --no-expand
-        train_and_eval ablation-cog "$five" ablation-test no "${small[@]}" --groups cog --no-expand
-        train_and_eval ablation-geom-cog "$five" ablation-test no "${small[@]}" --groups geom,cog --no-expand
-        train_and_eval ablation-geom-cog-view "$five" ablation-test no "${small[@]}" --groups geom,cog,view --no-expand
-        train_and_eval ablation-expanded "$five" ablation-test no "${small[@]}" --groups geom,cog,view
+        train_and_eval ablation-geom "$five" test no "${small[@]}" --groups geom --no-expand
+        train_and_eval ablation-cog "$five" test no "${small[@]}" --groups cog --no-expand
+        train_and_eval ablation-geom-cog "$five" test no "${small[@]}" --groups geom,cog --no-expand
+        train_and_eval ablation-geom-cog-view "$five" test no "${small[@]}" --groups geom,cog,view --no-expand
+        train_and_eval ablation-expanded "$five" test no "${small[@]}" --groups geom,cog,view
+        # Paired bootstrap differences (same 1 000 resamples of the test frames for both rows).
+        for pair in cog:geom geom-cog:cog geom-cog-view:geom-cog expanded:geom-cog-view; do
+            IFS=: read -r this that <<< "$pair"
+            "$BIN" eval --data "$WORK/test" --detections "$WORK/ablation-$this/detections" \
+                --categories "$five" --bootstrap 1000 --versus "$WORK/ablation-$that/detections" \
+                | tee "$WORK/ablation-$this-vs-$that.txt"
+        done
         ;;
     cascade)
         # The context cascade (paper section 6) on the models of `models` mode (run that first): first-stage
