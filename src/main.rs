@@ -46,7 +46,19 @@ enum Command {
     TrainLayout(cli::train_layout::Args),
 }
 
+/// `cog-gpu detect DIR | head` must end quietly when `head` has read enough, as command-line tools do.
+/// Rust ignores SIGPIPE, so a write to the closed pipe fails and `println!` panics (status 101); with the
+/// default action restored the process ends by the signal, like `cat`.
+fn restore_default_sigpipe() {
+    #[cfg(unix)]
+    // SAFETY: runs first in `main`, before any other thread exists; SIG_DFL is a valid disposition.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+}
+
 fn main() {
+    restore_default_sigpipe();
     env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("info")).format_timestamp(None).init();
     // Bad options exit with status 1 like every other error (README); --help and --version with 0.
     let cli = Cli::try_parse().unwrap_or_else(|err| {

@@ -20,17 +20,21 @@ const HEIGHT: u32 = 24;
 /// Longest any case may run: every case here is refused or finishes in well under a second.
 const DEADLINE: Duration = Duration::from_secs(60);
 
-/// Runs the binary with a deadline (a hang fails the test instead of blocking it).
-fn run(args: &[&str]) -> Output {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_cog-gpu"))
-        .arg("--cpu")
+/// The binary with `args`, quiet device selection, no backtraces, stdout and stderr piped.
+fn cog_gpu(args: &[&str]) -> Command {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_cog-gpu"));
+    command
         .args(args)
         .env("NODEVICE_SELECT", "1")
         .env("RUST_BACKTRACE", "0")
         .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("run cog-gpu");
+        .stderr(Stdio::piped());
+    command
+}
+
+/// Runs the binary (on the CPU path) with a deadline (a hang fails the test instead of blocking it).
+fn run(args: &[&str]) -> Output {
+    let mut child = cog_gpu(&[&["--cpu"], args].concat()).spawn().expect("run cog-gpu");
     let start = Instant::now();
     while child.try_wait().expect("wait").is_none() {
         if start.elapsed() > DEADLINE {
@@ -423,4 +427,24 @@ fn training_skips_positives_without_points_and_reports_them() {
     assert!(err.contains("1 positive examples have no point inside their box"), "{err}");
     let written: Value = serde_json::from_str(&std::fs::read_to_string(&model).unwrap()).unwrap();
     assert_eq!(written["training"]["positives"], 1);
+}
+
+/// `cog-gpu ... | head`: output into a pipe whose reader has gone ends the process quietly (SIGPIPE's
+/// default action, like `cat`), not with a panic in `println!` (status 101).
+#[cfg(unix)]
+#[test]
+fn a_closed_output_pipe_ends_the_process_without_a_panic() {
+    use std::os::unix::process::ExitStatusExt;
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("frames");
+    let mut child =
+        cog_gpu(&["synth", "--out", out.to_str().unwrap(), "--frames", "2", "--width", "64", "--height", "48"])
+            .spawn()
+            .expect("run cog-gpu");
+    // Close the reading end before the binary writes its summary line.
+    drop(child.stdout.take());
+    let output = child.wait_with_output().expect("output");
+    let err = stderr(&output);
+    assert!(!err.contains("panicked"), "panicked: {err}");
+    assert_eq!(output.status.signal(), Some(13), "expected the end by SIGPIPE, got {:?}: {err}", output.status);
 }
