@@ -13,16 +13,18 @@
 //! detections are sorted by score over all categories.
 
 use std::collections::BTreeMap;
+use std::time::Instant;
 
 use image::RgbImage;
 
+use crate::backend::Backend;
 use crate::draw::{category_colour, contrasting, draw_cuboid_with, draw_label};
 use crate::error::{Error, Result};
 use crate::eval::{Detection, FrameDetections};
 use crate::features::budget;
 use crate::features::fast::FastEngine;
 use crate::features::hypotheses::{sliding_window, FrameYaws, WindowOptions, YawAnchor};
-use crate::features::{Backend, FeatureScene, Hypothesis, Preprocessed};
+use crate::features::{FeatureScene, Hypothesis, Preprocessed};
 use crate::frame::Frame;
 use crate::geometry::Camera;
 use crate::model::{FeaturePath, Model};
@@ -90,6 +92,11 @@ impl<'a> FastEngines<'a> {
         };
         &self.engines[index]
     }
+
+    /// Seconds the engines spent building layer tables, summed over threads.
+    pub fn table_thread_seconds(&self) -> f64 {
+        self.engines.iter().map(FastEngine::table_thread_seconds).sum()
+    }
 }
 
 impl Default for FastEngines<'_> {
@@ -109,7 +116,7 @@ pub fn score_hypotheses<'a>(
 ) -> Result<Vec<f32>> {
     let weights = std::slice::from_ref(&model.weights);
     let scores = match model.features.path {
-        FeaturePath::Fast => crate::gpu::fast::fast_scores(backend, engines.get(scene, model), hypotheses, weights),
+        FeaturePath::Fast => backend.fast_scores(engines.get(scene, model), hypotheses, weights),
         FeaturePath::Exact => backend.scores(scene, &model.layout, hypotheses, weights)?.0,
     };
     Ok(scores.into_iter().map(|s| s + model.bias).collect())
@@ -153,6 +160,56 @@ fn check_budget_with(pre: &Preprocessed, frame_yaws: &FrameYaws, models: &[Model
     Ok(())
 }
 
+/// Wall-clock seconds of the stages of one frame's detection after preprocessing
+/// ([`detect_preprocessed_timed`]; `cog-gpu bench --detect` adds reading, preprocessing and output).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct DetectStages {
+    /// The frame's wall directions, the memory check and the per-yaw grids of each window step and yaw
+    /// anchor ([`FeatureScene::new`]).
+    pub yaw_grids_s: f64,
+    /// Every model's sliding-window hypotheses.
+    pub window_s: f64,
+    /// The fast path's per-yaw lattices ([`FastEngine::new`]), once per shared setting.
+    pub lattices_s: f64,
+    /// Scoring: the fast path's per-(yaw, height) summed-area tables and the scores (on the GPU path also
+    /// the uploads, dispatches and read-back), or the exact path's scores.
+    pub score_s: f64,
+    /// Of `score_s`'s work, the seconds spent building the fast path's tables, summed over threads (the
+    /// tables are built inside the parallel scoring loop, so they have no wall-clock stage of their own;
+    /// divide by the threads for a wall-clock share).
+    pub tables_thread_s: f64,
+    /// Thresholds, ordering and the candidates' cuboids.
+    pub select_s: f64,
+    /// 3D NMS and the calibration of the survivors.
+    pub nms_s: f64,
+    /// Hypotheses scored, over all models.
+    pub hypotheses: usize,
+}
+
+impl DetectStages {
+    /// The sum of the wall-clock stages (`tables_thread_s` is inside `score_s`).
+    pub fn total_s(&self) -> f64 {
+        self.yaw_grids_s + self.window_s + self.lattices_s + self.score_s + self.select_s + self.nms_s
+    }
+}
+
+/// Wall-clock laps for stage timings.
+pub struct Stopwatch(Instant);
+
+impl Stopwatch {
+    pub fn start() -> Stopwatch {
+        Stopwatch(Instant::now())
+    }
+
+    /// Seconds since the previous lap (or the start).
+    pub fn lap(&mut self) -> f64 {
+        let now = Instant::now();
+        let seconds = now.duration_since(self.0).as_secs_f64();
+        self.0 = now;
+        seconds
+    }
+}
+
 /// [`detect_frame`] on an already preprocessed frame.
 pub fn detect_preprocessed(
     name: &str,
@@ -161,6 +218,20 @@ pub fn detect_preprocessed(
     backend: Backend,
     options: &DetectOptions,
 ) -> Result<FrameDetections> {
+    detect_preprocessed_timed(name, pre, models, backend, options, &mut DetectStages::default())
+}
+
+/// [`detect_preprocessed`], adding each stage's wall-clock seconds to `stages`.
+pub fn detect_preprocessed_timed(
+    name: &str,
+    pre: Preprocessed,
+    models: &[Model],
+    backend: Backend,
+    options: &DetectOptions,
+    stages: &mut DetectStages,
+) -> Result<FrameDetections> {
+    let mut clock = Stopwatch::start();
+    let mut lap = || clock.lap();
     let frame_yaws = FrameYaws::new(&pre);
     check_budget_with(&pre, &frame_yaws, models)?;
     // One scene per distinct window step and yaw anchor (the yaw grids' cell is the step).
@@ -171,6 +242,7 @@ pub fn detect_preprocessed(
             .entry((step.to_bits(), anchor))
             .or_insert_with(|| FeatureScene::new(pre.clone(), &frame_yaws.yaws(anchor), step));
     }
+    stages.yaw_grids_s += lap();
     let mut candidates = Vec::new();
     let mut engines = FastEngines::new();
     for model in models {
@@ -178,7 +250,14 @@ pub fn detect_preprocessed(
         let window =
             sliding_window(scene, &WindowOptions { sizes: model.sizes(), min_points: model.window.min_points });
         let hypotheses = &window.hypotheses;
+        stages.window_s += lap();
+        if model.features.path == FeaturePath::Fast {
+            engines.get(scene, model);
+            stages.lattices_s += lap();
+        }
         let scores = score_hypotheses(scene, model, hypotheses, backend, &mut engines)?;
+        stages.score_s += lap();
+        stages.hypotheses += hypotheses.len();
         if let Some(n) = scores.iter().position(|s| !s.is_finite()) {
             return Err(Error::Input(format!(
                 "frame '{name}': the '{}' model gives hypothesis {n} the score {} (weights or features out of range)",
@@ -196,11 +275,14 @@ pub fn detect_preprocessed(
         candidates.extend(
             order.into_iter().map(|n| Detection::new(&model.category, &hypotheses[n].cuboid(scene), scores[n])),
         );
+        stages.select_s += lap();
     }
+    stages.tables_thread_s += engines.table_thread_seconds();
     let nms =
         NmsOptions { iou_threshold: options.nms_iou, max_detections: Some(options.max_per_category), top_k: None };
     let mut detections = nms_detections(&candidates, &nms);
     calibrate(&mut detections, models);
+    stages.nms_s += lap();
     Ok(FrameDetections { frame: name.to_string(), detections })
 }
 

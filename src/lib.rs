@@ -2,10 +2,13 @@
 //! (Ren & Sudderth, TPAMI), with the heavy feature work in WGSL compute shaders.
 //!
 //! Data flows one way through the modules:
-//! `frame` (SUN RGB-D frames, point clouds) → `geometry` (cuboids, IoU, projection) → `gpu` (context and
-//! kernels with their CPU twins) → later stages (features, learning, the room layout `room_layout`, cascade, evaluation).
+//! `frame` (SUN RGB-D frames, point clouds) → `geometry` (cuboids, IoU, projection) → `features`
+//! (definitions, CPU reference and fast path) → `gpu` (context and kernels with their CPU twins) →
+//! `backend` (which of the two scores) → later stages (detection, learning, the room layout
+//! `room_layout`, cascade, evaluation).
 //! `synth` writes frames in the same layout the `frame` module reads.
 
+pub mod backend;
 pub mod calibration;
 pub mod cascade;
 pub mod category;

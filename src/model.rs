@@ -39,6 +39,8 @@ use crate::category::{normalise_name, CATEGORIES};
 use crate::error::{Error, Result};
 use crate::features::fast::FastOptions;
 use crate::features::hypotheses::YawAnchor;
+/// The weight bounds live with the weight vectors' definition ([`crate::features::weights`]).
+pub use crate::features::weights::{check_weight_magnitudes, MAX_WEIGHT};
 use crate::features::{FeatureLayout, SizeQuantiles};
 use crate::limits::{check_step, check_subdivisions, MAX_OBJECT_SIZE_M, MIN_OBJECT_SIZE_M};
 
@@ -223,11 +225,6 @@ impl Model {
     }
 }
 
-/// Largest absolute weight or bias a model or weights file may hold: features are bounded (densities and
-/// bin counts per projected pixel, normalised COG, view RBFs), so any real model's weights are many orders
-/// of magnitude below it, and with it no score of the 12 017 dimensions can overflow to infinity or NaN.
-pub const MAX_WEIGHT: f32 = 1e6;
-
 /// Checks hypothesis sizes: 5 widths, 3 depths and 3 heights, each within
 /// [[`MIN_OBJECT_SIZE_M`], [`MAX_OBJECT_SIZE_M`]] metres.
 pub fn check_sizes(sizes: &SizeQuantiles) -> std::result::Result<(), String> {
@@ -240,17 +237,6 @@ pub fn check_sizes(sizes: &SizeQuantiles) -> std::result::Result<(), String> {
                 "sizes.{name} must hold {count} sizes in [{MIN_OBJECT_SIZE_M}, {MAX_OBJECT_SIZE_M}] m, found {values:?}"
             ));
         }
-    }
-    Ok(())
-}
-
-/// Checks every weight and the bias against ±[`MAX_WEIGHT`].
-pub fn check_weight_magnitudes(weights: &[f32], bias: f32) -> std::result::Result<(), String> {
-    if let Some(i) = weights.iter().position(|w| w.abs() > MAX_WEIGHT) {
-        return Err(format!("weights[{i}] = {} is beyond ±{MAX_WEIGHT:e}: not a trained model", weights[i]));
-    }
-    if bias.abs() > MAX_WEIGHT {
-        return Err(format!("bias = {bias} is beyond ±{MAX_WEIGHT:e}: not a trained model"));
     }
     Ok(())
 }

@@ -3,10 +3,11 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use cog_gpu::backend::Backend;
 use cog_gpu::detect::{detect_frame, overlay, DetectOptions};
 use cog_gpu::eval::FrameDetections;
 use cog_gpu::features::YawAnchor;
-use cog_gpu::features::{Backend, FeatureLayout, Groups, Preprocessed, SizeQuantiles};
+use cog_gpu::features::{FeatureLayout, Groups, Preprocessed, SizeQuantiles};
 use cog_gpu::frame::{DepthSource, Frame};
 use cog_gpu::geometry::{iou_3d, projected_hull_area, Camera};
 use cog_gpu::model::{FeaturePath, FeatureSettings, Model, WindowSettings};
@@ -193,4 +194,107 @@ fn the_cli_names_bad_inputs() {
         assert!(stderr.contains(&needle), "{args:?}: expected '{needle}' in {stderr}");
         assert!(!stderr.contains("panicked"), "{stderr}");
     }
+}
+
+/// `detect_preprocessed_timed` detects exactly what `detect_frame` does, and its stage record adds up: every
+/// stage non-negative, the fast path's tables counted only for fast models, a second call adding its own.
+#[test]
+fn timed_detection_is_detection_and_accumulates_its_stages() {
+    use cog_gpu::detect::{detect_preprocessed_timed, DetectStages};
+    let frame = Frame::read(SAMPLE, DepthSource::Raw).unwrap();
+    let options = DetectOptions::default();
+    for path in [FeaturePath::Fast, FeaturePath::Exact] {
+        let models = [density_model(path, 0.3)];
+        let plain = detect_frame(&frame, &models, Backend::Cpu, &options).unwrap();
+        let mut stages = DetectStages::default();
+        let pre = Preprocessed::from_frame(&frame).unwrap();
+        let timed =
+            detect_preprocessed_timed(&frame.name, pre.clone(), &models, Backend::Cpu, &options, &mut stages).unwrap();
+        assert_eq!(timed, plain, "{path:?}");
+        let once = stages;
+        let parts = [once.yaw_grids_s, once.window_s, once.lattices_s, once.score_s, once.select_s, once.nms_s];
+        assert!(parts.iter().all(|&s| s >= 0.0) && once.score_s > 0.0, "{once:?}");
+        assert!((once.total_s() - parts.iter().sum::<f64>()).abs() < 1e-12);
+        assert!(once.hypotheses > 0);
+        match path {
+            FeaturePath::Fast => assert!(once.tables_thread_s > 0.0 && once.lattices_s > 0.0, "{once:?}"),
+            FeaturePath::Exact => assert_eq!((once.tables_thread_s, once.lattices_s), (0.0, 0.0), "{once:?}"),
+        }
+        detect_preprocessed_timed(&frame.name, pre, &models, Backend::Cpu, &options, &mut stages).unwrap();
+        assert_eq!(stages.hypotheses, 2 * once.hypotheses);
+        assert!(stages.score_s > once.score_s);
+    }
+}
+
+/// `bench --detect` times the detection `detect` makes: per repeat one entry with the number of detections
+/// `detect --json` reports for the frame, and a total that is the sum of its stages.
+#[test]
+fn bench_detect_times_the_detection_the_cli_makes() {
+    let dir = tempfile::tempdir().unwrap();
+    let models = models_dir(dir.path());
+    let m = models.to_str().unwrap();
+    let output =
+        run(&["--cpu", "bench", "--detect", SAMPLE, "--models", m, "--json", "--warmup", "0", "--repeat", "2"]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    let out = dir.path().join("out");
+    let detected = run(&["--cpu", "detect", SAMPLE, "--models", m, "--out", out.to_str().unwrap(), "--json"]);
+    assert!(detected.status.success());
+    let printed: Vec<FrameDetections> = serde_json::from_slice(&detected.stdout).unwrap();
+    let frames = report["paths"]["cpu"]["frames"].as_array().expect("cpu frames");
+    assert_eq!(frames.len(), 2, "one entry per repeat");
+    assert!(report["paths"].get("gpu").is_none(), "--cpu runs the CPU path only");
+    for entry in frames {
+        assert_eq!(entry["frame"], "synth-bedroom-s52");
+        assert_eq!(entry["detections"].as_u64().unwrap() as usize, printed[0].detections.len());
+        let stage = |k: &str| entry[k].as_f64().unwrap_or_else(|| panic!("{k} missing in {entry}"));
+        let keys = [
+            "read_s",
+            "preprocess_s",
+            "yaw_grids_s",
+            "window_s",
+            "lattices_s",
+            "score_s",
+            "select_s",
+            "nms_s",
+            "cascade_s",
+            "layout_s",
+            "output_s",
+        ];
+        let sum: f64 = keys.iter().map(|k| stage(k)).sum();
+        assert!(keys.iter().all(|k| stage(k) >= 0.0));
+        assert!((sum - stage("total_s")).abs() <= 1e-9 * sum.max(1.0), "{sum} vs {entry}");
+    }
+    let mean = report["paths"]["cpu"]["mean"]["total_s"].as_f64().unwrap();
+    let expected = frames.iter().map(|f| f["total_s"].as_f64().unwrap()).sum::<f64>() / 2.0;
+    assert!((mean - expected).abs() <= 1e-9 * expected);
+}
+
+/// The GPU path (the fast kernel forced on, lavapipe included) detects the same boxes with the same scores
+/// as the CPU path, checked by `bench --detect --both`, which fails when they differ.
+#[test]
+fn bench_detect_finds_the_gpu_and_cpu_paths_agree() {
+    let dir = tempfile::tempdir().unwrap();
+    let models = models_dir(dir.path());
+    let output = Command::new(binary())
+        .args(["bench", "--detect", SAMPLE, "--models", models.to_str().unwrap(), "--both", "--json", "--warmup", "0"])
+        .env("NODEVICE_SELECT", "1")
+        .env("COG_GPU_FAST_KERNEL", "always")
+        .output()
+        .unwrap();
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    if report["gpu_vs_cpu"].is_null() {
+        assert_eq!(
+            std::env::var("COG_GPU_SKIP_GPU_TESTS").as_deref(),
+            Ok("1"),
+            "no GPU adapter: install a Vulkan driver (lavapipe) or set COG_GPU_SKIP_GPU_TESTS=1"
+        );
+        eprintln!("skipped: no GPU adapter and COG_GPU_SKIP_GPU_TESTS=1");
+        return;
+    }
+    assert_eq!(report["paths"]["gpu"]["fast_kernel"], true);
+    assert_eq!(report["gpu_vs_cpu"]["same"], true, "{}", report["gpu_vs_cpu"]);
+    assert_eq!(report["gpu_vs_cpu"]["frames_compared"], 1);
+    assert!(report["paths"]["gpu"]["frames"][0]["detections"].as_u64().unwrap() > 0);
 }

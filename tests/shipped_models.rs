@@ -3,9 +3,10 @@
 
 use std::path::Path;
 
+use cog_gpu::backend::Backend;
 use cog_gpu::category::LARGE_CATEGORIES;
 use cog_gpu::detect::{detect_frame, DetectOptions};
-use cog_gpu::features::{Backend, FeatureLayout};
+use cog_gpu::features::FeatureLayout;
 use cog_gpu::frame::{DepthSource, Frame};
 use cog_gpu::geometry::iou_3d;
 use cog_gpu::model::{read_models_dir, FeaturePath};

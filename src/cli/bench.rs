@@ -1,5 +1,7 @@
 //! `cog-gpu bench [--frame DIR] [--category bed] [--cpu|--gpu|--both] [--json]`: throughput of one
 //! category's full sliding window on one frame, for the CPU path and the GPU path side by side.
+//! `cog-gpu bench --detect [FRAME|DIR ...]`: the whole `detect` per frame, stage by stage
+//! ([`super::bench_detect`]).
 //!
 //! The weights are a fixed-seed pseudo-random vector (the arithmetic does not depend on their values).
 //! `--cpu` is the global flag; without any of the three flags both paths run. `preprocess_s` is the shared
@@ -18,10 +20,11 @@ use anyhow::bail;
 use serde_json::json;
 
 use super::{options, GlobalOptions};
+use cog_gpu::backend::Backend;
 use cog_gpu::features::fast::{FastEngine, FastOptions};
 use cog_gpu::features::hypotheses::{DEFAULT_MIN_POINTS, DEFAULT_STEP};
 use cog_gpu::features::window::{category_sizes, DEFAULT_SIZE_STATS};
-use cog_gpu::features::{budget, cpu, Backend, FeatureLayout, Hypothesis, PreparedWindow};
+use cog_gpu::features::{budget, cpu, FeatureLayout, Hypothesis, PreparedWindow};
 use cog_gpu::frame::{DepthSource, Frame};
 
 /// The real frame benchmarked when no `--frame` is given (until the synthetic standard frame exists).
@@ -61,6 +64,23 @@ pub struct Args {
     /// Print one JSON object.
     #[arg(long)]
     pub json: bool,
+    /// End-to-end detection instead of one window: times `detect` stage by stage on these frames (frame
+    /// directories or directories of frames; none: the shipped sample frames) with every model of
+    /// `--models`, GPU and CPU paths side by side (see `cli::bench_detect`).
+    #[arg(long, num_args = 0.., value_name = "FRAME|DIR")]
+    pub detect: Option<Vec<PathBuf>>,
+    /// With --detect: the models directory.
+    #[arg(long, default_value = "assets/models")]
+    pub models: PathBuf,
+    /// With --detect: overrides every model's window step (as `detect --step`).
+    #[arg(long, value_parser = options::step)]
+    pub detect_step: Option<f32>,
+    /// With --detect: timed detections of each frame.
+    #[arg(long, default_value_t = 1, value_parser = options::at_least_one)]
+    pub repeat: usize,
+    /// With --detect: untimed detections of the first frame before timing, per path.
+    #[arg(long, default_value_t = 1)]
+    pub warmup: usize,
 }
 
 /// Feature paths `bench` can time.
@@ -83,6 +103,9 @@ pub fn bench_weights(dim: usize, seed: u64) -> Vec<f32> {
 }
 
 pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
+    if args.detect.is_some() {
+        return super::bench_detect::run(args, options);
+    }
     if options.force_cpu && (args.gpu || args.both) {
         bail!("--cpu cannot be combined with --gpu or --both");
     }

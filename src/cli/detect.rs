@@ -16,12 +16,12 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{bail, Context};
+use cog_gpu::backend::Backend;
 use cog_gpu::cascade::Cascade;
 use cog_gpu::category::normalise_name;
 use cog_gpu::detect::{detect_frame, overlay, overlay_selection, DetectOptions};
 use cog_gpu::draw::category_colour;
 use cog_gpu::eval::FrameDetections;
-use cog_gpu::features::Backend;
 use cog_gpu::frame::{is_frame_dir, DepthSource, Frame};
 use cog_gpu::model::read_models_dir;
 use cog_gpu::nms::DEFAULT_NMS_IOU;
@@ -155,10 +155,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         .with_context(|| format!("creating the output directory {}", args.out.display()))?;
     // Both feature paths score on the GPU when there is one (fast: gpu::fast, exact: gpu::features).
     let gpu = if models.is_empty() { None } else { cog_gpu::gpu::acquire(options.force_cpu) };
-    let backend = match &gpu {
-        Some(ctx) => Backend::Gpu(ctx),
-        None => Backend::Cpu,
-    };
+    let backend = Backend::of(gpu.as_ref());
     log::info!(
         "{} frame(s), models: {}",
         frames.len(),
@@ -196,7 +193,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
 /// The cascade to apply: `<models>/cascade.json` unless `--no-cascade` or absent. Its context categories
 /// must all have a loaded model (the second stage was trained on their detections): with `--categories`
 /// leaving one out, the cascade is skipped with a warning.
-fn cascade_for(
+pub(super) fn cascade_for(
     models_dir: &Path,
     models: &[cog_gpu::model::Model],
     no_cascade: bool,
@@ -232,11 +229,11 @@ fn cascade_for(
 /// layout file's record) when the room was laid out. Written to `<frame>.json` and, with `--json`, as one
 /// entry of the array on stdout.
 #[derive(serde::Serialize)]
-struct FrameReport {
+pub(super) struct FrameReport {
     #[serde(flatten)]
-    detections: FrameDetections,
+    pub detections: FrameDetections,
     #[serde(skip_serializing_if = "Option::is_none")]
-    layout: Option<LayoutRecord>,
+    pub layout: Option<LayoutRecord>,
 }
 
 /// Reads one frame, detects (rescores with `cascade`, lays out the room with `layout_model`), and writes

@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
-use cog_gpu::features::Backend;
+use cog_gpu::backend::Backend;
 use cog_gpu::frame::{DepthSource, Frame};
 use cog_gpu::model::LAYOUT_MODEL_FILE;
 use cog_gpu::room_layout::model::LayoutModel;
@@ -130,10 +130,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating the output directory {}", args.out.display()))?;
     let gpu = if model.is_some() { cog_gpu::gpu::acquire(options.force_cpu) } else { None };
-    let backend = match &gpu {
-        Some(ctx) => Backend::Gpu(ctx),
-        None => Backend::Cpu,
-    };
+    let backend = Backend::of(gpu.as_ref());
     let mut failures = Vec::new();
     let mut seconds = Vec::new();
     for dir in &frames {

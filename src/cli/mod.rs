@@ -1,6 +1,7 @@
 //! Subcommands of the `cog-gpu` binary.
 
 pub mod bench;
+pub mod bench_detect;
 pub mod calibrate;
 pub mod cascade;
 pub mod detect;

@@ -6,9 +6,10 @@ use std::path::PathBuf;
 use anyhow::Context;
 
 use super::{options, GlobalOptions};
+use cog_gpu::backend::Backend;
 use cog_gpu::features::hypotheses::{DEFAULT_MIN_POINTS, DEFAULT_STEP};
 use cog_gpu::features::window::{category_sizes, DEFAULT_SIZE_STATS};
-use cog_gpu::features::{Backend, PreparedWindow, WeightsFile};
+use cog_gpu::features::{PreparedWindow, WeightsFile};
 use cog_gpu::frame::{DepthSource, Frame};
 
 #[derive(clap::Args)]
@@ -41,10 +42,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     let sizes = category_sizes(&args.sizes, &model.category)?;
     let window = PreparedWindow::new(&frame, sizes, args.step, args.min_points)?;
     let gpu = cog_gpu::gpu::acquire(options.force_cpu);
-    let backend = match &gpu {
-        Some(ctx) => Backend::Gpu(ctx),
-        None => Backend::Cpu,
-    };
+    let backend = Backend::of(gpu.as_ref());
     let hypotheses = &window.set.hypotheses;
     let (scores, _) = backend
         .scores(&window.scene, &model.layout, hypotheses, std::slice::from_ref(&model.weights))

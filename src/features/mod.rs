@@ -26,4 +26,4 @@ pub mod weights;
 pub mod window;
 
 pub use weights::WeightsFile;
-pub use window::{Backend, PreparedWindow};
+pub use window::PreparedWindow;

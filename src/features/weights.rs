@@ -78,7 +78,7 @@ impl WeightsFile {
         if !self.bias.is_finite() {
             return Err("bias is not finite".into());
         }
-        crate::model::check_weight_magnitudes(&self.weights, self.bias)?;
+        check_weight_magnitudes(&self.weights, self.bias)?;
         let mask = self.layout.mask();
         if let Some(n) = (0..mask.len()).find(|&n| !mask[n] && self.weights[n] != 0.0) {
             return Err(format!(
@@ -101,4 +101,20 @@ impl WeightsFile {
         let text = serde_json::to_string(self).map_err(|e| Error::invalid(path, e.to_string()))?;
         std::fs::write(path, text).map_err(|e| Error::io(path, e))
     }
+}
+
+/// Largest absolute weight or bias a model or weights file may hold: features are bounded (densities and
+/// bin counts per projected pixel, normalised COG, view RBFs), so any real model's weights are many orders
+/// of magnitude below it, and with it no score of the 12 017 dimensions can overflow to infinity or NaN.
+pub const MAX_WEIGHT: f32 = 1e6;
+
+/// Checks every weight and the bias against ±[`MAX_WEIGHT`].
+pub fn check_weight_magnitudes(weights: &[f32], bias: f32) -> std::result::Result<(), String> {
+    if let Some(i) = weights.iter().position(|w| w.abs() > MAX_WEIGHT) {
+        return Err(format!("weights[{i}] = {} is beyond ±{MAX_WEIGHT:e}: not a trained model", weights[i]));
+    }
+    if bias.abs() > MAX_WEIGHT {
+        return Err(format!("bias = {bias} is beyond ±{MAX_WEIGHT:e}: not a trained model"));
+    }
+    Ok(())
 }

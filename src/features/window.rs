@@ -1,52 +1,19 @@
 //! One frame's sliding window from end to end: preprocessing, yaw grids and hypotheses, then scoring on
-//! either path. Used by the `score` and `bench` commands and the benchmark.
+//! either path ([`crate::backend::Backend`]). Used by the `score` and `bench` commands and the benchmark.
 
 use std::path::Path;
 use std::time::Instant;
 
 use glam::Vec3;
 
-use super::feature_layout::FeatureLayout;
 use super::hypotheses::{default_yaws, sliding_window, HypothesisSet, SizeQuantiles, WindowOptions};
 use super::preprocess::Preprocessed;
 use super::scene::FeatureScene;
-use super::{cpu, Hypothesis};
 use crate::error::Result;
 use crate::frame::Frame;
-use crate::gpu::GpuContext;
 
 /// The SUN RGB-D size statistics the hypotheses' sizes default to (relative to the crate root).
 pub const DEFAULT_SIZE_STATS: &str = "../shared/data/sunrgbd-size-stats.json";
-
-/// Which implementation scores.
-#[derive(Clone, Copy)]
-pub enum Backend<'a> {
-    Cpu,
-    Gpu(&'a GpuContext),
-}
-
-impl Backend<'_> {
-    pub fn name(&self) -> &'static str {
-        match self {
-            Backend::Cpu => "cpu",
-            Backend::Gpu(_) => "gpu",
-        }
-    }
-
-    /// Fused scores (`hypotheses.len() × weights.len()`) and the point·voxel updates.
-    pub fn scores(
-        &self,
-        scene: &FeatureScene,
-        layout: &FeatureLayout,
-        hypotheses: &[Hypothesis],
-        weights: &[Vec<f32>],
-    ) -> Result<(Vec<f32>, u64)> {
-        match self {
-            Backend::Cpu => Ok(cpu::scores(scene, layout, hypotheses, weights)),
-            Backend::Gpu(ctx) => crate::gpu::features::scores_gpu(ctx, scene, layout, hypotheses, weights),
-        }
-    }
-}
 
 /// A frame made ready for scoring.
 pub struct PreparedWindow {

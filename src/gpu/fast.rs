@@ -39,7 +39,7 @@ use crate::features::cpu::{dot, HypothesisRecord};
 use crate::features::fast::{group_by_table, FastEngine, LayerTable, CHANNELS};
 use crate::features::feature_layout::{FeatureLayout, COG, COG_BINS, COG_EPSILON, NORMALS, PER_VOXEL, VIEW};
 use crate::features::preprocess::NORMAL_BINS;
-use crate::features::{Backend, Hypothesis};
+use crate::features::Hypothesis;
 use crate::geometry::MIN_PROJECT_DEPTH;
 
 /// The kernel's spec (registered in [`super::Kernels`]).
@@ -444,28 +444,7 @@ fn vec4_at<T: Copy>(data: &[T], n: usize) -> [T; 4] {
     [data[4 * n], data[4 * n + 1], data[4 * n + 2], data[4 * n + 3]]
 }
 
-/// Fast-path scores on `backend`: the GPU kernel with [`Backend::Gpu`], [`FastEngine::scores`] with
-/// [`Backend::Cpu`]. A GPU failure (e.g. a table over the binding limit) is logged and the CPU path is
-/// taken, so the caller always gets scores.
-///
-/// On a software adapter (`DeviceType::Cpu`: lavapipe, llvmpipe, WARP) the kernel is ~15× slower than the
-/// CPU path on the same cores (scattered table reads run lane by lane), so there the CPU path is used
-/// unless the environment sets `COG_GPU_FAST_KERNEL=always`; this is said once, at info level.
-pub fn fast_scores(backend: Backend, engine: &FastEngine, hypotheses: &[Hypothesis], weights: &[Vec<f32>]) -> Vec<f32> {
-    match backend {
-        Backend::Gpu(ctx) if !use_kernel_on(ctx) => engine.scores(hypotheses, weights),
-        Backend::Gpu(ctx) => match fast_scores_gpu(ctx, engine, hypotheses, weights) {
-            Ok(scores) => scores,
-            Err(e) => {
-                log::warn!("fast_scores on the GPU failed ({e}): scoring on the CPU");
-                engine.scores(hypotheses, weights)
-            }
-        },
-        Backend::Cpu => engine.scores(hypotheses, weights),
-    }
-}
-
-/// Whether [`fast_scores`] runs the kernel on `ctx` (see there).
+/// Whether [`crate::backend::Backend::fast_scores`] runs the kernel on `ctx` (see there).
 pub fn use_kernel_on(ctx: &GpuContext) -> bool {
     static SAID: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
     if ctx.info.device_type != wgpu::DeviceType::Cpu

@@ -292,7 +292,7 @@ pub fn hypotheses(scene: &LayoutScene) -> (Vec<voxels::YawCells>, Vec<RoomBox>) 
 pub fn predict(
     scene: &LayoutScene,
     model: &model::LayoutModel,
-    backend: crate::features::Backend,
+    backend: crate::backend::Backend,
 ) -> Result<PredictedLayout> {
     let (cells, boxes) = hypotheses(scene);
     if boxes.is_empty() {
@@ -300,8 +300,8 @@ pub fn predict(
     }
     let tables = voxels::ScoringTables::new(model.discretisation, &cells, &model.weights_f64());
     let scores = match backend {
-        crate::features::Backend::Cpu => voxels::scores_cpu(&cells, &tables, &boxes),
-        crate::features::Backend::Gpu(ctx) => crate::gpu::room_layout::scores_gpu(ctx, &cells, &tables, &boxes)?,
+        crate::backend::Backend::Cpu => voxels::scores_cpu(&cells, &tables, &boxes),
+        crate::backend::Backend::Gpu(ctx) => crate::gpu::room_layout::scores_gpu(ctx, &cells, &tables, &boxes)?,
     };
     let best = (0..boxes.len()).fold(0, |best, i| if scores[i] > scores[best] { i } else { best });
     let room_box = boxes[best];

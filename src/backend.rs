@@ -1,0 +1,71 @@
+//! The scoring backend: the one place that chooses, per scoring step, between the CPU implementations of
+//! [`crate::features`] and their GPU kernels in [`crate::gpu`]. It sits above both, so that `features`
+//! (definitions, CPU reference and fast path) never imports `gpu`, and `gpu` (kernels and their CPU
+//! twins) imports `features` only for the definitions it shares: data and imports flow one way,
+//! `features` → `gpu` → `backend` → `detect`, `room_layout` and the commands.
+
+use crate::error::Result;
+use crate::features::fast::FastEngine;
+use crate::features::{cpu, FeatureLayout, FeatureScene, Hypothesis};
+use crate::gpu::fast::{fast_scores_gpu, use_kernel_on};
+use crate::gpu::GpuContext;
+
+/// Which implementation scores.
+#[derive(Clone, Copy)]
+pub enum Backend<'a> {
+    Cpu,
+    Gpu(&'a GpuContext),
+}
+
+impl<'a> Backend<'a> {
+    /// The GPU when a context was acquired, else the CPU.
+    pub fn of(gpu: Option<&'a GpuContext>) -> Backend<'a> {
+        match gpu {
+            Some(ctx) => Backend::Gpu(ctx),
+            None => Backend::Cpu,
+        }
+    }
+
+    pub fn name(&self) -> &'static str {
+        match self {
+            Backend::Cpu => "cpu",
+            Backend::Gpu(_) => "gpu",
+        }
+    }
+
+    /// Exact-path fused scores (`hypotheses.len() × weights.len()`) and the point·voxel updates.
+    pub fn scores(
+        &self,
+        scene: &FeatureScene,
+        layout: &FeatureLayout,
+        hypotheses: &[Hypothesis],
+        weights: &[Vec<f32>],
+    ) -> Result<(Vec<f32>, u64)> {
+        match self {
+            Backend::Cpu => Ok(cpu::scores(scene, layout, hypotheses, weights)),
+            Backend::Gpu(ctx) => crate::gpu::features::scores_gpu(ctx, scene, layout, hypotheses, weights),
+        }
+    }
+
+    /// Fast-path scores: the GPU kernel with [`Backend::Gpu`], [`FastEngine::scores`] with
+    /// [`Backend::Cpu`]. A GPU failure (e.g. a table over the binding limit) is logged and the CPU path is
+    /// taken, so the caller always gets scores.
+    ///
+    /// On a software adapter (`DeviceType::Cpu`: lavapipe, llvmpipe, WARP) the kernel is ~15× slower than
+    /// the CPU path on the same cores (scattered table reads run lane by lane), so there the CPU path is
+    /// used unless the environment sets `COG_GPU_FAST_KERNEL=always` ([`use_kernel_on`]; said once, at
+    /// info level).
+    pub fn fast_scores(&self, engine: &FastEngine, hypotheses: &[Hypothesis], weights: &[Vec<f32>]) -> Vec<f32> {
+        match self {
+            Backend::Gpu(ctx) if !use_kernel_on(ctx) => engine.scores(hypotheses, weights),
+            Backend::Gpu(ctx) => match fast_scores_gpu(ctx, engine, hypotheses, weights) {
+                Ok(scores) => scores,
+                Err(e) => {
+                    log::warn!("fast_scores on the GPU failed ({e}): scoring on the CPU");
+                    engine.scores(hypotheses, weights)
+                }
+            },
+            Backend::Cpu => engine.scores(hypotheses, weights),
+        }
+    }
+}

@@ -1,0 +1,323 @@
+//! `cog-gpu bench --detect [FRAME|DIR ...]`: end-to-end detection time per frame, stage by stage, for the
+//! GPU and the CPU path side by side in one run.
+//!
+//! Per path (`gpu` when an adapter is found and `--cpu` is not given; `cpu` unless `--gpu`), after
+//! `--warmup` untimed detections of the first frame (pipelines, allocator, caches: the figures are the
+//! steady state of a long-running process), each frame is detected `--repeat` times, as `cog-gpu detect`
+//! does it, with every model of `--models` (the layout model and the cascade too when the directory holds
+//! them), timing each stage:
+//!
+//! | stage | what |
+//! |---|---|
+//! | `read_s` | reading the frame's files (`Frame::read`) |
+//! | `preprocess_s` | upright points, gradients, normals, floor (`Preprocessed::from_frame`) |
+//! | `yaw_grids_s`, `window_s`, `lattices_s`, `score_s`, `select_s`, `nms_s` | [`DetectStages`] |
+//! | `cascade_s` | the context cascade's rescoring (0 without `cascade.json`) |
+//! | `layout_s` | the room layout (0 without `layout.json`) |
+//! | `output_s` | the detections file's JSON text and the overlay drawn in memory (no PNG encoding, no disk) |
+//!
+//! `total_s` is the sum of the stages; `tables_thread_s` is the part of `score_s`'s work spent building the
+//! fast path's tables, summed over threads. On the GPU path the read-back is inside `score_s`. The two
+//! paths' detections are compared frame by frame (same categories and boxes, scores within a relative
+//! tolerance): the GPU path must not change what is detected.
+
+use std::path::Path;
+
+use anyhow::{bail, Context};
+use serde_json::json;
+
+use super::bench::Args;
+use super::detect::{cascade_for, frame_dirs, resolve_default, FrameReport};
+use super::GlobalOptions;
+use cog_gpu::backend::Backend;
+use cog_gpu::detect::{detect_preprocessed_timed, overlay, overlay_selection, DetectOptions, DetectStages, Stopwatch};
+use cog_gpu::eval::{Detection, FrameDetections};
+use cog_gpu::features::Preprocessed;
+use cog_gpu::frame::{DepthSource, Frame};
+use cog_gpu::gpu::fast::use_kernel_on;
+use cog_gpu::model::read_models_dir;
+
+/// Relative score difference (over max(|score|, 1)) within which two paths' detections count as the same.
+pub const SCORE_TOLERANCE: f32 = 1e-5;
+/// Centre, size and yaw difference within which two paths' boxes count as the same (metres, radians).
+pub const BOX_TOLERANCE: f32 = 1e-4;
+
+/// One frame's stage times on one path.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+struct FrameTimes {
+    frame: String,
+    read_s: f64,
+    preprocess_s: f64,
+    #[serde(flatten)]
+    stages: DetectStages,
+    cascade_s: f64,
+    layout_s: f64,
+    output_s: f64,
+    total_s: f64,
+    detections: usize,
+}
+
+pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
+    let frames_args = args.detect.clone().unwrap_or_default();
+    if options.force_cpu && (args.gpu || args.both) {
+        bail!("--cpu cannot be combined with --gpu or --both");
+    }
+    let frames = frame_dirs(&frames_args)?;
+    let models_dir =
+        if args.models == Path::new("assets/models") { resolve_default(&args.models) } else { args.models.clone() };
+    let mut models = read_models_dir(&models_dir, None)?;
+    if models.is_empty() {
+        bail!("{}: no detector models (<category>.json) to benchmark", models_dir.display());
+    }
+    if let Some(step) = args.detect_step {
+        for model in &mut models {
+            model.window.step = step;
+        }
+    }
+    let cascade = cascade_for(&models_dir, &models, false)?;
+    let layout_model = super::layout::model_in_dir(&models_dir)?;
+    let gpu = if options.force_cpu { None } else { cog_gpu::gpu::acquire(false) };
+    if args.gpu && gpu.is_none() {
+        bail!("--gpu: no GPU adapter (see the warning above)");
+    }
+    let mut backends = Vec::new();
+    if let Some(ctx) = &gpu {
+        backends.push(Backend::Gpu(ctx));
+    }
+    if !args.gpu {
+        backends.push(Backend::Cpu);
+    }
+    let detect_options = DetectOptions::default();
+    let bench = Bench { models: &models, cascade: cascade.as_ref(), layout_model: layout_model.as_ref() };
+    let mut paths = serde_json::Map::new();
+    let mut detections_per_path = Vec::new();
+    for backend in &backends {
+        let first = frames.first().context("no frames")?;
+        for _ in 0..args.warmup {
+            bench.frame(first, *backend, &detect_options)?;
+        }
+        let mut times = Vec::new();
+        let mut detections = Vec::new();
+        for dir in &frames {
+            for _ in 0..args.repeat {
+                let (frame_times, found) = bench.frame(dir, *backend, &detect_options)?;
+                times.push(frame_times);
+                detections.push(found);
+            }
+        }
+        let adapter = match backend {
+            Backend::Gpu(ctx) => ctx.adapter_summary(),
+            Backend::Cpu => format!("CPU, rayon, {} threads", rayon::current_num_threads()),
+        };
+        // On a software adapter the fast path stays on the CPU (backend::Backend::fast_scores).
+        let fast_kernel = match backend {
+            Backend::Gpu(ctx) => use_kernel_on(ctx),
+            Backend::Cpu => false,
+        };
+        paths.insert(
+            backend.name().into(),
+            json!({"adapter": adapter, "fast_kernel": fast_kernel, "mean": mean_times(&times), "frames": times}),
+        );
+        detections_per_path.push(detections);
+    }
+    let agreement = match detections_per_path.as_slice() {
+        [gpu_found, cpu_found] => Some(agreement(gpu_found, cpu_found)),
+        _ => None,
+    };
+    let report = json!({
+        "frames": frames.len(),
+        "repeat": args.repeat,
+        "warmup": args.warmup,
+        "models": models.iter().map(|m| m.category.as_str()).collect::<Vec<_>>(),
+        "steps": models.iter().map(|m| m.window.step).collect::<Vec<_>>(),
+        "layout_model": layout_model.is_some(),
+        "cascade": cascade.is_some(),
+        "paths": paths,
+        "gpu_vs_cpu": agreement,
+    });
+    if args.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        print_report(&report);
+    }
+    if let Some(agreement) = &agreement {
+        if agreement["same"] == json!(false) {
+            bail!("the GPU and CPU paths detected different boxes or scores: {agreement}");
+        }
+    }
+    Ok(())
+}
+
+/// What one benchmarked detection needs besides the frame.
+struct Bench<'a> {
+    models: &'a [cog_gpu::model::Model],
+    cascade: Option<&'a cog_gpu::cascade::Cascade>,
+    layout_model: Option<&'a cog_gpu::room_layout::model::LayoutModel>,
+}
+
+impl Bench<'_> {
+    /// Detects in the frame at `dir` as `cog-gpu detect` does, timing each stage.
+    fn frame(
+        &self,
+        dir: &Path,
+        backend: Backend,
+        detect_options: &DetectOptions,
+    ) -> anyhow::Result<(FrameTimes, Vec<Detection>)> {
+        let mut clock = Stopwatch::start();
+        let mut lap = || clock.lap();
+        let mut times = FrameTimes::default();
+        let frame = Frame::read(dir, DepthSource::Raw)?;
+        times.frame = frame.name.clone();
+        times.read_s = lap();
+        let pre = Preprocessed::from_frame(&frame).with_context(|| format!("preprocessing {}", dir.display()))?;
+        times.preprocess_s = lap();
+        let mut detections =
+            detect_preprocessed_timed(&frame.name, pre, self.models, backend, detect_options, &mut times.stages)
+                .with_context(|| format!("detecting in {}", dir.display()))?;
+        lap();
+        if let Some(cascade) = self.cascade {
+            cascade.rescore(&mut detections.detections)?;
+        }
+        times.cascade_s = lap();
+        let layout = match self.layout_model {
+            Some(model) => Some(super::layout::frame_layout(&frame, Some(model), backend)?),
+            None => None,
+        };
+        times.layout_s = lap();
+        let found = detections.detections.clone();
+        let report = FrameReport { detections, layout: layout.as_ref().map(|(_, record)| record.clone()) };
+        let text = serde_json::to_string_pretty(&report)?;
+        let best = FrameDetections {
+            frame: frame.name.clone(),
+            detections: overlay_selection(&report.detections.detections, 8),
+        };
+        let mut picture = overlay(&frame, &best);
+        if let Some((predicted, _)) = &layout {
+            let camera = cog_gpu::geometry::Camera::new(frame.intrinsics(), frame.rtilt());
+            cog_gpu::room_layout::output::draw_room(&mut picture, &camera, &predicted.room, 2);
+        }
+        std::hint::black_box((text, picture));
+        times.output_s = lap();
+        times.detections = found.len();
+        times.total_s = times.read_s
+            + times.preprocess_s
+            + times.stages.total_s()
+            + times.cascade_s
+            + times.layout_s
+            + times.output_s;
+        Ok((times, found))
+    }
+}
+
+/// The mean of every timing over the frames (and repeats).
+fn mean_times(times: &[FrameTimes]) -> serde_json::Value {
+    let n = times.len().max(1) as f64;
+    let mean = |f: &dyn Fn(&FrameTimes) -> f64| times.iter().map(f).sum::<f64>() / n;
+    json!({
+        "read_s": mean(&|t| t.read_s),
+        "preprocess_s": mean(&|t| t.preprocess_s),
+        "yaw_grids_s": mean(&|t| t.stages.yaw_grids_s),
+        "window_s": mean(&|t| t.stages.window_s),
+        "lattices_s": mean(&|t| t.stages.lattices_s),
+        "score_s": mean(&|t| t.stages.score_s),
+        "tables_thread_s": mean(&|t| t.stages.tables_thread_s),
+        "select_s": mean(&|t| t.stages.select_s),
+        "nms_s": mean(&|t| t.stages.nms_s),
+        "cascade_s": mean(&|t| t.cascade_s),
+        "layout_s": mean(&|t| t.layout_s),
+        "output_s": mean(&|t| t.output_s),
+        "total_s": mean(&|t| t.total_s),
+        "hypotheses": mean(&|t| t.stages.hypotheses as f64),
+        "hypotheses_per_s": times.iter().map(|t| t.stages.hypotheses as f64).sum::<f64>()
+            / times.iter().map(|t| t.stages.score_s).sum::<f64>().max(f64::MIN_POSITIVE),
+    })
+}
+
+/// Whether two paths detected the same boxes (same order, categories, boxes within [`BOX_TOLERANCE`],
+/// scores within [`SCORE_TOLERANCE`] relative), frame by frame.
+fn agreement(a: &[Vec<Detection>], b: &[Vec<Detection>]) -> serde_json::Value {
+    let mut max_score_difference = 0.0f32;
+    let mut different_frames = 0usize;
+    for (x, y) in a.iter().zip(b) {
+        let same_boxes = x.len() == y.len()
+            && x.iter().zip(y).all(|(p, q)| {
+                let close = |u: &[f32], v: &[f32]| u.iter().zip(v).all(|(s, t)| (s - t).abs() <= BOX_TOLERANCE);
+                p.category == q.category
+                    && close(&p.centre, &q.centre)
+                    && close(&p.size, &q.size)
+                    && close(&[p.yaw], &[q.yaw])
+            });
+        let difference =
+            x.iter().zip(y).map(|(p, q)| (p.score - q.score).abs() / p.score.abs().max(1.0)).fold(0.0f32, f32::max);
+        max_score_difference = max_score_difference.max(difference);
+        if !same_boxes || difference > SCORE_TOLERANCE {
+            different_frames += 1;
+        }
+    }
+    json!({
+        "frames_compared": a.len().min(b.len()),
+        "frames_different": different_frames,
+        "max_relative_score_difference": max_score_difference,
+        "same": different_frames == 0,
+    })
+}
+
+/// The text report: one row of mean stage seconds per path, and the GPU/CPU ratio.
+fn print_report(report: &serde_json::Value) {
+    println!(
+        "{} frame(s) × {} repeat(s) after {} warm-up detection(s); models: {}; layout model: {}; cascade: {}",
+        report["frames"],
+        report["repeat"],
+        report["warmup"],
+        report["models"]
+            .as_array()
+            .map(|m| m.iter().filter_map(|c| c.as_str()).collect::<Vec<_>>().join(","))
+            .unwrap_or_default(),
+        report["layout_model"],
+        report["cascade"]
+    );
+    let columns = [
+        "read_s",
+        "preprocess_s",
+        "yaw_grids_s",
+        "window_s",
+        "lattices_s",
+        "score_s",
+        "select_s",
+        "nms_s",
+        "cascade_s",
+        "layout_s",
+        "output_s",
+        "total_s",
+    ];
+    println!("mean seconds per frame:");
+    println!(
+        "{:>5} {}",
+        "path",
+        columns.iter().map(|c| format!(" {:>10}", c.trim_end_matches("_s"))).collect::<String>()
+    );
+    let paths = report["paths"].as_object().cloned().unwrap_or_default();
+    for (name, path) in &paths {
+        let values: String =
+            columns.iter().map(|c| format!(" {:>10.4}", path["mean"][c].as_f64().unwrap_or(f64::NAN))).collect();
+        println!("{name:>5} {values}");
+    }
+    for (name, path) in &paths {
+        println!(
+            "{name:>5}: {:.0} hypotheses/s in scoring; tables {:.3} thread-s per frame; fast kernel: {}  [{}]",
+            path["mean"]["hypotheses_per_s"].as_f64().unwrap_or(0.0),
+            path["mean"]["tables_thread_s"].as_f64().unwrap_or(0.0),
+            path["fast_kernel"],
+            path["adapter"].as_str().unwrap_or("?")
+        );
+    }
+    if let (Some(gpu), Some(cpu)) = (paths.get("gpu"), paths.get("cpu")) {
+        let ratio = |c: &str| cpu["mean"][c].as_f64().unwrap_or(f64::NAN) / gpu["mean"][c].as_f64().unwrap_or(f64::NAN);
+        println!(
+            "GPU speed-up (CPU time / GPU time): total {:.2}×, scoring {:.2}×",
+            ratio("total_s"),
+            ratio("score_s")
+        );
+        println!("gpu vs cpu detections: {}", report["gpu_vs_cpu"]);
+    }
+}
