@@ -157,3 +157,27 @@ fn switched_off_groups_stay_zero() {
         assert!(row.iter().any(|&v| v > 0.0));
     }
 }
+
+/// The eight-lane dot product of the fast path: exact on small integers (every partial sum representable),
+/// within float rounding of an f64 dot product otherwise, for every length around the lane count.
+#[test]
+fn lane_dot_products_equal_the_plain_dot_product() {
+    use cog_gpu::features::fast::dot_lanes;
+    let mut state = 12345u64;
+    let mut next = || {
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (state >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+    };
+    for len in 0..=41 {
+        let a: Vec<f32> = (0..len).map(|_| (next() * 8.0).round()).collect();
+        let b: Vec<f32> = (0..len).map(|_| (next() * 8.0).round()).collect();
+        let exact: f32 = a.iter().zip(&b).map(|(x, y)| x * y).sum();
+        assert_eq!(dot_lanes(&a, &b), exact, "integers, length {len}");
+        let a: Vec<f32> = (0..len).map(|_| next()).collect();
+        let b: Vec<f32> = (0..len).map(|_| next() * 100.0).collect();
+        let reference: f64 = a.iter().zip(&b).map(|(x, y)| *x as f64 * *y as f64).sum();
+        let magnitude: f64 = a.iter().zip(&b).map(|(x, y)| (*x as f64 * *y as f64).abs()).sum();
+        let got = dot_lanes(&a, &b) as f64;
+        assert!((got - reference).abs() <= 1e-6 * magnitude.max(1e-30), "length {len}: {got} vs {reference}");
+    }
+}
