@@ -16,8 +16,25 @@
 //! ψ_i = [p_i, p_i²] ++ for each k: [p_j, p_j·S1, p_j·S2, p_j·S3, p_i·p_j]     (zeros when no j)
 //! ```
 //!
-//! so `dim = 2 + 5·K` ([`feature_dim`]). The layout features of the paper (distance and angle to the
-//! nearest wall) wait for a room layout; the file format's `features` name says which set a cascade uses.
+//! then the room layout's part (the paper's "distance `D` and angle `A` of cuboid `B_i` to the closest
+//! wall", `A` linear and `D` through a radial basis expansion, each also times `p_i` as the quadratic
+//! function the paper names):
+//!
+//! ```text
+//!   ++ [no_room, A, p_i·A, r_1(D) … r_5(D), p_i·r_1(D) … p_i·r_5(D)]
+//! ```
+//!
+//! so `dim = 2 + 5·K + 13` ([`feature_dim`]). The room is the frame's predicted layout (its floor polygon,
+//! written by `detect` under `"layout"` when the models directory has a layout model; [`read_room`]).
+//! `D` ([`wall_context`]) is the smallest distance from a corner of the cuboid's footprint to a wall
+//! segment of the polygon, negative when the cuboid's centre lies outside the polygon; the closest wall
+//! is the segment that gives it. `A` is the angle between the cuboid's width axis and that wall, folded
+//! modulo 90° into [0°, 45°] and divided by 45°. `r_m(D) = exp(−(D − c_m)² / (2σ_m²))` with centres
+//! `c = 0, 0.25, 0.5, 1, 2` m and widths `σ = 0.15, 0.15, 0.25, 0.5, 1` m ([`RBF_CENTRES`],
+//! [`RBF_WIDTHS`]): furniture stands against a wall (nightstands, beds, dressers, bookshelves, toilets),
+//! a little off it (chairs at desks) or in the open (tables, sofas facing a TV), and pieces of other
+//! objects do not keep those distances. Without a room (`no_room` = 1) the rest of the part is zero.
+//! The file format's `features` name says which set a cascade uses ([`FEATURES`]).
 //!
 //! # Learning (paper §6.2)
 //! Per category, a linear SVM ([`crate::learn::binary_svm`]; the paper's RBF kernel is "only slightly"
@@ -47,25 +64,94 @@ use crate::calibration::{fit_logistic, Calibration};
 use crate::error::{Error, Result};
 use crate::eval::{average_precision, true_positives_in_input_order, Detection, ScoredBox};
 use crate::frame::Object;
-use crate::geometry::{intersection_volume, Cuboid};
+use crate::geometry::{intersection_volume, polygon_contains, Cuboid};
 use crate::learn::binary_svm::{balanced_costs, train_linear_svm, LinearSvm};
+use glam::Vec2;
 
 /// The `format` field of a cascade file.
 pub const FORMAT: &str = "cog-gpu-cascade";
 /// The file format's version.
 pub const VERSION: u32 = 1;
 /// Name of the feature set of the module doc (stored in the file; a file with another is refused).
-pub const FEATURES: &str = "object-overlap-v1";
+pub const FEATURES: &str = "object-overlap-layout-v2";
 /// The cascade's file name inside a models directory (next to `<category>.json`).
 pub const FILE_NAME: &str = "cascade.json";
 /// Values of the SVM's `C` tried by cross-validation.
 pub const C_GRID: [f64; 4] = [0.01, 0.1, 1.0, 10.0];
 /// Features per context category.
 const PER_CATEGORY: usize = 5;
+/// Centres of the radial basis expansion of the wall distance `D` (metres; module doc).
+pub const RBF_CENTRES: [f64; 5] = [0.0, 0.25, 0.5, 1.0, 2.0];
+/// Widths σ of the radial basis functions (metres).
+pub const RBF_WIDTHS: [f64; 5] = [0.15, 0.15, 0.25, 0.5, 1.0];
+/// Length of the room layout's part of ψ: `no_room`, `A`, `p_i·A`, 5 `r(D)`, 5 `p_i·r(D)`.
+pub const LAYOUT_FEATURES: usize = 3 + 2 * RBF_CENTRES.len();
 
 /// Length of ψ for `context_categories` categories.
 pub fn feature_dim(context_categories: usize) -> usize {
-    2 + PER_CATEGORY * context_categories
+    2 + PER_CATEGORY * context_categories + LAYOUT_FEATURES
+}
+
+/// One frame of a cascade's training set: its annotated objects, its first-stage detections and its
+/// predicted room (floor polygon, upright x-y), when the detections file has one.
+#[derive(Clone, Debug)]
+pub struct CascadeFrame {
+    pub truth: Vec<Object>,
+    pub detections: Vec<Detection>,
+    pub room: Option<Vec<Vec2>>,
+}
+
+/// The room's floor polygon that `detect` writes into a detections file under `"layout"` (the
+/// `corners` of `room_layout::output::LayoutRecord`), or `None` when the file has no room.
+pub fn read_room(path: &Path) -> Result<Option<Vec<Vec2>>> {
+    #[derive(Deserialize)]
+    struct File {
+        layout: Option<Layout>,
+    }
+    #[derive(Deserialize)]
+    struct Layout {
+        corners: Vec<[f32; 2]>,
+    }
+    let text = crate::frame::read_text(path)?;
+    let file: File = serde_json::from_str(&text).map_err(|e| Error::invalid(path, e.to_string()))?;
+    let Some(layout) = file.layout else { return Ok(None) };
+    if layout.corners.len() < 3 || layout.corners.iter().flatten().any(|v| !v.is_finite()) {
+        return Err(Error::invalid(path, "the layout's corners are not a polygon of finite points".to_string()));
+    }
+    Ok(Some(layout.corners.into_iter().map(Vec2::from).collect()))
+}
+
+/// `(D, A)` of the module doc: the signed distance (metres) from `cuboid`'s footprint to the closest wall
+/// segment of `room`, and its angle to that wall folded into [0, 1] (1 = 45°). `None` when the polygon has
+/// no segment of positive length.
+pub fn wall_context(cuboid: &Cuboid, room: &[Vec2]) -> Option<(f64, f64)> {
+    let footprint: Vec<Vec2> = cuboid.corners()[..4].iter().map(|c| c.truncate()).collect();
+    let mut closest: Option<(f32, Vec2)> = None;
+    for (n, &a) in room.iter().enumerate() {
+        let b = room[(n + 1) % room.len()];
+        let along = b - a;
+        let length_sq = along.length_squared();
+        if length_sq <= 0.0 || !length_sq.is_finite() {
+            continue;
+        }
+        for &p in &footprint {
+            let t = ((p - a).dot(along) / length_sq).clamp(0.0, 1.0);
+            let distance = (p - (a + along * t)).length();
+            if closest.is_none_or(|(d, _)| distance < d) {
+                closest = Some((distance, along));
+            }
+        }
+    }
+    let (distance, wall) = closest?;
+    let inside = polygon_contains(room, cuboid.centre.truncate());
+    let d = if inside { f64::from(distance) } else { -f64::from(distance) };
+    let width_axis = Vec2::new(cuboid.yaw.cos(), cuboid.yaw.sin());
+    let wall = wall.normalize();
+    // The angle between the two directions, folded modulo 90° into [0°, 45°].
+    let angle = width_axis.perp_dot(wall).atan2(width_axis.dot(wall)).abs() as f64;
+    let folded = angle % std::f64::consts::FRAC_PI_2;
+    let folded = folded.min(std::f64::consts::FRAC_PI_2 - folded);
+    Some((d, folded / std::f64::consts::FRAC_PI_4))
 }
 
 /// One category's second stage.
@@ -142,11 +228,12 @@ impl Cascade {
         Ok(())
     }
 
-    /// Rescores one frame's first-stage detections (module doc), then sorts them by score, best first
-    /// (stable). Detections must be the first stage's, calibrated (`raw_score` present) and not rescored.
-    pub fn rescore(&self, detections: &mut [Detection]) -> Result<()> {
+    /// Rescores one frame's first-stage detections (module doc) in the frame's predicted `room` (floor
+    /// polygon; `None` without a layout), then sorts them by score, best first (stable). Detections must
+    /// be the first stage's, calibrated (`raw_score` present) and not rescored.
+    pub fn rescore(&self, detections: &mut [Detection], room: Option<&[Vec2]>) -> Result<()> {
         check_first_stage(detections)?;
-        let features = frame_context_features(detections, &self.categories);
+        let features = frame_context_features(detections, &self.categories, room);
         let rescored: Vec<Option<(f32, f32)>> = (0..detections.len())
             .map(|i| {
                 let stage = self.stages.get(&detections[i].category)?;
@@ -191,15 +278,21 @@ fn check_first_stage(detections: &[Detection]) -> Result<()> {
     Ok(())
 }
 
-/// ψ of every detection of one frame's first-stage `detections` (module doc), in their order; `p` is each
-/// detection's `score` (the first stage's calibrated probability).
-pub fn frame_context_features(detections: &[Detection], categories: &[String]) -> Vec<Vec<f64>> {
+/// ψ of every detection of one frame's first-stage `detections` (module doc), in their order, in the
+/// frame's predicted `room`; `p` is each detection's `score` (the first stage's calibrated probability).
+pub fn frame_context_features(detections: &[Detection], categories: &[String], room: Option<&[Vec2]>) -> Vec<Vec<f64>> {
     let boxes: Vec<Cuboid> = detections.iter().map(Detection::cuboid).collect();
-    (0..detections.len()).map(|i| context_features(detections, &boxes, i, categories)).collect()
+    (0..detections.len()).map(|i| context_features(detections, &boxes, i, categories, room)).collect()
 }
 
 /// ψ of detection `i`; `boxes` are the detections' cuboids.
-fn context_features(detections: &[Detection], boxes: &[Cuboid], i: usize, categories: &[String]) -> Vec<f64> {
+fn context_features(
+    detections: &[Detection],
+    boxes: &[Cuboid],
+    i: usize,
+    categories: &[String],
+    room: Option<&[Vec2]>,
+) -> Vec<f64> {
     let own = boxes[i];
     let p_i = f64::from(detections[i].score);
     let mut psi = vec![0.0; feature_dim(categories.len())];
@@ -227,6 +320,19 @@ fn context_features(detections: &[Detection], boxes: &[Cuboid], i: usize, catego
         psi[base + 3] = if union > 0.0 { p_j * overlap / union } else { 0.0 };
         psi[base + 4] = p_i * p_j;
     }
+    let layout = 2 + PER_CATEGORY * categories.len();
+    match room.and_then(|room| wall_context(&own, room)) {
+        None => psi[layout] = 1.0,
+        Some((d, a)) => {
+            psi[layout + 1] = a;
+            psi[layout + 2] = p_i * a;
+            for (m, (c, sigma)) in RBF_CENTRES.iter().zip(RBF_WIDTHS).enumerate() {
+                let r = (-(d - c) * (d - c) / (2.0 * sigma * sigma)).exp();
+                psi[layout + 3 + m] = r;
+                psi[layout + 3 + RBF_CENTRES.len() + m] = p_i * r;
+            }
+        }
+    }
     psi
 }
 
@@ -243,17 +349,13 @@ struct Samples {
 }
 
 /// The samples of `category` (labels as the benchmark matches the first-stage scores).
-fn samples_of(
-    frames: &[(Vec<Object>, Vec<Detection>)],
-    category: &str,
-    categories: &[String],
-    iou_threshold: f32,
-) -> Samples {
+fn samples_of(frames: &[CascadeFrame], category: &str, categories: &[String], iou_threshold: f32) -> Samples {
     let mut s = Samples { psi: vec![], raw: vec![], labels: vec![], frame: vec![], cuboids: vec![], truth: vec![] };
     let mut boxes = Vec::new();
-    for (f, (objects, detections)) in frames.iter().enumerate() {
-        s.truth.push(objects.iter().filter(|o| o.category == category).map(|o| o.cuboid).collect());
-        let features = frame_context_features(detections, categories);
+    for (f, frame) in frames.iter().enumerate() {
+        s.truth.push(frame.truth.iter().filter(|o| o.category == category).map(|o| o.cuboid).collect());
+        let detections = &frame.detections;
+        let features = frame_context_features(detections, categories, frame.room.as_deref());
         for (i, d) in detections.iter().enumerate().filter(|(_, d)| d.category == category) {
             s.psi.push(features[i].clone());
             s.raw.push(d.raw_score.unwrap_or(d.score));
@@ -312,13 +414,13 @@ pub type StageResult = std::result::Result<SecondStage, String>;
 /// context does not raise gets no stage (the reason is returned): its detections keep their first-stage
 /// scores.
 pub fn train_cascade(
-    frames: &[(Vec<Object>, Vec<Detection>)],
+    frames: &[CascadeFrame],
     categories: &[String],
     iou_threshold: f32,
     training: CascadeTraining,
 ) -> Result<(Cascade, BTreeMap<String, StageResult>)> {
-    for (_, detections) in frames {
-        check_first_stage(detections)?;
+    for frame in frames {
+        check_first_stage(&frame.detections)?;
     }
     let results: Vec<(String, StageResult)> = categories
         .par_iter()
@@ -337,12 +439,7 @@ pub fn train_cascade(
 }
 
 /// One category's stage (module doc): C by cross-validation, then the SVM and calibration on all frames.
-fn train_stage(
-    frames: &[(Vec<Object>, Vec<Detection>)],
-    category: &str,
-    categories: &[String],
-    iou_threshold: f32,
-) -> StageResult {
+fn train_stage(frames: &[CascadeFrame], category: &str, categories: &[String], iou_threshold: f32) -> StageResult {
     let s = samples_of(frames, category, categories, iou_threshold);
     let positives = s.labels.iter().filter(|&&y| y).count();
     if positives == 0 || positives == s.labels.len() {

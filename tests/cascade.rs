@@ -6,12 +6,15 @@ use std::process::Command;
 
 mod common;
 
-use cog_gpu::cascade::{feature_dim, frame_context_features, train_cascade, Cascade, CascadeTraining};
+use cog_gpu::cascade::{
+    feature_dim, frame_context_features, train_cascade, wall_context, Cascade, CascadeFrame, CascadeTraining,
+    LAYOUT_FEATURES, RBF_CENTRES, RBF_WIDTHS,
+};
 use cog_gpu::eval::{average_precision, Detection, FrameDetections, ScoredBox};
 use cog_gpu::frame::Object;
 use cog_gpu::geometry::Cuboid;
 use cog_gpu::learn::binary_svm::{balanced_costs, train_linear_svm};
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 
 #[test]
 fn hard_margin_svm_is_the_perpendicular_bisector() {
@@ -71,7 +74,7 @@ fn context_features_match_a_hand_computation() {
         detection("chair", [0.0, 6.0, 0.5], [0.5, 0.5, 1.0], 0.7, 0.0),
     ];
     let categories = names(&["bed", "chair", "table"]);
-    let psi = &frame_context_features(&detections, &categories)[0];
+    let psi = &frame_context_features(&detections, &categories, None)[0];
     assert_eq!(psi.len(), feature_dim(3));
     // S1 = O/V_i = 1, S2 = O/V_j = 0.5, S3 = O/U = 1/(1 + 2 − 1) = 0.5.
     let expected = [
@@ -79,7 +82,9 @@ fn context_features_match_a_hand_computation() {
         0.8, 0.8, 0.4, 0.4, 0.4, // bed: p_j, p_j·S1, p_j·S2, p_j·S3, p_i·p_j
         0.0, 0.0, 0.0, 0.0, 0.0, // chair
         0.0, 0.0, 0.0, 0.0, 0.0, // table: no other table
+        1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, // no room
     ];
+    assert_eq!(expected.len(), psi.len());
     for (k, (got, want)) in psi.iter().zip(expected).enumerate() {
         assert!((got - want).abs() < 1e-6, "ψ[{k}] = {got}, expected {want}");
     }
@@ -87,7 +92,7 @@ fn context_features_match_a_hand_computation() {
 
 /// Frame `f` of a constructed set: a bed and a table (ground truth); the first stage finds the bed
 /// (p 0.9) and two tables: the real one, and a "piece" of the bed that the table model scores higher.
-fn frame(f: usize) -> (Vec<Object>, Vec<Detection>) {
+fn frame(f: usize) -> CascadeFrame {
     let object = |category: &str, centre: [f32; 3], size: [f32; 3]| Object {
         category: category.into(),
         label: None,
@@ -104,15 +109,15 @@ fn frame(f: usize) -> (Vec<Object>, Vec<Detection>) {
         detection("table", [0.2, 2.0, 0.6], [1.0, 0.6, 0.8], sigmoid(raw_false), raw_false),
         detection("table", table.0, table.1, sigmoid(raw_true), raw_true),
     ];
-    (truth, detections)
+    CascadeFrame { truth, detections, room: None }
 }
 
-fn table_ap(frames: &[(Vec<Object>, Vec<Detection>)]) -> f32 {
+fn category_ap(frames: &[CascadeFrame], category: &str) -> f32 {
     let boxes: Vec<ScoredBox> = frames
         .iter()
         .enumerate()
-        .flat_map(|(image, (_, dets))| {
-            dets.iter().filter(|d| d.category == "table").map(move |d| ScoredBox {
+        .flat_map(|(image, frame)| {
+            frame.detections.iter().filter(move |d| d.category == category).map(move |d| ScoredBox {
                 image,
                 score: d.score,
                 cuboid: d.cuboid(),
@@ -121,9 +126,13 @@ fn table_ap(frames: &[(Vec<Object>, Vec<Detection>)]) -> f32 {
         .collect();
     let truth: Vec<Vec<Cuboid>> = frames
         .iter()
-        .map(|(objects, _)| objects.iter().filter(|o| o.category == "table").map(|o| o.cuboid).collect())
+        .map(|frame| frame.truth.iter().filter(|o| o.category == category).map(|o| o.cuboid).collect())
         .collect();
     average_precision(&boxes, &truth, 0.25).ap.unwrap()
+}
+
+fn table_ap(frames: &[CascadeFrame]) -> f32 {
+    category_ap(frames, "table")
 }
 
 #[test]
@@ -141,27 +150,27 @@ fn the_cascade_learns_that_a_table_on_a_bed_is_a_piece_of_the_bed() {
     let mut test: Vec<_> = (100..140).map(frame).collect();
     let before = table_ap(&test);
     assert!(before < 0.8, "first-stage AP {before}");
-    for (_, detections) in &mut test {
-        cascade.rescore(detections).unwrap();
+    for CascadeFrame { detections, .. } in &mut test {
+        cascade.rescore(detections, None).unwrap();
         assert!(detections.windows(2).all(|w| w[0].score >= w[1].score), "sorted by score");
         let bed = detections.iter().find(|d| d.category == "bed").unwrap();
         assert_eq!((bed.score, bed.context_score), (0.9, None), "a category without a stage is unchanged");
     }
     assert!((table_ap(&test) - 1.0).abs() < 1e-6, "cascade AP {}", table_ap(&test));
-    assert!(test[0].1.iter().filter(|d| d.category == "table").all(|d| d.first_stage_score.is_some()));
+    assert!(test[0].detections.iter().filter(|d| d.category == "table").all(|d| d.first_stage_score.is_some()));
 
     // The rescoring reads only the first-stage list: any input order gives the same scores.
-    let (_, mut forward) = frame(7);
-    let (_, mut reversed) = frame(7);
+    let mut forward = frame(7).detections;
+    let mut reversed = frame(7).detections;
     reversed.reverse();
-    cascade.rescore(&mut forward).unwrap();
-    cascade.rescore(&mut reversed).unwrap();
+    cascade.rescore(&mut forward, None).unwrap();
+    cascade.rescore(&mut reversed, None).unwrap();
     let by_box = |dets: &[Detection]| -> BTreeMap<String, f32> {
         dets.iter().map(|d| (format!("{} {:?}", d.category, d.centre), d.score)).collect()
     };
     assert_eq!(by_box(&forward), by_box(&reversed));
     // Rescored detections are not first-stage input any more.
-    let err = cascade.rescore(&mut forward).unwrap_err().to_string();
+    let err = cascade.rescore(&mut forward, None).unwrap_err().to_string();
     assert!(err.contains("already rescored"), "{err}");
 }
 
@@ -182,7 +191,7 @@ fn cascade_files_round_trip_and_are_checked() {
     assert!(err.contains("cascade.json") && err.contains("weights"), "{err}");
     // Uncalibrated detections (no raw score) are refused.
     let mut raw_only = vec![Detection::new("table", &Cuboid::new(Vec3::ZERO, Vec3::ONE, 0.0), 0.3)];
-    assert!(cascade.rescore(&mut raw_only).unwrap_err().to_string().contains("calibrated"));
+    assert!(cascade.rescore(&mut raw_only, None).unwrap_err().to_string().contains("calibrated"));
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
@@ -192,7 +201,7 @@ fn cli_trains_a_cascade_and_rescores_files() {
     let (data, first, rescored) = (tmp.path().join("data"), tmp.path().join("first"), tmp.path().join("rescored"));
     std::fs::create_dir_all(&first).unwrap();
     for f in 0..30 {
-        let (objects, detections) = frame(f);
+        let CascadeFrame { truth: objects, detections, .. } = frame(f);
         let name = format!("f{f:02}");
         common::write_tiny_frame(&data, &name, objects);
         FrameDetections { frame: name.clone(), detections }.write(&first.join(format!("{name}.json"))).unwrap();
@@ -232,6 +241,12 @@ fn cli_trains_a_cascade_and_rescores_files() {
     let read = cog_gpu::model::read_models_dir(&dir, None).unwrap();
     assert_eq!(read.iter().map(|m| m.category.as_str()).collect::<Vec<_>>(), ["bed"]);
 
+    // f03 carries a room, as `detect` writes it with a layout model: rescoring keeps it.
+    let f03 = first.join("f03.json");
+    let mut with_room: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&f03).unwrap()).unwrap();
+    let layout = serde_json::json!({"method": "manhattan", "corners": [[-2, -1], [6, -1], [6, 4], [-2, 4]]});
+    with_room["layout"] = layout.clone();
+    std::fs::write(&f03, with_room.to_string()).unwrap();
     let out = run(&[
         "rescore",
         "--detections",
@@ -243,6 +258,9 @@ fn cli_trains_a_cascade_and_rescores_files() {
     ]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let file = FrameDetections::read(&rescored.join("f03.json")).unwrap();
+    let kept: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(rescored.join("f03.json")).unwrap()).unwrap();
+    assert_eq!(kept["layout"], layout);
     let tables: Vec<&Detection> = file.detections.iter().filter(|d| d.category == "table").collect();
     assert_eq!(tables.len(), 2);
     assert!(tables.iter().all(|d| d.context_score.is_some() && d.first_stage_score.is_some()));
@@ -255,4 +273,121 @@ fn cli_trains_a_cascade_and_rescores_files() {
     let out = train(&rescored);
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("already rescored"));
+}
+
+/// The wall distance and angle of the layout features by hand, in a 4 m × 3 m room with corners at the
+/// origin and (4, 3).
+#[test]
+fn wall_distance_and_angle_match_a_hand_computation() {
+    let room = [Vec2::new(0.0, 0.0), Vec2::new(4.0, 0.0), Vec2::new(4.0, 3.0), Vec2::new(0.0, 3.0)];
+    let cuboid = |x: f32, y: f32, yaw_deg: f32| {
+        Cuboid::new(Vec3::new(x, y, 0.4), Vec3::new(1.0, 0.6, 0.8), yaw_deg.to_radians())
+    };
+    // Footprint x 0.7..1.7, y 0.5..1.1: the wall y = 0 is 0.5 m away (x = 0 is 0.7 m), parallel: A = 0.
+    let (d, a) = wall_context(&cuboid(1.2, 0.8, 0.0), &room).unwrap();
+    assert!((d - 0.5).abs() < 1e-6 && a.abs() < 1e-6, "{d} {a}");
+    // Turned by 90°: footprint x 0.9..1.5, y 0.3..1.3; the wall y = 0 at 0.3 m, still parallel modulo 90°.
+    let (d, a) = wall_context(&cuboid(1.2, 0.8, 90.0), &room).unwrap();
+    assert!((d - 0.3).abs() < 1e-5 && a.abs() < 1e-5, "{d} {a}");
+    // Turned by 30° near the wall x = 4: the lowest corner decides; 30° folds to 30/45.
+    let c = cuboid(3.0, 1.5, 30.0);
+    let nearest = c.corners()[..4].iter().map(|p| 4.0 - p.x).fold(f32::INFINITY, f32::min);
+    let (d, a) = wall_context(&c, &room).unwrap();
+    assert!((d - nearest as f64).abs() < 1e-5, "{d} vs {nearest}");
+    assert!((a - 30.0 / 45.0).abs() < 1e-5, "{a}");
+    // 60° folds to 30° as well (modulo 90°, then the smaller side).
+    let (_, a) = wall_context(&cuboid(2.0, 1.5, 60.0), &room).unwrap();
+    assert!((a - 30.0 / 45.0).abs() < 1e-5, "{a}");
+    // Centre outside the room: negative distance. A degenerate polygon: no wall.
+    let (d, _) = wall_context(&cuboid(5.0, 1.5, 0.0), &room).unwrap();
+    assert!((d + 0.5).abs() < 1e-6, "{d}");
+    assert!(wall_context(&cuboid(1.0, 1.0, 0.0), &[Vec2::ZERO, Vec2::ZERO, Vec2::ZERO]).is_none());
+}
+
+/// The layout part of ψ in a room: `no_room` 0, `A`, `p·A`, the radial basis values of `D` and their
+/// products with `p`, computed here from the definition.
+#[test]
+fn layout_features_follow_their_definition() {
+    let room = [Vec2::new(0.0, 0.0), Vec2::new(4.0, 0.0), Vec2::new(4.0, 3.0), Vec2::new(0.0, 3.0)];
+    // Footprint x 0.7..1.7, y 0.5..1.1 (D = 0.5 m to the wall y = 0), width axis along x (A = 0).
+    let detections = vec![detection("nightstand", [1.2, 0.8, 0.4], [1.0, 0.6, 0.8], 0.4, 0.0)];
+    let categories = names(&["nightstand"]);
+    let psi = &frame_context_features(&detections, &categories, Some(&room))[0];
+    let layout = &psi[psi.len() - LAYOUT_FEATURES..];
+    assert_eq!(&layout[..3], &[0.0, 0.0, 0.0]);
+    for (m, (c, sigma)) in RBF_CENTRES.iter().zip(RBF_WIDTHS).enumerate() {
+        let r = (-(0.5 - c) * (0.5 - c) / (2.0 * sigma * sigma)).exp();
+        assert!((layout[3 + m] - r).abs() < 1e-6, "r_{m}: {} vs {r}", layout[3 + m]);
+        assert!((layout[3 + RBF_CENTRES.len() + m] - 0.4 * r).abs() < 1e-6);
+    }
+    // The centre's basis function (c = 0.5 m) is the largest.
+    assert!((layout[5] - 1.0).abs() < 1e-6);
+}
+
+/// A constructed set where only the room tells true from false: true nightstands stand against a wall,
+/// false ones (scored higher by the first stage) stand in the middle of the room. With the room the cascade
+/// ranks every true nightstand first on held-out frames; without rooms it cannot.
+#[test]
+fn the_cascade_learns_that_nightstands_stand_against_walls() {
+    let room = vec![Vec2::new(0.0, 0.0), Vec2::new(5.0, 0.0), Vec2::new(5.0, 4.0), Vec2::new(0.0, 4.0)];
+    let make = |f: usize, with_room: bool| {
+        let size = [0.5, 0.4, 0.6];
+        let wall = ([0.3 + 0.1 * (f % 7) as f32, 0.25, 0.3], size);
+        let middle = ([2.5, 2.0 + 0.1 * (f % 5) as f32, 0.3], size);
+        // Overlapping first-stage scores, the false ones higher on average: no function of the score alone
+        // separates them.
+        let (raw_false, raw_true) = (1.0 + 0.5 * (f as f32 * 1.3).sin(), 0.8 + 0.5 * (f as f32 * 2.1).cos());
+        let sigmoid = |s: f32| 1.0 / (1.0 + (-s).exp());
+        let truth = vec![Object {
+            category: "nightstand".into(),
+            label: None,
+            cuboid: Cuboid::new(Vec3::from(wall.0), Vec3::from(wall.1), 0.0),
+        }];
+        let detections = vec![
+            detection("nightstand", middle.0, middle.1, sigmoid(raw_false), raw_false),
+            detection("nightstand", wall.0, wall.1, sigmoid(raw_true), raw_true),
+        ];
+        CascadeFrame { truth, detections, room: with_room.then(|| room.clone()) }
+    };
+    let categories = names(&["nightstand"]);
+    let training: Vec<_> = (0..40).map(|f| make(f, true)).collect();
+    let (cascade, results) = train_cascade(&training, &categories, 0.25, CascadeTraining::default()).unwrap();
+    let stage = results["nightstand"].as_ref().unwrap();
+    assert!(stage.cv_ap_cascade > stage.cv_ap_first_stage + 0.1, "{stage:?}");
+    let mut test: Vec<_> = (100..140).map(|f| make(f, true)).collect();
+    let before = category_ap(&test, "nightstand");
+    assert!(before < 0.8, "first-stage AP {before}");
+    for frame in &mut test {
+        let room = frame.room.clone();
+        cascade.rescore(&mut frame.detections, room.as_deref()).unwrap();
+    }
+    assert!((category_ap(&test, "nightstand") - 1.0).abs() < 1e-6, "{}", category_ap(&test, "nightstand"));
+    // Trained and applied without rooms, the context has nothing to go on: far from separated.
+    let roomless: Vec<_> = (0..40).map(|f| make(f, false)).collect();
+    let (blind, _) = train_cascade(&roomless, &categories, 0.25, CascadeTraining::default()).unwrap();
+    let mut test: Vec<_> = (100..140).map(|f| make(f, false)).collect();
+    for frame in &mut test {
+        blind.rescore(&mut frame.detections, None).unwrap();
+    }
+    assert!(category_ap(&test, "nightstand") < 0.9, "{}", category_ap(&test, "nightstand"));
+}
+
+/// The room a detections file carries: read from `"layout"."corners"` as `detect` writes it, absent without
+/// a layout, and a clear error naming the file for corners that are no polygon.
+#[test]
+fn rooms_are_read_from_detections_files() {
+    use cog_gpu::cascade::read_room;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("f.json");
+    let write = |layout: &str| {
+        std::fs::write(&path, format!("{{\"frame\": \"f\", \"detections\": []{layout}}}")).unwrap();
+    };
+    write(", \"layout\": {\"method\": \"manhattan\", \"corners\": [[0, 0], [4, 0], [4, 3], [0, 3]], \"floor\": 0}");
+    let room = read_room(&path).unwrap().unwrap();
+    assert_eq!(room, vec![Vec2::new(0.0, 0.0), Vec2::new(4.0, 0.0), Vec2::new(4.0, 3.0), Vec2::new(0.0, 3.0)]);
+    write("");
+    assert_eq!(read_room(&path).unwrap(), None);
+    write(", \"layout\": {\"corners\": [[0, 0], [4, 0]]}");
+    let err = read_room(&path).unwrap_err().to_string();
+    assert!(err.contains("f.json") && err.contains("polygon"), "{err}");
 }

@@ -175,15 +175,16 @@ impl Bench<'_> {
             detect_preprocessed_timed(&frame.name, pre, self.models, backend, detect_options, &mut times.stages)
                 .with_context(|| format!("detecting in {}", dir.display()))?;
         lap();
-        if let Some(cascade) = self.cascade {
-            cascade.rescore(&mut detections.detections)?;
-        }
-        times.cascade_s = lap();
         let layout = match self.layout_model {
             Some(model) => Some(super::layout::frame_layout(&frame, Some(model), backend)?),
             None => None,
         };
         times.layout_s = lap();
+        if let Some(cascade) = self.cascade {
+            let room = layout.as_ref().map(|(predicted, _)| predicted.room.corners.as_slice());
+            cascade.rescore(&mut detections.detections, room)?;
+        }
+        times.cascade_s = lap();
         let found = detections.detections.clone();
         let report = FrameReport { detections, layout: layout.as_ref().map(|(_, record)| record.clone()) };
         let text = serde_json::to_string_pretty(&report)?;

@@ -64,7 +64,7 @@ impl HeldOutArgs {
 pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     let held_out = &args.held_out;
     let mut models = held_out.models()?;
-    let LabelledDetections { frames, truth, detections } =
+    let LabelledDetections { frames, truth, detections, .. } =
         read_labelled_detections(&held_out.data, &held_out.detections)?;
     let out_dir = args.out.clone().unwrap_or_else(|| held_out.models.clone());
     std::fs::create_dir_all(&out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
@@ -132,6 +132,7 @@ pub fn read_labelled_detections(
     }
     let mut truth = Vec::new();
     let mut detections: Vec<Vec<Detection>> = Vec::new();
+    let mut rooms = Vec::new();
     let mut missing = 0;
     for dir in &dataset.frames {
         let name = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
@@ -139,9 +140,11 @@ pub fn read_labelled_detections(
         let path = detections_dir.join(format!("{name}.json"));
         if path.is_file() {
             detections.push(FrameDetections::read(&path)?.detections);
+            rooms.push(cog_gpu::cascade::read_room(&path)?);
         } else {
             missing += 1;
             detections.push(Vec::new());
+            rooms.push(None);
         }
     }
     if missing == dataset.len() {
@@ -158,12 +161,14 @@ pub fn read_labelled_detections(
             dataset.len()
         );
     }
-    Ok(LabelledDetections { frames: dataset.len(), truth, detections })
+    Ok(LabelledDetections { frames: dataset.len(), truth, detections, rooms })
 }
 
 /// Held-out frames' annotations and detections, frame by frame.
 pub struct LabelledDetections {
     pub frames: usize,
     pub truth: Vec<Vec<Object>>,
+    /// The predicted room of each frame's detections file (`"layout"`), when it has one.
+    pub rooms: Vec<Option<Vec<glam::Vec2>>>,
     pub detections: Vec<Vec<Detection>>,
 }

@@ -12,7 +12,7 @@
 use std::path::PathBuf;
 
 use anyhow::bail;
-use cog_gpu::cascade::{train_cascade, CascadeTraining, FILE_NAME};
+use cog_gpu::cascade::{train_cascade, CascadeFrame, CascadeTraining, FILE_NAME};
 
 use super::calibrate::{read_labelled_detections, HeldOutArgs, LabelledDetections};
 use super::GlobalOptions;
@@ -37,9 +37,21 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         );
     }
     let categories: Vec<String> = models.iter().map(|m| m.category.clone()).collect();
-    let LabelledDetections { frames, truth, detections } =
+    let LabelledDetections { frames, truth, detections, rooms } =
         read_labelled_detections(&held_out.data, &held_out.detections)?;
-    let inputs: Vec<_> = truth.into_iter().zip(detections).collect();
+    let with_room = rooms.iter().filter(|r| r.is_some()).count();
+    if with_room < frames {
+        log::warn!(
+            "{} of {frames} detections files have no room layout (detect with a layout model in --models writes              it): their layout features say 'no room'",
+            frames - with_room
+        );
+    }
+    let inputs: Vec<CascadeFrame> = truth
+        .into_iter()
+        .zip(detections)
+        .zip(rooms)
+        .map(|((truth, detections), room)| CascadeFrame { truth, detections, room })
+        .collect();
     let training = CascadeTraining {
         data: held_out.data.display().to_string(),
         frames,

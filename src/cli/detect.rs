@@ -250,13 +250,15 @@ fn detect_one(
     let frame = Frame::read(dir, DepthSource::Raw)?;
     let mut detections = detect_frame(&frame, models, backend, detect_options)
         .with_context(|| format!("detecting in {}", dir.display()))?;
-    if let Some(cascade) = cascade {
-        cascade.rescore(&mut detections.detections).with_context(|| format!("rescoring {}", dir.display()))?;
-    }
     let layout = match layout_model {
         Some(model) => Some(super::layout::frame_layout(&frame, Some(model), backend)?),
         None => None,
     };
+    // The cascade's layout features read the room.
+    if let Some(cascade) = cascade {
+        let room = layout.as_ref().map(|(predicted, _)| predicted.room.corners.as_slice());
+        cascade.rescore(&mut detections.detections, room).with_context(|| format!("rescoring {}", dir.display()))?;
+    }
     let report = FrameReport { detections, layout: layout.as_ref().map(|(_, record)| record.clone()) };
     let json_path = args.out.join(format!("{}.json", frame.name));
     std::fs::write(&json_path, serde_json::to_string_pretty(&report)?)
