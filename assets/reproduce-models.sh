@@ -115,6 +115,10 @@ train_and_eval() {
 case "$mode" in
     models)
         # `train`'s defaults are the shipped models' settings; detection uses the models' own step (0.2 m).
+        # The shipped layout model (assets/reproduce-layout.sh) sits beside them, so that every detections
+        # file carries the frame's room, which the cascade's layout features read.
+        mkdir -p "$WORK/models/models"
+        cp assets/models/layout.json "$WORK/models/models/"
         train_and_eval models bed,chair,sofa,table,desk,toilet,bathtub,dresser,nightstand,bookshelf test yes
         ;;
     ablation)
@@ -143,6 +147,13 @@ case "$mode" in
         dir="$WORK/models"
         ten=bed,chair,sofa,table,desk,toilet,bathtub,dresser,nightstand,bookshelf
         [ -f "$dir/models/bed.json" ] || { echo "run the models mode first" >&2; exit 1; }
+        # The layout features need the room in every detections file: a WORK made before the layout
+        # model sat beside the detectors gets it and its test set detected again.
+        if [ ! -f "$dir/models/layout.json" ]; then
+            cp assets/models/layout.json "$dir/models/"
+            "$BIN" detect "$WORK/test" --models "$dir/models" --out "$dir/detections" --min-score -3 \
+                --no-overlay --no-cascade > /dev/null
+        fi
         synth_set "$WORK/cascade-set/mixed" "$all_rooms" 80 1700 cmixed
         synth_set "$WORK/cascade-set/bathroom" bathroom 40 1701 cbath
         synth_set "$WORK/cascade-set/bedroom" bedroom 40 1702 cbed
