@@ -142,8 +142,8 @@ case "$mode" in
         ;;
     cascade)
         # The context cascade (paper section 6) on the models of `models` mode (run that first): first-stage
-        # detections of the cascade set, the cascade trained on them (WORK/models/cascade.json, not copied
-        # into the models directory), the test set's first-stage detections rescored, and both evaluated.
+        # detections of the cascade set, the cascade trained on them (WORK/models/cascade.json; copy it to
+        # assets/models/ to ship it), the test set's first-stage detections rescored, and both evaluated.
         dir="$WORK/models"
         ten=bed,chair,sofa,table,desk,toilet,bathtub,dresser,nightstand,bookshelf
         [ -f "$dir/models/bed.json" ] || { echo "run the models mode first" >&2; exit 1; }

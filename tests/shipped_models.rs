@@ -113,3 +113,39 @@ fn the_shipped_layout_model_lays_out_the_real_frame() {
     let iou = free_space_iou(&predicted.room, truth, &scene.camera, scene.image_size);
     assert!(iou >= 0.6, "free-space IoU {iou}");
 }
+
+/// The shipped context cascade (`assets/models/cascade.json`) has this build's feature set and a context
+/// category for each shipped model; through the README's main command (`detect`, which applies it with the
+/// room of the shipped layout model) the sample bedroom's detections are rescored and its best detection
+/// is still its bed.
+#[test]
+fn the_shipped_cascade_rescores_the_sample_and_keeps_the_bed_first() {
+    use cog_gpu::cascade::{Cascade, FEATURES};
+    let cascade = Cascade::read(&Path::new(MODELS).join(cog_gpu::cascade::FILE_NAME)).unwrap();
+    assert_eq!(cascade.features, FEATURES);
+    let mut categories: Vec<&str> = cascade.categories.iter().map(String::as_str).collect();
+    categories.sort_unstable();
+    let mut expected: Vec<&str> = LARGE_CATEGORIES.to_vec();
+    expected.sort_unstable();
+    assert_eq!(categories, expected);
+    assert!(!cascade.stages.is_empty());
+    let out = tempfile::tempdir().unwrap();
+    let output = std::process::Command::new(env!("CARGO_BIN_EXE_cog-gpu"))
+        .args(["--cpu", "detect", SAMPLE, "--out", out.path().to_str().unwrap(), "--no-overlay", "--json"])
+        .env("NODEVICE_SELECT", "1")
+        .output()
+        .unwrap();
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let frames: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    let detections: Vec<cog_gpu::eval::Detection> = serde_json::from_value(frames[0]["detections"].clone()).unwrap();
+    assert!(frames[0]["layout"]["corners"].is_array(), "the room is laid out");
+    let rescored = detections.iter().filter(|d| d.context_score.is_some()).count();
+    let staged = detections.iter().filter(|d| cascade.stages.contains_key(&d.category)).count();
+    assert_eq!(rescored, staged, "every detection of a category with a second stage is rescored");
+    assert!(rescored > 0);
+    let frame = Frame::read(SAMPLE, DepthSource::Raw).unwrap();
+    let truth = frame.objects.iter().find(|o| o.category == "bed").unwrap().cuboid;
+    let best = &detections[0];
+    assert_eq!(best.category, "bed", "best detection {best:?}");
+    assert!(iou_3d(&best.cuboid(), &truth) >= 0.25, "best detection {best:?}");
+}
