@@ -42,7 +42,8 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     let with_room = rooms.iter().filter(|r| r.is_some()).count();
     if with_room < frames {
         log::warn!(
-            "{} of {frames} detections files have no room layout (detect with a layout model in --models writes              it): their layout features say 'no room'",
+            "{} of {frames} detections files have no room layout (detect writes it when --models holds a layout \
+             model): their layout features say 'no room'",
             frames - with_room
         );
     }
