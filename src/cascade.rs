@@ -25,7 +25,8 @@
 //! ```
 //!
 //! so `dim = 2 + 5·K + 13` ([`feature_dim`]). The room is the frame's predicted layout (its floor polygon,
-//! written by `detect` under `"layout"` when the models directory has a layout model; [`read_room`]).
+//! written by `detect` under `"layout"` when the models directory has a layout model;
+//! [`read_detections_and_room`]).
 //! `D` ([`wall_context`]) is the smallest distance from a corner of the cuboid's footprint to a wall
 //! segment of the polygon, negative when the cuboid's centre lies outside the polygon; the closest wall
 //! is the segment that gives it. `A` is the angle between the cuboid's width axis and that wall, folded
@@ -62,7 +63,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::calibration::{fit_logistic, Calibration};
 use crate::error::{Error, Result};
-use crate::eval::{average_precision, true_positives_in_input_order, Detection, ScoredBox};
+use crate::eval::{average_precision, true_positives_in_input_order, Detection, FrameDetections, ScoredBox};
 use crate::frame::Object;
 use crate::geometry::{intersection_volume, polygon_contains, Cuboid};
 use crate::learn::binary_svm::{balanced_costs, train_linear_svm, LinearSvm};
@@ -101,9 +102,15 @@ pub struct CascadeFrame {
     pub room: Option<Vec<Vec2>>,
 }
 
-/// The room's floor polygon that `detect` writes into a detections file under `"layout"` (the
-/// `corners` of `room_layout::output::LayoutRecord`), or `None` when the file has no room.
-pub fn read_room(path: &Path) -> Result<Option<Vec<Vec2>>> {
+/// A detections file (`path`, its `text`) with its room: the floor polygon that `detect` writes under
+/// `"layout"` (the `corners` of `room_layout::output::LayoutRecord`), or `None` when the file has none.
+pub fn read_detections_and_room(path: &Path) -> Result<(FrameDetections, Option<Vec<Vec2>>)> {
+    let text = crate::frame::read_text(path)?;
+    Ok((FrameDetections::parse(path, &text)?, room_in(path, &text)?))
+}
+
+/// The room of a detections file's `text` (see [`read_detections_and_room`]); errors name `path`.
+pub fn room_in(path: &Path, text: &str) -> Result<Option<Vec<Vec2>>> {
     #[derive(Deserialize)]
     struct File {
         layout: Option<Layout>,
@@ -112,8 +119,7 @@ pub fn read_room(path: &Path) -> Result<Option<Vec<Vec2>>> {
     struct Layout {
         corners: Vec<[f32; 2]>,
     }
-    let text = crate::frame::read_text(path)?;
-    let file: File = serde_json::from_str(&text).map_err(|e| Error::invalid(path, e.to_string()))?;
+    let file: File = serde_json::from_str(text).map_err(|e| Error::invalid(path, e.to_string()))?;
     let Some(layout) = file.layout else { return Ok(None) };
     if layout.corners.len() < 3 || layout.corners.iter().flatten().any(|v| !v.is_finite()) {
         return Err(Error::invalid(path, "the layout's corners are not a polygon of finite points".to_string()));
@@ -125,7 +131,7 @@ pub fn read_room(path: &Path) -> Result<Option<Vec<Vec2>>> {
 /// segment of `room`, and its angle to that wall folded into [0, 1] (1 = 45°). `None` when the polygon has
 /// no segment of positive length.
 pub fn wall_context(cuboid: &Cuboid, room: &[Vec2]) -> Option<(f64, f64)> {
-    let footprint: Vec<Vec2> = cuboid.corners()[..4].iter().map(|c| c.truncate()).collect();
+    let footprint = cuboid.footprint();
     let mut closest: Option<(f32, Vec2)> = None;
     for (n, &a) in room.iter().enumerate() {
         let b = room[(n + 1) % room.len()];

@@ -78,7 +78,11 @@ pub struct FrameDetections {
 impl FrameDetections {
     /// Reads and checks a detections file: finite numbers, positive sizes.
     pub fn read(path: &Path) -> Result<FrameDetections> {
-        let text = crate::frame::read_text(path)?;
+        FrameDetections::parse(path, &crate::frame::read_text(path)?)
+    }
+
+    /// [`FrameDetections::read`] on the file's text, already read (errors name `path`).
+    pub fn parse(path: &Path, text: &str) -> Result<FrameDetections> {
         if text.trim_start().starts_with('[') {
             return Err(Error::invalid(
                 path,
@@ -87,7 +91,7 @@ impl FrameDetections {
             ));
         }
         let parsed: FrameDetections =
-            serde_json::from_str(&text).map_err(|e| Error::invalid(path, format!("not a detections file: {e}")))?;
+            serde_json::from_str(text).map_err(|e| Error::invalid(path, format!("not a detections file: {e}")))?;
         for (i, d) in parsed.detections.iter().enumerate() {
             let finite =
                 d.centre.iter().chain(&d.size).chain([&d.yaw, &d.score]).chain(&d.raw_score).all(|v| v.is_finite());

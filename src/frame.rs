@@ -259,7 +259,7 @@ impl Frame {
 // Reading
 
 /// Reads a UTF-8 text file; a leading byte-order mark (which Windows editors write) is dropped.
-pub(crate) fn read_text(path: &Path) -> Result<String> {
+pub fn read_text(path: &Path) -> Result<String> {
     let text = fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
     Ok(match text.strip_prefix('\u{feff}') {
         Some(rest) => rest.to_string(),

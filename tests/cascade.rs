@@ -376,7 +376,8 @@ fn the_cascade_learns_that_nightstands_stand_against_walls() {
 /// a layout, and a clear error naming the file for corners that are no polygon.
 #[test]
 fn rooms_are_read_from_detections_files() {
-    use cog_gpu::cascade::read_room;
+    use cog_gpu::cascade::read_detections_and_room;
+    let read_room = |path: &std::path::Path| read_detections_and_room(path).map(|(_, room)| room);
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("f.json");
     let write = |layout: &str| {

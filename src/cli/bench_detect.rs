@@ -27,11 +27,13 @@ use anyhow::{bail, Context};
 use serde_json::json;
 
 use super::bench::Args;
-use super::detect::{cascade_for, frame_dirs, resolve_default, FrameReport};
+use super::detect::{
+    best_of, cascade_for, frame_dirs, lay_out, overlay_picture, rescore_in_room, resolve_default, FrameReport,
+};
 use super::GlobalOptions;
 use cog_gpu::backend::Backend;
-use cog_gpu::detect::{detect_preprocessed_timed, overlay, overlay_selection, DetectOptions, DetectStages, Stopwatch};
-use cog_gpu::eval::{Detection, FrameDetections};
+use cog_gpu::detect::{detect_preprocessed_timed, DetectOptions, DetectStages, Stopwatch};
+use cog_gpu::eval::Detection;
 use cog_gpu::features::Preprocessed;
 use cog_gpu::frame::{DepthSource, Frame};
 use cog_gpu::gpu::fast::use_kernel_on;
@@ -175,28 +177,14 @@ impl Bench<'_> {
             detect_preprocessed_timed(&frame.name, pre, self.models, backend, detect_options, &mut times.stages)
                 .with_context(|| format!("detecting in {}", dir.display()))?;
         lap();
-        let layout = match self.layout_model {
-            Some(model) => Some(super::layout::frame_layout(&frame, Some(model), backend)?),
-            None => None,
-        };
+        let layout = lay_out(&frame, self.layout_model, backend)?;
         times.layout_s = lap();
-        if let Some(cascade) = self.cascade {
-            let room = layout.as_ref().map(|(predicted, _)| predicted.room.corners.as_slice());
-            cascade.rescore(&mut detections.detections, room)?;
-        }
+        rescore_in_room(self.cascade, &mut detections, layout.as_ref())?;
         times.cascade_s = lap();
         let found = detections.detections.clone();
         let report = FrameReport { detections, layout: layout.as_ref().map(|(_, record)| record.clone()) };
         let text = serde_json::to_string_pretty(&report)?;
-        let best = FrameDetections {
-            frame: frame.name.clone(),
-            detections: overlay_selection(&report.detections.detections, 8),
-        };
-        let mut picture = overlay(&frame, &best);
-        if let Some((predicted, _)) = &layout {
-            let camera = cog_gpu::geometry::Camera::new(frame.intrinsics(), frame.rtilt());
-            cog_gpu::room_layout::output::draw_room(&mut picture, &camera, &predicted.room, 2);
-        }
+        let picture = overlay_picture(&frame, &best_of(&report, 8), layout.as_ref().map(|(p, _)| &p.room));
         std::hint::black_box((text, picture));
         times.output_s = lap();
         times.detections = found.len();
@@ -210,28 +198,20 @@ impl Bench<'_> {
     }
 }
 
-/// The mean of every timing over the frames (and repeats).
+/// The mean over the frames (and repeats) of every number of [`FrameTimes`], and the scoring throughput.
 fn mean_times(times: &[FrameTimes]) -> serde_json::Value {
-    let n = times.len().max(1) as f64;
-    let mean = |f: &dyn Fn(&FrameTimes) -> f64| times.iter().map(f).sum::<f64>() / n;
-    json!({
-        "read_s": mean(&|t| t.read_s),
-        "preprocess_s": mean(&|t| t.preprocess_s),
-        "yaw_grids_s": mean(&|t| t.stages.yaw_grids_s),
-        "window_s": mean(&|t| t.stages.window_s),
-        "lattices_s": mean(&|t| t.stages.lattices_s),
-        "score_s": mean(&|t| t.stages.score_s),
-        "tables_thread_s": mean(&|t| t.stages.tables_thread_s),
-        "select_s": mean(&|t| t.stages.select_s),
-        "nms_s": mean(&|t| t.stages.nms_s),
-        "cascade_s": mean(&|t| t.cascade_s),
-        "layout_s": mean(&|t| t.layout_s),
-        "output_s": mean(&|t| t.output_s),
-        "total_s": mean(&|t| t.total_s),
-        "hypotheses": mean(&|t| t.stages.hypotheses as f64),
-        "hypotheses_per_s": times.iter().map(|t| t.stages.hypotheses as f64).sum::<f64>()
-            / times.iter().map(|t| t.stages.score_s).sum::<f64>().max(f64::MIN_POSITIVE),
-    })
+    let rows: Vec<serde_json::Value> = times.iter().map(|t| json!(t)).collect();
+    let mut mean = serde_json::Map::new();
+    if let Some(first) = rows.first().and_then(|r| r.as_object()) {
+        for key in first.keys().filter(|k| first[*k].is_number()) {
+            let sum: f64 = rows.iter().filter_map(|r| r[key].as_f64()).sum();
+            mean.insert(key.clone(), json!(sum / rows.len() as f64));
+        }
+    }
+    let hypotheses: f64 = times.iter().map(|t| t.stages.hypotheses as f64).sum();
+    let score_s: f64 = times.iter().map(|t| t.stages.score_s).sum();
+    mean.insert("hypotheses_per_s".into(), json!(hypotheses / score_s.max(f64::MIN_POSITIVE)));
+    serde_json::Value::Object(mean)
 }
 
 /// Whether two paths detected the same boxes (same order, categories, boxes within [`BOX_TOLERANCE`],

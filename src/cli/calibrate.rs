@@ -15,7 +15,7 @@ use std::path::PathBuf;
 use anyhow::{bail, Context};
 use cog_gpu::calibration::{fit_logistic, label_detections, Calibration};
 use cog_gpu::category::normalise_name;
-use cog_gpu::eval::{Detection, FrameDetections};
+use cog_gpu::eval::Detection;
 use cog_gpu::frame::{read_annotations, Dataset, Object};
 use cog_gpu::model::read_models_dir;
 
@@ -139,8 +139,9 @@ pub fn read_labelled_detections(
         truth.push(read_annotations(dir)?.0);
         let path = detections_dir.join(format!("{name}.json"));
         if path.is_file() {
-            detections.push(FrameDetections::read(&path)?.detections);
-            rooms.push(cog_gpu::cascade::read_room(&path)?);
+            let (file, room) = cog_gpu::cascade::read_detections_and_room(&path)?;
+            detections.push(file.detections);
+            rooms.push(room);
         } else {
             missing += 1;
             detections.push(Vec::new());

@@ -22,10 +22,13 @@ use cog_gpu::category::normalise_name;
 use cog_gpu::detect::{detect_frame, overlay, overlay_selection, DetectOptions};
 use cog_gpu::draw::category_colour;
 use cog_gpu::eval::FrameDetections;
+use cog_gpu::frame::RoomLayout;
 use cog_gpu::frame::{is_frame_dir, DepthSource, Frame};
 use cog_gpu::model::read_models_dir;
 use cog_gpu::nms::DEFAULT_NMS_IOU;
 use cog_gpu::room_layout::output::LayoutRecord;
+use cog_gpu::room_layout::PredictedLayout;
+use image::RgbImage;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use super::{options, GlobalOptions};
@@ -250,32 +253,17 @@ fn detect_one(
     let frame = Frame::read(dir, DepthSource::Raw)?;
     let mut detections = detect_frame(&frame, models, backend, detect_options)
         .with_context(|| format!("detecting in {}", dir.display()))?;
-    let layout = match layout_model {
-        Some(model) => Some(super::layout::frame_layout(&frame, Some(model), backend)?),
-        None => None,
-    };
-    // The cascade's layout features read the room.
-    if let Some(cascade) = cascade {
-        let room = layout.as_ref().map(|(predicted, _)| predicted.room.corners.as_slice());
-        cascade.rescore(&mut detections.detections, room).with_context(|| format!("rescoring {}", dir.display()))?;
-    }
+    let layout = lay_out(&frame, layout_model, backend)?;
+    rescore_in_room(cascade, &mut detections, layout.as_ref())?;
     let report = FrameReport { detections, layout: layout.as_ref().map(|(_, record)| record.clone()) };
     let json_path = args.out.join(format!("{}.json", frame.name));
     std::fs::write(&json_path, serde_json::to_string_pretty(&report)?)
         .with_context(|| format!("writing {}", json_path.display()))?;
-    // The best detections over all categories, one category per object.
-    let best = FrameDetections {
-        frame: report.detections.frame.clone(),
-        detections: overlay_selection(&report.detections.detections, args.overlay_top),
-    };
+    let best = best_of(&report, args.overlay_top);
     let room = layout.as_ref().map(|(predicted, _)| &predicted.room);
     if !args.no_overlay {
         let png_path = args.out.join(format!("{}.png", frame.name));
-        let mut img = overlay(&frame, &best);
-        if let Some(room) = room {
-            let camera = cog_gpu::geometry::Camera::new(frame.intrinsics(), frame.rtilt());
-            cog_gpu::room_layout::output::draw_room(&mut img, &camera, room, 2);
-        }
+        let img = overlay_picture(&frame, &best, room);
         img.save(&png_path).with_context(|| format!("writing the overlay {}", png_path.display()))?;
     }
     if args.ply {
@@ -287,6 +275,48 @@ fn detect_one(
         super::layout::write_scene_ply(&args.out.join(format!("{}.ply", frame.name)), &frame, boxes, room)?;
     }
     Ok(report)
+}
+
+/// The frame's room with `layout_model` (none without one).
+pub(super) fn lay_out(
+    frame: &Frame,
+    layout_model: Option<&cog_gpu::room_layout::model::LayoutModel>,
+    backend: Backend,
+) -> anyhow::Result<Option<(PredictedLayout, LayoutRecord)>> {
+    layout_model.map(|model| super::layout::frame_layout(frame, Some(model), backend)).transpose()
+}
+
+/// Rescores the detections with `cascade` (when there is one), whose layout features read the room.
+pub(super) fn rescore_in_room(
+    cascade: Option<&Cascade>,
+    detections: &mut FrameDetections,
+    layout: Option<&(PredictedLayout, LayoutRecord)>,
+) -> anyhow::Result<()> {
+    if let Some(cascade) = cascade {
+        let room = layout.map(|(predicted, _)| predicted.room.corners.as_slice());
+        cascade
+            .rescore(&mut detections.detections, room)
+            .with_context(|| format!("rescoring the detections of {}", detections.frame))?;
+    }
+    Ok(())
+}
+
+/// The best `top` detections over all categories, one category per object (what the overlay draws).
+pub(super) fn best_of(report: &FrameReport, top: usize) -> FrameDetections {
+    FrameDetections {
+        frame: report.detections.frame.clone(),
+        detections: overlay_selection(&report.detections.detections, top),
+    }
+}
+
+/// The overlay picture: `best` drawn on the RGB, and the room's edges when there is a room.
+pub(super) fn overlay_picture(frame: &Frame, best: &FrameDetections, room: Option<&RoomLayout>) -> RgbImage {
+    let mut img = overlay(frame, best);
+    if let Some(room) = room {
+        let camera = cog_gpu::geometry::Camera::new(frame.intrinsics(), frame.rtilt());
+        cog_gpu::room_layout::output::draw_room(&mut img, &camera, room, 2);
+    }
+    img
 }
 
 /// One line per frame: detections per category and the best score.

@@ -49,14 +49,14 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     }
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     for path in &inputs {
-        let mut frame = FrameDetections::read(path)?;
-        let room = cog_gpu::cascade::read_room(path)?;
+        // One read: the detections, the room the cascade reads, and every other field, kept as it was.
+        let text = cog_gpu::frame::read_text(path)?;
+        let mut frame = FrameDetections::parse(path, &text)?;
+        let room = cog_gpu::cascade::room_in(path, &text)?;
         cascade.rescore(&mut frame.detections, room.as_deref()).with_context(|| format!("{}", path.display()))?;
-        let name = path.file_name().context("a detections file without a name")?;
-        // Everything else of the file (the room under "layout") is kept as it was.
-        let mut file: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(path)?).with_context(|| format!("{}", path.display()))?;
+        let mut file: serde_json::Value = serde_json::from_str(&text).with_context(|| format!("{}", path.display()))?;
         file["detections"] = serde_json::to_value(&frame.detections)?;
+        let name = path.file_name().context("a detections file without a name")?;
         let out = args.out.join(name);
         std::fs::write(&out, serde_json::to_string_pretty(&file)?)
             .with_context(|| format!("writing {}", out.display()))?;
