@@ -2,13 +2,17 @@
 //! [`crate::features`] and their GPU kernels in [`crate::gpu`]. It sits above both, so that `features`
 //! (definitions, CPU reference and fast path) never imports `gpu`, and `gpu` (kernels and their CPU
 //! twins) imports `features` only for the definitions it shares: data and imports flow one way,
-//! `features` → `gpu` → `backend` → `detect`, `room_layout` and the commands.
+//! `features` → `gpu` → `backend` → `detect` and the commands. The same holds for the room layout:
+//! `room_layout` (definitions, CPU scorer) → `gpu::room_layout` (its kernel) → [`Backend::layout_scores`],
+//! which the commands hand to [`crate::room_layout::predict`].
 
 use crate::error::Result;
 use crate::features::fast::FastEngine;
 use crate::features::{cpu, FeatureLayout, FeatureScene, Hypothesis};
 use crate::gpu::fast::{fast_scores_gpu, use_kernel_on};
 use crate::gpu::GpuContext;
+use crate::room_layout::voxels::{self, ScoringTables, YawCells};
+use crate::room_layout::RoomBox;
 
 /// Which implementation scores.
 #[derive(Clone, Copy)]
@@ -66,6 +70,15 @@ impl<'a> Backend<'a> {
                 }
             },
             Backend::Cpu => engine.scores(hypotheses, weights),
+        }
+    }
+
+    /// Integer scores of room-layout hypotheses: [`voxels::scores_cpu`] or its kernel
+    /// ([`crate::gpu::room_layout::scores_gpu`]); the two agree exactly (fixed point, tested on lavapipe).
+    pub fn layout_scores(&self, cells: &[YawCells], tables: &ScoringTables, boxes: &[RoomBox]) -> Result<Vec<i32>> {
+        match self {
+            Backend::Cpu => Ok(voxels::scores_cpu(cells, tables, boxes)),
+            Backend::Gpu(ctx) => crate::gpu::room_layout::scores_gpu(ctx, cells, tables, boxes),
         }
     }
 }

@@ -108,7 +108,7 @@ fn the_shipped_layout_model_lays_out_the_real_frame() {
     assert!(model.provenance.get("command").is_some() && model.provenance.get("data_seed").is_some());
     let frame = Frame::read("../shared/data/sunrgbd/kv1-b3dodata-img_0063", DepthSource::Raw).unwrap();
     let scene = LayoutScene::from_frame(&frame).unwrap();
-    let predicted = predict(&scene, &model, Backend::Cpu).unwrap();
+    let predicted = predict(&scene, &model, &|c, t, b| Backend::Cpu.layout_scores(c, t, b)).unwrap();
     let truth = frame.layout.as_ref().expect("the real frame has a room annotation");
     let iou = free_space_iou(&predicted.room, truth, &scene.camera, scene.image_size);
     assert!(iou >= 0.6, "free-space IoU {iou}");

@@ -53,7 +53,7 @@ pub fn frame_layout(
 ) -> anyhow::Result<(PredictedLayout, LayoutRecord)> {
     let scene = LayoutScene::from_frame(frame)?;
     let predicted = match model {
-        Some(model) => predict(&scene, model, backend)?,
+        Some(model) => predict(&scene, model, &|cells, tables, boxes| backend.layout_scores(cells, tables, boxes))?,
         None => predict_heuristic(&scene),
     };
     let method = model.map_or("heuristic", |m| m.discretisation.name());

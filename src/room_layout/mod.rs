@@ -4,7 +4,8 @@
 //!
 //! Flow: [`LayoutScene::from_frame`] (a subsampled upright point cloud with normals, floor and ceiling) →
 //! [`hypotheses`] (cuboids per orientation) → [`voxels::YawCells`] (the points binned once per orientation)
-//! → [`voxels::scores_cpu`] or the GPU twin `crate::gpu::room_layout` → the best hypothesis. Evaluation:
+//! → [`voxels::scores_cpu`] or the GPU twin `crate::gpu::room_layout` (chosen by the caller, see
+//! [`predict`]) → the best hypothesis. Evaluation:
 //! [`free_space`]; learning: [`learn`]; the model file: [`model`]; the plane-fitting baseline: [`baseline`].
 //!
 //! # Choices where the paper is terse (one place, used everywhere)
@@ -287,22 +288,28 @@ pub fn hypotheses(scene: &LayoutScene) -> (Vec<voxels::YawCells>, Vec<RoomBox>) 
     (all_cells, all_boxes)
 }
 
-/// Scores every hypothesis of a frame with a model's weights on `backend` and returns the best (the first
-/// of the highest integer score, so the answer is the same on every backend).
+/// The integer scores of every hypothesis (one per box, in order), given the frame's binned points and the
+/// model's tables: [`voxels::scores_cpu`], or its GPU twin through `crate::backend::Backend::layout_scores`.
+/// `predict` takes the scorer as an argument so that this module, which the GPU kernel's module imports for
+/// its data, imports neither `gpu` nor `backend` (imports flow one way: `room_layout` → `gpu` → `backend`).
+pub type ScoreHypotheses<'a> = dyn Fn(&[voxels::YawCells], &voxels::ScoringTables, &[RoomBox]) -> Result<Vec<i32>> + 'a;
+
+/// Scores every hypothesis of a frame with a model's weights through `score_hypotheses` and returns the best
+/// (the first of the highest integer score, so the answer is the same on every backend).
 pub fn predict(
     scene: &LayoutScene,
     model: &model::LayoutModel,
-    backend: crate::backend::Backend,
+    score_hypotheses: &ScoreHypotheses,
 ) -> Result<PredictedLayout> {
     let (cells, boxes) = hypotheses(scene);
     if boxes.is_empty() {
         return Err(Error::Input("no room hypothesis holds 80 % of the points".into()));
     }
     let tables = voxels::ScoringTables::new(model.discretisation, &cells, &model.weights_f64());
-    let scores = match backend {
-        crate::backend::Backend::Cpu => voxels::scores_cpu(&cells, &tables, &boxes),
-        crate::backend::Backend::Gpu(ctx) => crate::gpu::room_layout::scores_gpu(ctx, &cells, &tables, &boxes)?,
-    };
+    let scores = score_hypotheses(&cells, &tables, &boxes)?;
+    if scores.len() != boxes.len() {
+        return Err(Error::Input(format!("{} layout scores for {} hypotheses", scores.len(), boxes.len())));
+    }
     let best = (0..boxes.len()).fold(0, |best, i| if scores[i] > scores[best] { i } else { best });
     let room_box = boxes[best];
     Ok(PredictedLayout {
