@@ -1,16 +1,20 @@
 //! Room layout (`cog_gpu::room_layout`): free-space IoU against hand-computed boxes, the Manhattan and
 //! cubical region assignment of hand-placed points, the summed-area IoU against the direct count, the
-//! hypotheses' 80 % rule, the model file, and the PLY writer read back.
+//! hypotheses' 80 % rule, the orientation features against their closed form, the wall leaks against a
+//! direct count, the model file, and the PLY writer read back.
 
 use cog_gpu::frame::RoomLayout;
 use cog_gpu::geometry::Camera;
 use cog_gpu::ply::{write_ply, LineSet};
+use cog_gpu::room_layout::baseline::dominant_orientation;
 use cog_gpu::room_layout::free_space::{free_space_counts, free_space_iou, YawFreeSpace};
 use cog_gpu::room_layout::learn::yaw_difference_mod_90;
+use cog_gpu::room_layout::orientation::orientation_features;
 use cog_gpu::room_layout::voxels::{
-    cubical_region, features, manhattan_region, Discretisation, ScoringTables, YawCells, LAYERS,
+    box_features, cubical_region, features, manhattan_region, Discretisation, ScoringTables, YawCells, BOX_FEATURES,
+    LAYERS, ORIENTATION_FEATURES,
 };
-use cog_gpu::room_layout::{orientation_yaw, room_axes, LayoutScene, RoomBox, ORIENTATIONS};
+use cog_gpu::room_layout::{orientation_yaw, room_axes, to_mm, LayoutScene, RoomBox, ORIENTATIONS};
 use glam::{Mat3, Vec2, Vec3};
 
 /// A camera at the upright origin looking along +y with no tilt, with a very wide field of view (focal
@@ -177,45 +181,129 @@ fn features_of_a_constructed_room_put_wall_points_in_their_bands() {
     assert_eq!(cells.total_points as usize, scene.points.len());
     let truth = RoomBox { yaw_index: YAW_ZERO as u32, u0: -2000, u1: 2000, v0: 0, v1: 5000 };
     let phi = features(Discretisation::Manhattan, &cells, &truth);
-    assert_eq!(phi.len(), 288);
-    // Everything sums to 1 (every point is in exactly one region, layer and class).
-    assert!((phi.iter().sum::<f32>() - 1.0).abs() < 1e-5);
+    assert_eq!(phi.len(), 288 + BOX_FEATURES);
+    let voxel_part = &phi[..288];
+    // The voxel part sums to 1 (every point is in exactly one region, layer and class).
+    assert!((voxel_part.iter().sum::<f32>() - 1.0).abs() < 1e-5);
     let n = scene.points.len() as f32;
     // Front wall band (region 4), "facing" class 0, summed over the layers: the 2000 front-wall points.
     let front_facing: f32 = (0..LAYERS).map(|l| phi[(4 * LAYERS + l) * 4]).sum();
     assert!((front_facing * n - 2000.0).abs() < 0.5, "{}", front_facing * n);
     // The left and right walls' points are "facing" in their own bands 5 and 7, except the ones in the
     // front corners within 150 mm (cells of the front band by the diagonal split): nothing is exterior.
-    let exterior: f32 = phi[8 * LAYERS * 4..].iter().sum();
+    let exterior: f32 = voxel_part[8 * LAYERS * 4..].iter().sum();
     assert_eq!(exterior, 0.0);
+    assert_eq!(phi[288 + ORIENTATION_FEATURES..], [0.0; 4], "no wall leaks");
     // A room 1 m too narrow on the left puts the left wall's points outside, in region 9.
     let narrow = RoomBox { u0: -1000, ..truth };
     let phi = features(Discretisation::Manhattan, &cells, &narrow);
     let left_exterior: f32 =
         (0..LAYERS).flat_map(|l| (0..4).map(move |c| (9 * LAYERS + l) * 4 + c)).map(|i| phi[i]).sum();
     assert!(left_exterior * n > 1500.0, "{}", left_exterior * n);
+    // ... and its leak feature (wall 1, left) sees them: sqrt(> 1500 / 8000) > 0.43.
+    assert!(phi[288 + ORIENTATION_FEATURES + 1] > 0.43, "{}", phi[288 + ORIENTATION_FEATURES + 1]);
 }
 
 #[test]
 fn scoring_tables_give_the_dot_product_with_the_features() {
-    let scene = room_scene();
-    let cells: Vec<YawCells> = (0..ORIENTATIONS).map(|k| YawCells::new(&scene, k)).collect();
+    // The scene turned by 14°, so that the orientation features differ between orientations (the cells of
+    // `hypotheses` carry them) and the orientation term of the score is tested too.
+    let scene = turned(&room_scene(), 14.0);
+    let (cells, _) = cog_gpu::room_layout::hypotheses(&scene);
+    assert!(cells.iter().any(|c| c.orientation != cells[0].orientation));
     for disc in [Discretisation::Manhattan, Discretisation::Cubical] {
         let w: Vec<f64> = (0..disc.dim()).map(|i| ((i * 37 % 101) as f64 - 50.0) / 7.0).collect();
         let tables = ScoringTables::new(disc, &cells, &w);
         let boxes = [
-            RoomBox { yaw_index: YAW_ZERO as u32, u0: -2000, u1: 2000, v0: 0, v1: 5000 },
+            RoomBox { yaw_index: orientation_at(14.0) as u32, u0: -2000, u1: 2000, v0: 0, v1: 5000 },
             RoomBox { yaw_index: orientation_at(-30.0) as u32, u0: -2600, u1: 1500, v0: -300, v1: 4000 },
         ];
         let scores = cog_gpu::room_layout::voxels::scores_cpu(&cells, &tables, &boxes);
         for (b, s) in boxes.iter().zip(scores) {
             let phi = features(disc, &cells[b.yaw_index as usize], b);
+            assert_eq!(phi.len(), disc.voxel_dim() + BOX_FEATURES);
+            let start = disc.voxel_dim();
+            assert_eq!(phi[start..start + ORIENTATION_FEATURES], cells[b.yaw_index as usize].orientation);
             let dot: f64 = phi.iter().zip(&w).map(|(&x, &w)| x as f64 * w).sum();
-            // Fixed point: each cell's contribution is rounded to 1/scale.
+            // Fixed point: each cell's contribution and the box features' term are rounded to 1/scale.
             let cells_of_yaw = cells[b.yaw_index as usize].centres.len() as f64;
-            assert!((s as f64 / tables.scale - dot).abs() < 1e-5 + cells_of_yaw / tables.scale, "{disc:?} {b:?}");
+            let total = tables.total(&cells[b.yaw_index as usize], b, s) as f64 / tables.scale;
+            assert!((total - dot).abs() < 1e-5 + (cells_of_yaw + 1.0) / tables.scale, "{disc:?} {b:?}");
         }
     }
+}
+
+/// `scene` turned about the vertical axis by `degrees` (points and normals).
+fn turned(scene: &LayoutScene, degrees: f32) -> LayoutScene {
+    let r = Mat3::from_rotation_z(degrees.to_radians());
+    LayoutScene {
+        points: scene.points.iter().map(|&p| r * p).collect(),
+        normals: scene.normals.iter().map(|&n| r * n).collect(),
+        ..scene.clone()
+    }
+}
+
+#[test]
+fn wall_leaks_count_the_points_beyond_each_wall() {
+    let scene = turned(&room_scene(), -20.0);
+    let k = orientation_at(-20.0);
+    let cells = YawCells::new(&scene, k);
+    let (a, b) = room_axes(k);
+    // The cell centre of each point, directly (5 cm cells centred at 50·i + 25 mm).
+    let centre = |mm: i32| mm.div_euclid(50) * 50 + 25;
+    let centres: Vec<(i32, i32)> =
+        scene.points.iter().map(|p| (centre(to_mm(p.truncate().dot(a))), centre(to_mm(p.truncate().dot(b))))).collect();
+    for room_box in [
+        RoomBox { yaw_index: k as u32, u0: -2000, u1: 2000, v0: 0, v1: 5000 },
+        RoomBox { yaw_index: k as u32, u0: -1500, u1: 1200, v0: -300, v1: 3000 },
+        RoomBox { yaw_index: k as u32, u0: -2400, u1: 100, v0: 1000, v1: 4700 },
+    ] {
+        let count = |f: &dyn Fn(i32, i32) -> bool| centres.iter().filter(|&&(u, v)| f(u, v)).count() as u64;
+        let direct = [
+            count(&|_, v| v > room_box.v1 + 150),
+            count(&|u, _| u < room_box.u0 - 150),
+            count(&|_, v| v < room_box.v0 - 150),
+            count(&|u, _| u > room_box.u1 + 150),
+        ];
+        assert_eq!(cells.points_beyond_walls(&room_box), direct, "{room_box:?}");
+        let features = box_features(&cells, &room_box);
+        for (wall, &n) in direct.iter().enumerate() {
+            let expected = (n as f64 / scene.points.len() as f64).sqrt();
+            assert_eq!(features[ORIENTATION_FEATURES + wall], expected);
+        }
+    }
+    // The hand case: with the front wall at 3 m the front wall's 2 000 points (at 5 m) are beyond it, and
+    // with the room's own walls nothing is.
+    let walls_at_3 = RoomBox { yaw_index: k as u32, u0: -2100, u1: 2100, v0: 0, v1: 3000 };
+    assert!(cells.points_beyond_walls(&walls_at_3)[0] >= 2000);
+    let own = RoomBox { yaw_index: k as u32, u0: -2100, u1: 2100, v0: 0, v1: 5100 };
+    assert_eq!(cells.points_beyond_walls(&own), [0, 0, 0, 0]);
+}
+
+#[test]
+fn orientation_features_follow_the_walls_normals() {
+    // Every wall normal of the room scene is ±x or ±y: at yaw φ (|φ| ≤ 45°) each contributes cos^p φ, so
+    // relative to the peak at the walls' orientation the broad feature is cos⁸ φ and the sharp one cos⁶⁴ φ.
+    for walls_deg in [0.0f32, 20.0, -36.0] {
+        let scene = turned(&room_scene(), walls_deg);
+        let evidence = orientation_features(&scene);
+        let peak = orientation_at(walls_deg);
+        assert_eq!(evidence[peak], [1.0, 1.0, 1.0], "walls at {walls_deg}°");
+        assert_eq!(dominant_orientation(&scene), peak);
+        for (k, o) in evidence.iter().enumerate() {
+            let off = yaw_difference_mod_90(orientation_yaw(k), walls_deg.to_radians()).cos() as f64;
+            assert!((o[0] as f64 - off.powi(8)).abs() < 1e-4, "{walls_deg}° k={k}: {o:?}");
+            assert!((o[1] as f64 - off.powi(64)).abs() < 1e-4, "{walls_deg}° k={k}: {o:?}");
+            assert_eq!(o[2], if k == peak { 1.0 } else { 0.0 });
+        }
+    }
+    // Hand values 10° off the walls: cos⁸ 10° = 0.8847, cos⁶⁴ 10° = 0.3754.
+    let o = orientation_features(&room_scene())[orientation_at(10.0)];
+    assert!((o[0] - 0.8847).abs() < 1e-3 && (o[1] - 0.3754).abs() < 1e-3, "{o:?}");
+    // Without wall normals (only the floor) there is no evidence.
+    let mut floor_only = room_scene();
+    floor_only.normals.iter_mut().for_each(|n| *n = Vec3::Z);
+    assert!(orientation_features(&floor_only).iter().all(|o| *o == [0.0; ORIENTATION_FEATURES]));
 }
 
 #[test]

@@ -24,12 +24,14 @@ fn ok(args: &[&str]) -> String {
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
-fn rejected(args: &[&str], needle: &str) {
+/// Runs a command that must fail with exit code 1 and `needle` in its error; returns the error text.
+fn rejected(args: &[&str], needle: &str) -> String {
     let out = run(args);
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
     assert_eq!(out.status.code(), Some(1), "{args:?} should fail: {err}");
     assert!(!err.contains("panicked"), "{args:?} panicked: {err}");
     assert!(err.contains(needle), "{args:?}: expected '{needle}' in: {err}");
+    err
 }
 
 fn json(path: &Path) -> Value {
@@ -58,7 +60,9 @@ fn train_layout_eval_and_detect_end_to_end() {
     ok(&["train-layout", "--data", &p("data"), "--out", &p("layout.json"), "--max-iterations", "3"]);
     let model = json(&dir.path().join("layout.json"));
     assert_eq!(model["format"], "cog-gpu-layout-model");
-    assert_eq!(model["weights"].as_array().unwrap().len(), 288);
+    // 288 Manhattan-voxel weights and 7 box-feature weights.
+    assert_eq!(model["weights"].as_array().unwrap().len(), 295);
+    assert_eq!(model["version"], 2);
     assert_eq!(model["provenance"]["data_seed"], 5);
 
     ok(&["layout", &p("data"), "--model", &p("layout.json"), "--out", &p("out"), "--ply"]);
@@ -122,15 +126,23 @@ fn bad_layout_inputs_are_errors_naming_the_file() {
     std::fs::write(dir.path().join("garbage.json"), "{not json").unwrap();
     rejected(&["layout", "--model", &p("garbage.json"), "--out", &p("out")], "garbage.json");
     let short =
-        r#"{"format": "cog-gpu-layout-model", "version": 1, "discretisation": "manhattan", "weights": [1.0, 2.0]}"#;
+        r#"{"format": "cog-gpu-layout-model", "version": 2, "discretisation": "manhattan", "weights": [1.0, 2.0]}"#;
     std::fs::write(dir.path().join("short.json"), short).unwrap();
     rejected(&["layout", "--model", &p("short.json"), "--out", &p("out")], "short.json");
     let nan = format!(
-        r#"{{"format": "cog-gpu-layout-model", "version": 1, "discretisation": "cubical", "weights": [{}]}}"#,
-        vec!["1e30"; 384].join(",")
+        r#"{{"format": "cog-gpu-layout-model", "version": 2, "discretisation": "cubical", "weights": [{}]}}"#,
+        vec!["1e30"; 391].join(",")
     );
     std::fs::write(dir.path().join("huge.json"), nan).unwrap();
     rejected(&["layout", "--model", &p("huge.json"), "--out", &p("out")], "huge.json");
+    // A version-1 file (before the orientation features) is refused with the way out.
+    let old = format!(
+        r#"{{"format": "cog-gpu-layout-model", "version": 1, "discretisation": "manhattan", "weights": [{}]}}"#,
+        vec!["0.5"; 288].join(",")
+    );
+    std::fs::write(dir.path().join("old.json"), old).unwrap();
+    let stderr = rejected(&["layout", "--model", &p("old.json"), "--out", &p("out")], "old.json");
+    assert!(stderr.contains("train-layout"), "{stderr}");
     rejected(&["eval", "--layout", "--data", &p("nowhere"), "--detections", &p("out")], "nowhere");
     rejected(&["train-layout", "--data", &p("nowhere"), "--out", &p("m.json")], "nowhere");
 }

@@ -8,36 +8,15 @@
 //! the room); floor and ceiling are the frame's.
 
 use super::voxels::CELL_MM;
-use super::{room_axes, to_mm, LayoutScene, RoomBox, ORIENTATIONS};
+use super::{orientation, room_axes, to_mm, LayoutScene, RoomBox};
 
 /// Quantile of the room-frame coordinates that places the near walls (and `1 −` it the far ones).
 pub const WALL_QUANTILE: f64 = 0.01;
 
-/// Orientation whose axes best align with the near-horizontal normals.
+/// Orientation whose axes best align with the near-horizontal normals ([`orientation::alignment`] with
+/// [`orientation::BROAD_POWER`], the first maximum).
 pub fn dominant_orientation(scene: &LayoutScene) -> usize {
-    let alignment = |k: usize| -> f64 {
-        let (a, b) = room_axes(k);
-        scene
-            .normals
-            .iter()
-            .filter(|n| n.z.abs() < 0.5)
-            .map(|n| {
-                let h = n.truncate().normalize_or_zero();
-                (h.dot(a).abs().max(h.dot(b).abs()) as f64).powi(8)
-            })
-            .sum()
-    };
-    // First maximum: deterministic.
-    (0..ORIENTATIONS)
-        .fold((0, f64::MIN), |best, k| {
-            let s = alignment(k);
-            if s > best.1 {
-                (k, s)
-            } else {
-                best
-            }
-        })
-        .0
+    orientation::dominant(&orientation::alignment(scene, orientation::BROAD_POWER))
 }
 
 /// The heuristic room of a frame.

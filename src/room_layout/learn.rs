@@ -129,7 +129,8 @@ impl SeparationOracle for LayoutOracle {
         let e = &self.examples[example];
         let tables = ScoringTables::new(self.discretisation, &e.cells, w);
         let scores = super::voxels::scores_cpu(&e.cells, &tables, &e.boxes);
-        let best = argmax(scores.iter().zip(&e.losses).map(|(&s, &l)| l as f64 + s as f64 / tables.scale));
+        let totals = tables.totals(&e.cells, &e.boxes, &scores);
+        let best = argmax(totals.iter().zip(&e.losses).map(|(&t, &l)| l as f64 + t as f64 / tables.scale));
         let b = &e.boxes[best];
         Ok(Constraint {
             loss: e.losses[best] as f64,

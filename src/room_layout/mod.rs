@@ -3,7 +3,8 @@
 //! structural-SVM weight vector.
 //!
 //! Flow: [`LayoutScene::from_frame`] (a subsampled upright point cloud with normals, floor and ceiling) →
-//! [`hypotheses`] (cuboids per orientation) → [`voxels::YawCells`] (the points binned once per orientation)
+//! [`hypotheses`] (cuboids per orientation) → [`voxels::YawCells`] (the points binned once per orientation,
+//! with the orientation's [`orientation`] features)
 //! → [`voxels::scores_cpu`] or the GPU twin `crate::gpu::room_layout` (chosen by the caller, see
 //! [`predict`]) → the best hypothesis. Evaluation:
 //! [`free_space`]; learning: [`learn`]; the model file: [`model`]; the plane-fitting baseline: [`baseline`].
@@ -46,6 +47,7 @@ pub mod baseline;
 pub mod free_space;
 pub mod learn;
 pub mod model;
+pub mod orientation;
 pub mod output;
 pub mod voxels;
 
@@ -268,7 +270,8 @@ pub fn orientation_hypotheses(scene: &LayoutScene, cells: &voxels::YawCells) -> 
     out
 }
 
-/// Every orientation's binned points and hypotheses, orientation by orientation.
+/// Every orientation's binned points (with its orientation features) and hypotheses, orientation by
+/// orientation.
 pub fn hypotheses(scene: &LayoutScene) -> (Vec<voxels::YawCells>, Vec<RoomBox>) {
     use rayon::prelude::*;
     let per_yaw: Vec<(voxels::YawCells, Vec<RoomBox>)> = (0..ORIENTATIONS)
@@ -279,9 +282,11 @@ pub fn hypotheses(scene: &LayoutScene) -> (Vec<voxels::YawCells>, Vec<RoomBox>) 
             (cells, boxes)
         })
         .collect();
+    let evidence = orientation::orientation_features(scene);
     let mut all_cells = Vec::with_capacity(ORIENTATIONS);
     let mut all_boxes = Vec::new();
-    for (cells, boxes) in per_yaw {
+    for ((mut cells, boxes), features) in per_yaw.into_iter().zip(evidence) {
+        cells.orientation = features;
         all_cells.push(cells);
         all_boxes.extend(boxes);
     }
@@ -294,8 +299,9 @@ pub fn hypotheses(scene: &LayoutScene) -> (Vec<voxels::YawCells>, Vec<RoomBox>) 
 /// its data, imports neither `gpu` nor `backend` (imports flow one way: `room_layout` → `gpu` → `backend`).
 pub type ScoreHypotheses<'a> = dyn Fn(&[voxels::YawCells], &voxels::ScoringTables, &[RoomBox]) -> Result<Vec<i32>> + 'a;
 
-/// Scores every hypothesis of a frame with a model's weights through `score_hypotheses` and returns the best
-/// (the first of the highest integer score, so the answer is the same on every backend).
+/// Scores every hypothesis of a frame with a model's weights — the voxel part through `score_hypotheses`,
+/// plus the box features' term ([`voxels::ScoringTables::total`]) — and returns the best (the first of the
+/// highest integer score, so the answer is the same on every backend).
 pub fn predict(
     scene: &LayoutScene,
     model: &model::LayoutModel,
@@ -310,12 +316,13 @@ pub fn predict(
     if scores.len() != boxes.len() {
         return Err(Error::Input(format!("{} layout scores for {} hypotheses", scores.len(), boxes.len())));
     }
-    let best = (0..boxes.len()).fold(0, |best, i| if scores[i] > scores[best] { i } else { best });
+    let totals = tables.totals(&cells, &boxes, &scores);
+    let best = (0..boxes.len()).fold(0, |best, i| if totals[i] > totals[best] { i } else { best });
     let room_box = boxes[best];
     Ok(PredictedLayout {
         room_box,
         room: room_box.to_room(scene.floor, scene.ceiling),
-        score: scores[best] as f64 / tables.scale,
+        score: totals[best] as f64 / tables.scale,
         hypotheses: boxes.len(),
     })
 }

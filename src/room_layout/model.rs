@@ -2,8 +2,9 @@
 //! (`crate::model::read_models_dir` skips it by name, [`crate::model::LAYOUT_MODEL_FILE`]).
 //!
 //! ```json
-//! {"format": "cog-gpu-layout-model", "version": 1, "discretisation": "manhattan" | "cubical",
-//!  "weights": [288 or 384 numbers, in the order of room_layout::voxels::feature_index],
+//! {"format": "cog-gpu-layout-model", "version": 2, "discretisation": "manhattan" | "cubical",
+//!  "weights": [295 or 391 numbers: the voxel weights in the order of room_layout::voxels::feature_index,
+//!              then the 7 box-feature weights of room_layout::voxels::box_features],
 //!  "provenance": {free-form: the training command, data, seeds, counts, solver figures}}
 //! ```
 
@@ -13,7 +14,9 @@ use super::voxels::Discretisation;
 use crate::error::{Error, Result};
 
 pub const FORMAT: &str = "cog-gpu-layout-model";
-pub const VERSION: u32 = 1;
+/// Version 2 added the box features (`room_layout::voxels::box_features`); a version-1 file has none and is
+/// refused (retrain it with `cog-gpu train-layout`).
+pub const VERSION: u32 = 2;
 /// Largest |weight| accepted (a larger one is no trained model and would overflow the fixed-point scores).
 pub const MAX_WEIGHT: f32 = 1e6;
 
@@ -38,7 +41,11 @@ impl LayoutModel {
             return Err(format!("format is '{}', expected '{FORMAT}'", self.format));
         }
         if self.version != VERSION {
-            return Err(format!("version {} (this build reads version {VERSION})", self.version));
+            return Err(format!(
+                "version {} (this build reads version {VERSION}, which adds the box features; retrain the \
+                 model with `cog-gpu train-layout`)",
+                self.version
+            ));
         }
         let dim = self.discretisation.dim();
         if self.weights.len() != dim {

@@ -29,18 +29,32 @@
 //! ceiling, table tops) and **other**; for cubical regions relative to the room axes (along a, along b,
 //! horizontal, other). The point density is the sum of the four classes, so a linear model has it without
 //! a separate entry. COG (image gradients) is not used by the layout (not implemented).
-//! Feature index: `(region·6 + layer)·4 + class`; Manhattan 12·6·4 = 288 dimensions, cubical 16·6·4 = 384.
+//! Feature index: `(region·6 + layer)·4 + class`; Manhattan 12·6·4 = 288 voxel dimensions, cubical 16·6·4 =
+//! 384. After them come the [`BOX_FEATURES`] = 7 *box features*, computed per hypothesis on the CPU rather
+//! than summed by the kernel: the 3 orientation features of [`super::orientation`] (the same for every
+//! hypothesis of one orientation), then 4 **wall leaks**, per wall (front, left, back, right)
+//! `sqrt(n_w / N)` with `n_w` the points whose cell centre lies more than the band (150 mm) beyond the wall's
+//! line (the whole half-plane, corners included) and `N` the frame's points. The exterior regions hold the
+//! same points linearly; the square root makes a few points behind a wall cost much more than their share
+//! (our choice: the first model put walls on the fronts of counters and wardrobes, leaving the strip of
+//! real wall visible above them outside the room). 295 and 391 dimensions in all.
 //!
 //! # Scoring (the GPU kernel's twin)
 //! `score(h) = w·φ(h)` is a sum over cells of a per-(cell, region) contribution, tabulated once per frame
 //! and weight vector ([`ScoringTables`]) in fixed point: `round(x·2^e)` as i32, with `2^e` the largest
 //! power of two such that, for every orientation, `Σ_cells max_region |x|·2^e ≤ 2^30`. A hypothesis's score
-//! is then an i32 sum that cannot overflow and does not depend on summation order; the real score is
-//! `sum / 2^e`. [`score_box`] is written like `shaders/room_layout.wgsl`.
+//! is then an i32 sum that cannot overflow and does not depend on summation order. The box features add
+//! the integer `round(w_box·b(h)·2^e)` (i64, on the CPU: [`ScoringTables::total`]); the real score is
+//! `(sum + that) / 2^e`. [`score_box`] is written like `shaders/room_layout.wgsl`.
 
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
+pub use super::orientation::ORIENTATION_FEATURES;
+/// Wall-leak features per hypothesis (see the module doc).
+pub const WALL_LEAK_FEATURES: usize = 4;
+/// Features of a hypothesis computed on the CPU: orientation, then wall leaks.
+pub const BOX_FEATURES: usize = ORIENTATION_FEATURES + WALL_LEAK_FEATURES;
 use super::{room_axes, to_mm, LayoutScene, RoomBox};
 
 /// Ground-cell side, millimetres.
@@ -87,9 +101,14 @@ impl Discretisation {
         }
     }
 
-    /// Length of the feature vector.
-    pub fn dim(self) -> usize {
+    /// Length of the voxel part of the feature vector (the box features follow it).
+    pub fn voxel_dim(self) -> usize {
         self.regions() as usize * CELL_BINS
+    }
+
+    /// Length of the feature vector: the voxel features, then the box features.
+    pub fn dim(self) -> usize {
+        self.voxel_dim() + BOX_FEATURES
     }
 
     pub fn name(self) -> &'static str {
@@ -196,6 +215,9 @@ pub struct YawCells {
     pub bins: Vec<[u16; CELL_BINS]>,
     /// Points of the frame (all of them land in some cell).
     pub total_points: u32,
+    /// The orientation's features ([`super::orientation::orientation_features`]): filled by
+    /// [`super::hypotheses`], which sees every orientation; 0 from [`YawCells::new`] alone.
+    pub orientation: [f32; ORIENTATION_FEATURES],
     /// Dense summed-area table of point counts over cells `origin .. origin + size`, `(size + 1)²` entries.
     origin: [i32; 2],
     size: [usize; 2],
@@ -242,17 +264,43 @@ impl YawCells {
                     - table[(row - 1) * stride + col - 1];
             }
         }
-        YawCells { yaw_index: yaw_index as u32, centres, bins, total_points: keyed.len() as u32, origin, size, table }
+        YawCells {
+            yaw_index: yaw_index as u32,
+            centres,
+            bins,
+            total_points: keyed.len() as u32,
+            orientation: [0.0; ORIENTATION_FEATURES],
+            origin,
+            size,
+            table,
+        }
     }
 
     /// Points whose cell centre lies inside the box's footprint (walls inclusive).
     pub fn points_inside(&self, b: &RoomBox) -> u64 {
+        self.points_in([b.u0, b.u1], [b.v0, b.v1])
+    }
+
+    /// Per wall (front, left, back, right), the points whose cell centre lies more than [`BAND_MM`] beyond
+    /// the wall's line, on its outer side.
+    pub fn points_beyond_walls(&self, b: &RoomBox) -> [u64; 4] {
+        const FAR: i32 = i32::MAX / 4;
+        [
+            self.points_in([-FAR, FAR], [b.v1 + BAND_MM + 1, FAR]),
+            self.points_in([-FAR, b.u0 - BAND_MM - 1], [-FAR, FAR]),
+            self.points_in([-FAR, FAR], [-FAR, b.v0 - BAND_MM - 1]),
+            self.points_in([b.u1 + BAND_MM + 1, FAR], [-FAR, FAR]),
+        ]
+    }
+
+    /// Points whose cell centre `(u, v)` lies in `[u_lo, u_hi] × [v_lo, v_hi]` (millimetres, inclusive).
+    fn points_in(&self, [u_lo, u_hi]: [i32; 2], [v_lo, v_hi]: [i32; 2]) -> u64 {
         let clamp = |lo: i32, hi: i32, axis: usize| -> Option<(usize, usize)> {
             let first = (first_cell_at_or_after(lo) - self.origin[axis]).max(0);
             let last = (cell_index(hi - CELL_MM / 2) - self.origin[axis]).min(self.size[axis] as i32 - 1);
-            (first <= last).then_some((first as usize, last as usize + 1))
+            (first <= last).then(|| (first as usize, last as usize + 1))
         };
-        let (Some((i0, i1)), Some((j0, j1))) = (clamp(b.u0, b.u1, 0), clamp(b.v0, b.v1, 1)) else { return 0 };
+        let (Some((i0, i1)), Some((j0, j1))) = (clamp(u_lo, u_hi, 0), clamp(v_lo, v_hi, 1)) else { return 0 };
         let stride = self.size[0] + 1;
         let at = |row: usize, col: usize| self.table[row * stride + col] as i64;
         (at(j1, i1) - at(j0, i1) - at(j1, i0) + at(j0, i0)) as u64
@@ -276,7 +324,24 @@ pub fn features(disc: Discretisation, cells: &YawCells, room_box: &RoomBox) -> V
             }
         }
     }
+    let voxel_dim = disc.voxel_dim();
+    for (j, x) in box_features(cells, room_box).into_iter().enumerate() {
+        out[voxel_dim + j] = x;
+    }
     out.into_iter().map(|x| x as f32).collect()
+}
+
+/// The box features of one hypothesis (see the module doc): orientation, then wall leaks.
+pub fn box_features(cells: &YawCells, room_box: &RoomBox) -> [f64; BOX_FEATURES] {
+    let mut out = [0.0; BOX_FEATURES];
+    for (j, &o) in cells.orientation.iter().enumerate() {
+        out[j] = o as f64;
+    }
+    let total = cells.total_points.max(1) as f64;
+    for (j, n) in cells.points_beyond_walls(room_box).into_iter().enumerate() {
+        out[ORIENTATION_FEATURES + j] = (n as f64 / total).sqrt();
+    }
+    out
 }
 
 /// Index of (region, layer, feature class) in the feature vector.
@@ -292,6 +357,8 @@ pub struct ScoringTables {
     /// Real score = integer score / `scale`.
     pub scale: f64,
     pub contributions: Vec<Vec<i32>>,
+    /// The weights of the box features (the last [`BOX_FEATURES`] of the weight vector).
+    pub box_weights: [f64; BOX_FEATURES],
 }
 
 impl ScoringTables {
@@ -323,7 +390,22 @@ impl ScoringTables {
             .fold(0f64, f64::max);
         let scale = if bound > 0.0 { 2f64.powi((SCORE_BUDGET / bound).log2().floor() as i32) } else { 1.0 };
         let contributions = real.iter().map(|yaw| yaw.iter().map(|x| (x * scale).round() as i32).collect()).collect();
-        ScoringTables { discretisation: disc, scale, contributions }
+        let mut box_weights = [0.0; BOX_FEATURES];
+        box_weights.copy_from_slice(&w[disc.voxel_dim()..disc.dim()]);
+        ScoringTables { discretisation: disc, scale, contributions, box_weights }
+    }
+
+    /// The whole fixed-point score of `room_box` given its voxel score (the kernel's or [`score_box`]'s) and
+    /// its orientation's cells: the voxel score plus `round(w_box·b(h)·scale)`. The real score is this divided
+    /// by `scale`.
+    pub fn total(&self, cells: &YawCells, room_box: &RoomBox, voxel_score: i32) -> i64 {
+        let x: f64 = box_features(cells, room_box).iter().zip(&self.box_weights).map(|(&b, &w)| b * w).sum();
+        voxel_score as i64 + (x * self.scale).round() as i64
+    }
+
+    /// [`ScoringTables::total`] of every hypothesis, given their voxel scores (in the same order).
+    pub fn totals(&self, cells: &[YawCells], boxes: &[RoomBox], voxel_scores: &[i32]) -> Vec<i64> {
+        boxes.iter().zip(voxel_scores).map(|(b, &s)| self.total(&cells[b.yaw_index as usize], b, s)).collect()
     }
 }
 
