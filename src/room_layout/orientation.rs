@@ -57,21 +57,13 @@ pub fn orientation_features(scene: &LayoutScene) -> Vec<[f32; ORIENTATION_FEATUR
     let broad = alignment(scene, BROAD_POWER);
     let sharp = alignment(scene, SHARP_POWER);
     let best = dominant(&broad);
-    let relative = |values: &[f64], k: usize| {
-        let max = values.iter().copied().fold(0.0, f64::max);
-        if max > 0.0 {
-            (values[k] / max) as f32
-        } else {
-            0.0
-        }
-    };
+    // Every wall normal adds a positive amount to every orientation's alignment, so the largest broad
+    // alignment is 0 exactly when there is no wall normal, and then the sharp one is 0 too.
+    let (broad_max, sharp_max) = (broad[best], sharp.iter().copied().fold(0.0, f64::max));
+    if broad_max <= 0.0 || sharp_max <= 0.0 {
+        return vec![[0.0; ORIENTATION_FEATURES]; ORIENTATIONS];
+    }
     (0..ORIENTATIONS)
-        .map(|k| {
-            if broad[best] > 0.0 {
-                [relative(&broad, k), relative(&sharp, k), if k == best { 1.0 } else { 0.0 }]
-            } else {
-                [0.0; ORIENTATION_FEATURES]
-            }
-        })
+        .map(|k| [(broad[k] / broad_max) as f32, (sharp[k] / sharp_max) as f32, if k == best { 1.0 } else { 0.0 }])
         .collect()
 }

@@ -51,11 +51,12 @@ use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
 pub use super::orientation::ORIENTATION_FEATURES;
+use super::{room_axes, to_mm, LayoutScene, RoomBox};
+
 /// Wall-leak features per hypothesis (see the module doc).
 pub const WALL_LEAK_FEATURES: usize = 4;
 /// Features of a hypothesis computed on the CPU: orientation, then wall leaks.
 pub const BOX_FEATURES: usize = ORIENTATION_FEATURES + WALL_LEAK_FEATURES;
-use super::{room_axes, to_mm, LayoutScene, RoomBox};
 
 /// Ground-cell side, millimetres.
 pub const CELL_MM: i32 = 50;
