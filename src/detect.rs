@@ -15,15 +15,18 @@
 use std::collections::BTreeMap;
 use std::time::Instant;
 
+use glam::Vec3;
 use image::RgbImage;
+use rayon::prelude::*;
 
 use crate::backend::Backend;
-use crate::draw::{category_colour, contrasting, draw_cuboid_with, draw_label};
+use crate::draw::{category_colour, contrasting, draw_cuboid_with, draw_label, shade_convex_polygon};
 use crate::error::{Error, Result};
 use crate::eval::{Detection, FrameDetections};
 use crate::features::budget;
 use crate::features::fast::FastEngine;
 use crate::features::hypotheses::{sliding_window, FrameYaws, WindowOptions, YawAnchor};
+use crate::features::surface::{best_slice, refined_surface_height, slice_at, surface_height, SurfaceEngine};
 use crate::features::{FeatureScene, Hypothesis, Preprocessed};
 use crate::frame::Frame;
 use crate::geometry::Camera;
@@ -105,8 +108,9 @@ impl Default for FastEngines<'_> {
     }
 }
 
-/// Scores of `hypotheses` for one model (`w·φ + bias`), with the model's feature path; fast-path engines
-/// come from (and go into) `engines`.
+/// Scores of `hypotheses` for one model (`w·φ + bias`, plus `max_h` of the surface part for a model with
+/// latent support surfaces), with the model's feature path; fast-path engines come from (and go into)
+/// `engines`.
 pub fn score_hypotheses<'a>(
     scene: &'a FeatureScene,
     model: &Model,
@@ -114,12 +118,39 @@ pub fn score_hypotheses<'a>(
     backend: Backend,
     engines: &mut FastEngines<'a>,
 ) -> Result<Vec<f32>> {
+    Ok(score_hypotheses_with_slices(scene, model, hypotheses, backend, engines)?.0)
+}
+
+/// [`score_hypotheses`] and, for a model with latent support surfaces, each hypothesis's best slice
+/// ([`crate::features::surface::best_slice`]). The surface part is scored on the CPU on either backend
+/// (the slices' tables come from the fast path's CPU engine; no WGSL twin yet).
+pub fn score_hypotheses_with_slices<'a>(
+    scene: &'a FeatureScene,
+    model: &Model,
+    hypotheses: &[Hypothesis],
+    backend: Backend,
+    engines: &mut FastEngines<'a>,
+) -> Result<(Vec<f32>, Option<Vec<u8>>)> {
     let weights = std::slice::from_ref(&model.weights);
-    let scores = match model.features.path {
+    let mut scores = match model.features.path {
         FeaturePath::Fast => backend.fast_scores(engines.get(scene, model), hypotheses, weights),
         FeaturePath::Exact => backend.scores(scene, &model.layout, hypotheses, weights)?.0,
     };
-    Ok(scores.into_iter().map(|s| s + model.bias).collect())
+    scores.iter_mut().for_each(|s| *s += model.bias);
+    let slices = model.surface.as_ref().map(|surface| {
+        let engine = SurfaceEngine::new(scene, model.layout.groups, model.features.fast_options());
+        engine
+            .slice_scores(hypotheses, surface)
+            .iter()
+            .zip(scores.iter_mut())
+            .map(|(slice_scores, score)| {
+                let (h, value) = best_slice(slice_scores);
+                *score += value;
+                h as u8
+            })
+            .collect()
+    });
+    Ok((scores, slices))
 }
 
 /// Detects every model's category in `frame`.
@@ -255,7 +286,7 @@ pub fn detect_preprocessed_timed(
             engines.get(scene, model);
             stages.lattices_s += lap();
         }
-        let scores = score_hypotheses(scene, model, hypotheses, backend, &mut engines)?;
+        let (scores, slices) = score_hypotheses_with_slices(scene, model, hypotheses, backend, &mut engines)?;
         stages.score_s += lap();
         stages.hypotheses += hypotheses.len();
         if let Some(n) = scores.iter().position(|s| !s.is_finite()) {
@@ -272,15 +303,25 @@ pub fn detect_preprocessed_timed(
             order.truncate(limit);
         }
         order.sort_by(by_score);
-        candidates.extend(
-            order.into_iter().map(|n| Detection::new(&model.category, &hypotheses[n].cuboid(scene), scores[n])),
-        );
+        candidates.extend(order.into_iter().map(|n| {
+            let mut detection = Detection::new(&model.category, &hypotheses[n].cuboid(scene), scores[n]);
+            if let Some(slices) = &slices {
+                detection.surface_z = Some(surface_height(&hypotheses[n], slices[n] as usize));
+            }
+            detection
+        }));
         stages.select_s += lap();
     }
     stages.tables_thread_s += engines.table_thread_seconds();
     let nms =
         NmsOptions { iou_threshold: options.nms_iou, max_detections: Some(options.max_per_category), top_k: None };
     let mut detections = nms_detections(&candidates, &nms);
+    // The survivors' surfaces, measured in their chosen slices (a few per category; every point visited).
+    detections.par_iter_mut().filter(|d| d.surface_z.is_some()).for_each(|d| {
+        let cuboid = d.cuboid();
+        let z = d.surface_z.unwrap_or(cuboid.centre.z);
+        d.surface_z = Some(refined_surface_height(&pre, &cuboid, slice_at(&cuboid, z)));
+    });
     calibrate(&mut detections, models);
     stages.nms_s += lap();
     Ok(FrameDetections { frame: name.to_string(), detections })
@@ -337,7 +378,16 @@ pub fn overlay(frame: &Frame, detections: &FrameDetections) -> RgbImage {
     let mut order: Vec<&Detection> = detections.detections.iter().collect();
     order.sort_by(|a, b| a.score.total_cmp(&b.score));
     for d in &order {
-        draw_cuboid_with(&mut image, &camera, &d.cuboid(), category_colour(&d.category), scale, 2 * scale + 1);
+        let cuboid = d.cuboid();
+        if let Some(z) = d.surface_z {
+            // The inferred support surface: the footprint at its height, shaded in the category's colour.
+            let corners: Option<Vec<_>> =
+                cuboid.corners()[..4].iter().map(|c| camera.project(Vec3::new(c.x, c.y, z))).collect();
+            if let Some(corners) = corners {
+                shade_convex_polygon(&mut image, &corners, category_colour(&d.category), 0.4);
+            }
+        }
+        draw_cuboid_with(&mut image, &camera, &cuboid, category_colour(&d.category), scale, 2 * scale + 1);
     }
     for d in &order {
         let cuboid = d.cuboid();

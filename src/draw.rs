@@ -42,6 +42,42 @@ pub fn fill_rect(img: &mut RgbImage, x: i64, y: i64, width: u32, height: u32, co
     }
 }
 
+/// Blends `colour` with weight `alpha` (0–1) into every pixel whose centre `(x + ½, y + ½)` lies inside the
+/// convex polygon `points` (either winding; on an edge counts as inside), clipped to the image. Used to
+/// shade a detection's support surface on the overlay.
+pub fn shade_convex_polygon(img: &mut RgbImage, points: &[Vec2], colour: Colour, alpha: f32) {
+    if points.len() < 3 || points.iter().any(|p| !p.is_finite()) {
+        return;
+    }
+    let lo = points.iter().fold(Vec2::splat(f32::INFINITY), |a, p| a.min(*p));
+    let hi = points.iter().fold(Vec2::splat(f32::NEG_INFINITY), |a, p| a.max(*p));
+    let x0 = (lo.x.floor() as i64).max(0);
+    let y0 = (lo.y.floor() as i64).max(0);
+    let x1 = (hi.x.ceil() as i64).min(img.width() as i64);
+    let y1 = (hi.y.ceil() as i64).min(img.height() as i64);
+    // Signed edge functions: inside when all have the same sign (or are zero).
+    let side = |p: Vec2, a: Vec2, b: Vec2| (b - a).perp_dot(p - a);
+    let alpha = alpha.clamp(0.0, 1.0);
+    for y in y0..y1 {
+        for x in x0..x1 {
+            let p = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+            let sides = (0..points.len()).map(|k| side(p, points[k], points[(k + 1) % points.len()]));
+            let (mut negative, mut positive) = (false, false);
+            for value in sides {
+                negative |= value < 0.0;
+                positive |= value > 0.0;
+            }
+            if negative && positive {
+                continue;
+            }
+            let pixel = img.get_pixel_mut(x as u32, y as u32);
+            for (channel, &c) in pixel.0.iter_mut().zip(&colour) {
+                *channel = (*channel as f32 * (1.0 - alpha) + c as f32 * alpha).round() as u8;
+            }
+        }
+    }
+}
+
 /// Outlines the `width × height` rectangle whose top-left pixel is `(x, y)` with lines `thickness` pixels
 /// wide, drawn inwards (the outline stays within the rectangle).
 pub fn draw_rect(img: &mut RgbImage, x: i64, y: i64, width: u32, height: u32, colour: Colour, thickness: u32) {

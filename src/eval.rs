@@ -47,6 +47,11 @@ pub struct Detection {
     /// is the calibrated `raw_score + context_score`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub context_score: Option<f32>,
+    /// For a model with latent support surfaces ([`crate::features::surface`]): the height (upright z,
+    /// metres, the frame's coordinates like `centre`) of the inferred support surface — the centre of the
+    /// best-scoring of the cuboid's seven horizontal slices.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub surface_z: Option<f32>,
 }
 
 impl Detection {
@@ -64,6 +69,7 @@ impl Detection {
             raw_score: None,
             first_stage_score: None,
             context_score: None,
+            surface_z: None,
         }
     }
 }
@@ -93,8 +99,14 @@ impl FrameDetections {
         let parsed: FrameDetections =
             serde_json::from_str(text).map_err(|e| Error::invalid(path, format!("not a detections file: {e}")))?;
         for (i, d) in parsed.detections.iter().enumerate() {
-            let finite =
-                d.centre.iter().chain(&d.size).chain([&d.yaw, &d.score]).chain(&d.raw_score).all(|v| v.is_finite());
+            let finite = d
+                .centre
+                .iter()
+                .chain(&d.size)
+                .chain([&d.yaw, &d.score])
+                .chain(&d.raw_score)
+                .chain(&d.surface_z)
+                .all(|v| v.is_finite());
             if !finite {
                 return Err(Error::invalid(path, format!("detections[{i}] has a non-finite number")));
             }
@@ -155,9 +167,29 @@ pub fn average_precision(
 ) -> PrecisionRecall {
     let positives: usize = ground_truth.iter().map(Vec::len).sum();
     let order = score_order(detections);
+    let true_positive: Vec<bool> =
+        match_in_order(detections, &order, ground_truth, iou_threshold).iter().map(Option::is_some).collect();
+    let (mut tp, mut precision, mut recall) = (0usize, Vec::new(), Vec::new());
+    for (k, &hit) in true_positive.iter().enumerate() {
+        tp += hit as usize;
+        precision.push(tp as f32 / (k + 1) as f32);
+        recall.push(if positives > 0 { tp as f32 / positives as f32 } else { 0.0 });
+    }
+    let ap = (positives > 0).then(|| interpolated_ap(&precision, &recall));
+    PrecisionRecall { precision, recall, true_positive, positives, ap }
+}
+
+/// The benchmark's matching (module doc): visiting `detections` in `order`, the ground-truth box (index
+/// into its image's list) each takes as a true positive, `None` for a false positive; in visiting order.
+fn match_in_order(
+    detections: &[ScoredBox],
+    order: &[usize],
+    ground_truth: &[Vec<Cuboid>],
+    iou_threshold: f32,
+) -> Vec<Option<usize>> {
     let mut taken: Vec<Vec<bool>> = ground_truth.iter().map(|g| vec![false; g.len()]).collect();
-    let mut true_positive = Vec::with_capacity(order.len());
-    for &d in &order {
+    let mut matches = Vec::with_capacity(order.len());
+    for &d in order {
         let det = &detections[d];
         let truths = ground_truth.get(det.image).map(Vec::as_slice).unwrap_or(&[]);
         let best = truths.iter().enumerate().map(|(g, truth)| (g, iou_3d(&det.cuboid, truth))).fold(
@@ -170,20 +202,28 @@ pub fn average_precision(
         let hit = match best {
             Some((g, iou)) if iou >= iou_threshold && !taken[det.image][g] => {
                 taken[det.image][g] = true;
-                true
+                Some(g)
             }
-            _ => false,
+            _ => None,
         };
-        true_positive.push(hit);
+        matches.push(hit);
     }
-    let (mut tp, mut precision, mut recall) = (0usize, Vec::new(), Vec::new());
-    for (k, &hit) in true_positive.iter().enumerate() {
-        tp += hit as usize;
-        precision.push(tp as f32 / (k + 1) as f32);
-        recall.push(if positives > 0 { tp as f32 / positives as f32 } else { 0.0 });
+    matches
+}
+
+/// For each of `boxes`, **in input order**, the ground-truth box of its image that it takes as a true
+/// positive under [`average_precision`]'s matching (`None` for a false positive).
+pub fn matched_truth_in_input_order(
+    boxes: &[ScoredBox],
+    ground_truth: &[Vec<Cuboid>],
+    iou_threshold: f32,
+) -> Vec<Option<usize>> {
+    let order = score_order(boxes);
+    let mut matched = vec![None; boxes.len()];
+    for (&n, hit) in order.iter().zip(match_in_order(boxes, &order, ground_truth, iou_threshold)) {
+        matched[n] = hit;
     }
-    let ap = (positives > 0).then(|| interpolated_ap(&precision, &recall));
-    PrecisionRecall { precision, recall, true_positive, positives, ap }
+    matched
 }
 
 /// The indices of `detections` in the order [`average_precision`] visits them: score descending, equal
@@ -441,4 +481,70 @@ pub fn precision_recall_plot(pr: &PrecisionRecall, title: &str, colour: crate::d
         previous_recall = r;
     }
     img
+}
+
+// ---------------------------------------------------------------------------------------------------------
+// Support surfaces
+
+/// How close the support surfaces inferred by a model with latent surfaces ([`Detection::surface_z`]) lie
+/// to the true ones, over the true positives of one category (the benchmark's matching at the given IoU).
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct SurfaceAccuracy {
+    pub category: String,
+    /// True positives, and of those the ones with an inferred surface and a known true one.
+    pub true_positives: usize,
+    pub measured: usize,
+    /// Of `measured`, those within `tolerance_m` of the nearest of the object's true support surfaces, and
+    /// of its main (first, topmost) one.
+    pub within_nearest: usize,
+    pub within_main: usize,
+    /// Median distance to the nearest true surface (metres).
+    pub median_error_m: Option<f32>,
+    pub tolerance_m: f32,
+}
+
+/// [`SurfaceAccuracy`] of `category`: `truth[i]` are image `i`'s annotated objects, `supports[i][k]` the
+/// true support-surface heights (upright z, the main one first; empty when unknown) of its object `k`, and
+/// `detections[i]` its detections.
+pub fn surface_accuracy(
+    truth: &[Vec<crate::frame::Object>],
+    supports: &[Vec<Vec<f32>>],
+    detections: &[Vec<Detection>],
+    category: &str,
+    iou_threshold: f32,
+    tolerance_m: f32,
+) -> SurfaceAccuracy {
+    let boxes = scored_boxes(detections, category);
+    let surfaces: Vec<Option<f32>> =
+        detections.iter().flat_map(|d| d.iter().filter(|d| d.category == category).map(|d| d.surface_z)).collect();
+    // Each image's true surfaces of the category's objects, in category_truth's order.
+    let true_surfaces: Vec<Vec<&[f32]>> = truth
+        .iter()
+        .enumerate()
+        .map(|(i, objects)| {
+            objects
+                .iter()
+                .enumerate()
+                .filter(|(_, o)| o.category == category)
+                .map(|(k, _)| supports.get(i).and_then(|s| s.get(k)).map_or(&[][..], Vec::as_slice))
+                .collect()
+        })
+        .collect();
+    let matched = matched_truth_in_input_order(&boxes, &category_truth(truth, category), iou_threshold);
+    let mut result = SurfaceAccuracy { category: category.to_string(), tolerance_m, ..Default::default() };
+    let mut errors = Vec::new();
+    for ((b, hit), surface) in boxes.iter().zip(&matched).zip(&surfaces) {
+        let Some(g) = hit else { continue };
+        result.true_positives += 1;
+        let heights = true_surfaces[b.image][*g];
+        let (Some(z), Some(&main)) = (surface, heights.first()) else { continue };
+        result.measured += 1;
+        let nearest = heights.iter().map(|h| (h - z).abs()).fold(f32::INFINITY, f32::min);
+        result.within_nearest += (nearest <= tolerance_m) as usize;
+        result.within_main += ((main - z).abs() <= tolerance_m) as usize;
+        errors.push(nearest);
+    }
+    errors.sort_by(f32::total_cmp);
+    result.median_error_m = (!errors.is_empty()).then(|| errors[errors.len() / 2]);
+    result
 }

@@ -14,8 +14,16 @@
 //!   "training": {free-form provenance: data, C, ε, iterations, seconds, ...},
 //!   "calibration": {"a": 2.1, "b": -1.3, "detections": 5210, "true_positives": 212, "iou": 0.25,
 //!                   "data": "...", "frames": 150}   (optional, written by `cog-gpu calibrate`)
+//!   "surface": {"slice": [875 numbers], "indicator": [7 numbers]}   (version 2 only)
 //! }
 //! ```
+//!
+//! **Version 2** is a model with latent support surfaces (paper §4.1, [`crate::features::surface`]): its
+//! `surface` holds `w_slice` (25 voxels × 35 features of one horizontal slice of a 5×5×7 grid of the
+//! cuboid, in the order of [`crate::features::surface`]) and the seven height biases `u_h`, and a
+//! hypothesis scores `weights · φ + bias + max_h (w_slice · φ_surface(h) + u_h)`; detections report the
+//! best slice's height. A version-1 file has no `surface`; a build that reads only version 1 refuses a
+//! version-2 file instead of silently ignoring its surface.
 //!
 //! The raw score of a hypothesis is `weights · φ + bias`; detection drops hypotheses whose raw score is
 //! below `threshold`. With a `calibration` ([`crate::calibration`]), a detection's reported `score` is
@@ -39,6 +47,7 @@ use crate::category::{normalise_name, CATEGORIES};
 use crate::error::{Error, Result};
 use crate::features::fast::FastOptions;
 use crate::features::hypotheses::YawAnchor;
+use crate::features::surface::SurfaceWeights;
 /// The weight bounds live with the weight vectors' definition ([`crate::features::weights`]).
 pub use crate::features::weights::{check_weight_magnitudes, MAX_WEIGHT};
 use crate::features::{FeatureLayout, SizeQuantiles};
@@ -46,6 +55,8 @@ use crate::limits::{check_step, check_subdivisions, MAX_OBJECT_SIZE_M, MIN_OBJEC
 
 pub const MODEL_FORMAT: &str = "cog-gpu-model";
 pub const MODEL_VERSION: u32 = 1;
+/// The version of a model with latent support surfaces (see the module doc).
+pub const MODEL_VERSION_SURFACES: u32 = 2;
 /// Default detection threshold (see the module doc).
 pub const DEFAULT_THRESHOLD: f32 = 0.0;
 
@@ -114,6 +125,9 @@ pub struct Model {
     /// ([`crate::calibration`]); `null` until then (detections then report the raw score).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub calibration: Option<Calibration>,
+    /// The latent support surface's weights (version 2; see the module doc).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub surface: Option<SurfaceWeights>,
 }
 
 fn default_threshold() -> f32 {
@@ -145,9 +159,18 @@ impl Model {
             weights,
             training,
             calibration: None,
+            surface: None,
         };
         model.check().map_err(Error::Input)?;
         Ok(model)
+    }
+
+    /// The model with latent support surfaces (version 2), checked.
+    pub fn with_surface(mut self, surface: SurfaceWeights) -> Result<Model> {
+        self.version = MODEL_VERSION_SURFACES;
+        self.surface = Some(surface);
+        self.check().map_err(Error::Input)?;
+        Ok(self)
     }
 
     /// The hypothesis sizes (45 for the paper's quantiles).
@@ -160,11 +183,22 @@ impl Model {
         if self.format != MODEL_FORMAT {
             return Err(format!("format is '{}', expected '{MODEL_FORMAT}'", self.format));
         }
-        if self.version != MODEL_VERSION {
-            return Err(format!(
-                "version {} is not supported (this build reads version {MODEL_VERSION})",
-                self.version
-            ));
+        match (self.version, &self.surface) {
+            (MODEL_VERSION, None) | (MODEL_VERSION_SURFACES, Some(_)) => {}
+            (MODEL_VERSION, Some(_)) => {
+                return Err(format!(
+                    "a version-{MODEL_VERSION} model has no \"surface\" (version {MODEL_VERSION_SURFACES} has)"
+                ))
+            }
+            (MODEL_VERSION_SURFACES, None) => {
+                return Err(format!("a version-{MODEL_VERSION_SURFACES} model needs its \"surface\" weights"))
+            }
+            (version, _) => {
+                return Err(format!(
+                    "version {version} is not supported (this build reads versions {MODEL_VERSION} and \
+                     {MODEL_VERSION_SURFACES})"
+                ))
+            }
         }
         let (category, _) = normalise_name(&self.category);
         if category != self.category || !CATEGORIES.contains(&category.as_str()) {
@@ -201,6 +235,14 @@ impl Model {
         check_weight_magnitudes(&self.weights, self.bias)?;
         if let Some(calibration) = &self.calibration {
             calibration.validate()?;
+        }
+        if let Some(surface) = &self.surface {
+            SurfaceWeights::new(surface.slice.clone(), surface.indicator).map_err(|e| format!("surface: {e}"))?;
+            if !self.features.path.eq(&FeaturePath::Fast) {
+                return Err("a model with surfaces must use the fast feature path".into());
+            }
+            check_weight_magnitudes(&surface.slice, 0.0).map_err(|e| format!("surface.slice: {e}"))?;
+            check_weight_magnitudes(&surface.indicator, 0.0).map_err(|e| format!("surface.indicator: {e}"))?;
         }
         Ok(())
     }

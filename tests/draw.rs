@@ -205,3 +205,28 @@ fn palette_colours_are_distinct() {
     assert_eq!(category_colour("lamp"), CATEGORY_PALETTE[18]);
     assert_eq!(category_colour("not-a-category"), [255, 255, 255]);
 }
+
+/// Shading a convex polygon blends exactly the pixels whose centres lie inside it (edges included), by hand.
+#[test]
+fn shading_covers_the_pixel_centres_inside_the_polygon() {
+    use cog_gpu::draw::shade_convex_polygon;
+    // The square [2, 6) × [1, 4): pixel centres x + ½ in 2.5..5.5, y + ½ in 1.5..3.5 → 4 × 3 = 12 pixels.
+    let mut img = RgbImage::new(10, 8);
+    let square = [Vec2::new(2.0, 1.0), Vec2::new(6.0, 1.0), Vec2::new(6.0, 4.0), Vec2::new(2.0, 4.0)];
+    shade_convex_polygon(&mut img, &square, [200, 100, 0], 0.5);
+    let shaded = lit(&img);
+    assert_eq!(shaded.len(), 12);
+    assert!(shaded.iter().all(|&(x, y)| (2..6).contains(&x) && (1..4).contains(&y)));
+    assert_eq!(img.get_pixel(3, 2).0, [100, 50, 0], "half of the colour over black");
+    // The other winding, a triangle: (0,0), (0,4), (4,0) holds the centres with x + y ≤ 3 (10 pixels: 4+3+2+1).
+    let mut img = RgbImage::new(10, 8);
+    shade_convex_polygon(&mut img, &[Vec2::ZERO, Vec2::new(0.0, 4.0), Vec2::new(4.0, 0.0)], RED, 1.0);
+    let shaded = lit(&img);
+    assert_eq!(shaded.len(), 10, "{shaded:?}");
+    assert!(shaded.iter().all(|&(x, y)| x + y <= 3));
+    // Off the image or degenerate: nothing.
+    let mut img = RgbImage::new(10, 8);
+    shade_convex_polygon(&mut img, &[Vec2::new(20.0, 20.0), Vec2::new(30.0, 20.0), Vec2::new(30.0, 30.0)], RED, 1.0);
+    shade_convex_polygon(&mut img, &[Vec2::ZERO, Vec2::new(5.0, 5.0)], RED, 1.0);
+    assert!(lit(&img).is_empty());
+}

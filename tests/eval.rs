@@ -187,3 +187,38 @@ fn identical_frames_give_a_point_interval_and_paired_differences_cancel() {
     let full = evaluate_categories(&truth, &detections, &categories, 0.25)[0].pr.ap.unwrap();
     assert!(lo < full && full < hi, "{lo} < {full} < {hi}");
 }
+
+/// The support-surface report: true positives only (the benchmark's matching), the distance to the nearest
+/// and to the main true surface, and the median, on a hand-made case.
+#[test]
+fn surface_accuracy_by_hand() {
+    use cog_gpu::eval::surface_accuracy;
+    use cog_gpu::frame::Object;
+    let object = |x: f32| Object { category: "table".into(), label: None, cuboid: unit_box(x, 0.0) };
+    // Image 0: two tables (surfaces 0.75 main and 0.30 shelf; 0.70), a chair; image 1: one table (no
+    // support data).
+    let truth = vec![
+        vec![object(0.0), Object { category: "chair".into(), label: None, cuboid: unit_box(9.0, 0.0) }, object(5.0)],
+        vec![object(0.0)],
+    ];
+    let supports = vec![vec![vec![0.75, 0.30], vec![0.4], vec![0.70]], vec![]];
+    let with = |x: f32, score: f32, z: Option<f32>| {
+        let mut d = Detection::new("table", &unit_box(x, 0.0), score);
+        d.surface_z = z;
+        d
+    };
+    let detections = vec![
+        vec![
+            with(0.0, 0.9, Some(0.32)), // TP on table 0: nearest 0.30 (2 cm), main 0.75 (43 cm)
+            with(0.0, 0.8, Some(0.75)), // duplicate: FP, not measured
+            with(5.0, 0.7, Some(0.80)), // TP on the 0.70 table: 10 cm
+            with(20.0, 0.6, Some(0.5)), // FP
+        ],
+        vec![with(0.0, 0.5, Some(0.7))], // TP, but no true surface known
+    ];
+    let s = surface_accuracy(&truth, &supports, &detections, "table", 0.25, 0.05);
+    assert_eq!((s.true_positives, s.measured), (3, 2));
+    assert_eq!((s.within_nearest, s.within_main), (1, 0));
+    // Errors 0.02 and 0.10: the median of two is the upper one (index len / 2).
+    assert!((s.median_error_m.unwrap() - 0.10).abs() < 1e-6);
+}

@@ -113,3 +113,42 @@ fn a_models_directory_is_read_by_category() {
     let misnamed = read_models_dir(d, None).unwrap_err().to_string();
     assert!(misnamed.contains("desk.json") && misnamed.contains("'bed'"), "{misnamed}");
 }
+
+/// Version 2: a model with latent support surfaces keeps its surface weights through a file; a version-2
+/// file without them, a version-1 file with them, and malformed surface weights are refused.
+#[test]
+fn a_surface_model_is_version_2_and_checked() {
+    use cog_gpu::features::surface::{SurfaceWeights, SLICES, SLICE_DIM};
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("chair.json");
+    let slice: Vec<f32> = (0..SLICE_DIM).map(|k| (k % 11) as f32 * 0.01 - 0.05).collect();
+    let indicator = [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7];
+    let m = model("chair").with_surface(SurfaceWeights::new(slice, indicator).unwrap()).unwrap();
+    assert_eq!(m.version, 2);
+    m.write(&path).unwrap();
+    assert_eq!(Model::read(&path).unwrap(), m);
+    let value = serde_json::to_value(&m).unwrap();
+    let refused = |edit: &dyn Fn(&mut serde_json::Value)| {
+        let mut v = value.clone();
+        edit(&mut v);
+        std::fs::write(&path, serde_json::to_string(&v).unwrap()).unwrap();
+        let err = Model::read(&path).expect_err("must be refused").to_string();
+        assert!(err.contains("chair.json"), "{err}");
+        err
+    };
+    assert!(refused(&|v| v["version"] = 1.into()).contains("no \"surface\""));
+    assert!(refused(&|v| {
+        v.as_object_mut().unwrap().remove("surface");
+    })
+    .contains("needs its \"surface\""));
+    assert!(refused(&|v| {
+        v["surface"]["slice"].as_array_mut().unwrap().pop();
+    })
+    .contains("slice entries"));
+    assert!(refused(&|v| v["surface"]["indicator"] = serde_json::json!(vec![0.0; SLICES - 1]))
+        .contains("not a cog-gpu model file"));
+    assert!(refused(&|v| v["surface"]["slice"][0] = 1e12.into()).contains("surface.slice"));
+    // A plain model stays version 1 without a "surface" field.
+    let text = serde_json::to_string(&model("chair")).unwrap();
+    assert!(text.contains("\"version\":1") && !text.contains("surface"), "{text}");
+}

@@ -6,7 +6,8 @@ use cog_gpu::features::fast::FastOptions;
 use cog_gpu::features::feature_layout::{FeatureLayout, Groups, DENSITY, NORMALS, PER_VOXEL};
 use cog_gpu::features::preprocess::{normal_bin, Preprocessed};
 use cog_gpu::features::surface::{
-    best_slice, centre_slice_weights, surface_height, SurfaceEngine, SurfaceWeights, SLICES, SLICE_DIM, SLICE_VOXELS,
+    best_slice, centre_slice_weights, refined_surface_height, surface_height, SurfaceEngine, SurfaceWeights, SLICES,
+    SLICE_DIM, SLICE_VOXELS,
 };
 use cog_gpu::features::{FeatureScene, Hypothesis};
 use cog_gpu::geometry::{Camera, Cuboid};
@@ -151,4 +152,123 @@ fn centre_slice_weights_copy_the_middle_layer_of_the_base_grid() {
     assert!(err.to_string().contains("10 cuboid weights"), "{err}");
     assert!(SurfaceWeights::new(vec![0.0; 3], [0.0; SLICES]).is_err());
     assert!(SurfaceWeights::new(vec![f32::NAN; SLICE_DIM], [0.0; SLICES]).is_err());
+}
+
+/// `detect` with a model that has latent surfaces, on the constructed table: cuboid weights 0 and surface
+/// weights that reward upward normals, so a hypothesis scores its best slice's upward-normal density plus
+/// that slice's bias. Every detection's score is that independent maximum and its `surface_z` the centre
+/// of the chosen slice; the best detection's surface lies within 5 cm of the table top.
+#[test]
+fn detection_reports_the_inferred_surface_of_a_constructed_table() {
+    use cog_gpu::backend::Backend;
+    use cog_gpu::detect::{detect_preprocessed, DetectOptions};
+    use cog_gpu::features::{SizeQuantiles, YawAnchor};
+    use cog_gpu::model::{FeaturePath, FeatureSettings, Model, WindowSettings};
+    let top = 0.55f32;
+    let scene = table_scene(top);
+    let layout = FeatureLayout::new([5, 5, 5], false, Groups::ALL).unwrap();
+    let sizes = SizeQuantiles { widths: vec![0.8; 5], depths: vec![0.8; 3], heights: vec![0.7; 3] };
+    let window = WindowSettings { step: 0.1, min_points: 50, yaw_anchor: YawAnchor::Camera };
+    let features = FeatureSettings { path: FeaturePath::Fast, subdivisions: 2 };
+    let up = NORMALS + normal_bin(Vec3::Z) as usize;
+    let mut slice = vec![0.0f32; SLICE_DIM];
+    for v in 0..SLICE_VOXELS {
+        slice[v * PER_VOXEL + up] = 1.0;
+    }
+    let indicator = [0.0, 0.01, 0.02, 0.03, 0.04, 0.05, 0.06];
+    let surface = SurfaceWeights::new(slice, indicator).unwrap();
+    let model = Model::new("table", layout, sizes, window, features, vec![0.0; layout.dim()], serde_json::json!({}))
+        .unwrap()
+        .with_surface(surface.clone())
+        .unwrap();
+    let options = DetectOptions { min_score: Some(-1.0), ..DetectOptions::default() };
+    let found = detect_preprocessed("table", scene.pre.clone(), &[model], Backend::Cpu, &options).unwrap();
+    assert!(!found.detections.is_empty());
+    // The scene detection scored on: the camera's 16 yaws, the model's step.
+    let yaws = cog_gpu::features::hypotheses::default_yaws();
+    let detect_scene = FeatureScene::new(scene.pre.clone(), &yaws, 0.1);
+    let engine = SurfaceEngine::new(&detect_scene, Groups::ALL, FastOptions::default());
+    for d in &found.detections {
+        let z = d.surface_z.expect("a surface model's detections carry their surface");
+        let yaw = cog_gpu::features::hypotheses::nearest_yaw_index(&yaws, d.yaw);
+        let hyp = Hypothesis::from_cuboid(&detect_scene, yaw, &d.cuboid());
+        let (h, best) = best_slice(&engine.slice_scores(std::slice::from_ref(&hyp), &surface)[0]);
+        assert!((d.score - best).abs() <= 1e-4 * (1.0 + best.abs()), "score {} vs {best}", d.score);
+        // The surface measured in the chosen slice: the median height of its upward points (all of the
+        // table's top lie at one height), else the slice's centre.
+        let measured = refined_surface_height(&scene.pre, &d.cuboid(), h);
+        assert_eq!(z, measured, "surface_z vs slice {h}");
+        let slice_bottom = hyp.bottom + h as f32 * hyp.size.z / SLICES as f32;
+        let top_in_slice =
+            (slice_bottom..=slice_bottom + hyp.size.z / SLICES as f32).contains(&(top + scene.pre.floor));
+        if top_in_slice && d.cuboid().contains(Vec3::new(0.0, 3.0, top + scene.pre.floor)) {
+            assert!((z - (top + scene.pre.floor)).abs() < 1e-5, "{z}");
+        } else if !top_in_slice {
+            assert!((z - surface_height(&hyp, h)).abs() < 1e-5, "no upward point: the slice centre");
+        }
+    }
+    let best = &found.detections[0];
+    let height = best.surface_z.unwrap() - scene.pre.floor;
+    assert!((height - top).abs() < 1e-5, "the best box's surface at {height} m, the top at {top} m");
+}
+
+/// CCCP's default initialisation: the slice with the most upward-facing points of each ground truth, on the
+/// constructed table (its top at 0.55 m fills slice 5 of the 0.7 m box; at 0.23 m slice 2), never slice 0
+/// (the floor it stands on), and its only latent, 0, for a "no object" example.
+#[test]
+fn the_initial_slice_is_the_one_with_the_most_upward_points() {
+    use cog_gpu::features::hypotheses::YawAnchor;
+    use cog_gpu::learn::detector::{DetectorOracle, FeatureEngine, PositiveTarget, TrainingExample, TrainingSettings};
+    for (top, expected) in [(0.55f32, 5usize), (0.23, 2)] {
+        let scene = table_scene(top);
+        let truth = Cuboid::new(Vec3::new(0.0, 3.0, -1.2 + 0.35), Vec3::new(0.8, 0.8, 0.7), 0.0);
+        let settings = TrainingSettings {
+            layout: FeatureLayout::new([5, 5, 5], false, Groups::ALL).unwrap(),
+            sizes: vec![Vec3::new(0.8, 0.8, 0.7)],
+            step: 0.2,
+            min_points: 10,
+            engine: FeatureEngine::Fast(FastOptions::default()),
+            target: PositiveTarget::Exact,
+            yaw_anchor: YawAnchor::Camera,
+            surfaces: true,
+        };
+        let positive = TrainingExample::new("table".into(), &scene.pre, Some(truth), &[]);
+        let negative = TrainingExample::new("none".into(), &scene.pre, None, &[]);
+        let oracle = DetectorOracle::new(settings, vec![positive, negative]).unwrap();
+        assert_eq!(oracle.upward_slices(), vec![expected, 0], "top at {top} m");
+    }
+}
+
+/// The measured surface: the median height of the upward points inside the footprint and the slice only;
+/// sideways normals, points outside the footprint or the slice do not count; no point gives the centre.
+#[test]
+fn the_refined_surface_is_the_median_of_the_slice_upward_points() {
+    use cog_gpu::features::surface::slice_at;
+    // A 1 m cube on the floor (z from 0 to 1): slice 3 spans 3/7..4/7 m.
+    let cube = Cuboid::new(Vec3::new(0.0, 3.0, 0.5), Vec3::ONE, 0.0);
+    let (low, high) = (3.0 / 7.0, 4.0 / 7.0);
+    let mut points = Vec::new();
+    let mut normals = Vec::new();
+    let mut add = |p: Vec3, n: Vec3| {
+        points.push(p);
+        normals.push(n);
+    };
+    for (k, z) in [0.45f32, 0.46, 0.50, 0.52, 0.55].into_iter().enumerate() {
+        add(Vec3::new(0.1 * k as f32 - 0.2, 3.0, z), Vec3::Z);
+    }
+    add(Vec3::new(0.0, 3.0, 0.44), Vec3::X); // sideways: not a surface
+    add(Vec3::new(2.0, 3.0, 0.44), Vec3::Z); // outside the footprint
+    add(Vec3::new(0.0, 3.0, 0.9), Vec3::Z); // another slice
+    let gradients = vec![Vec2::ZERO; points.len()];
+    let camera = Camera::new([500.0, 500.0, 320.5, 240.5], Mat3::IDENTITY);
+    let pre = Preprocessed { camera, image_size: [640, 480], points, normals, gradients, floor: 0.0 };
+    assert!((low..high).contains(&0.45) && (low..high).contains(&0.55));
+    assert_eq!(refined_surface_height(&pre, &cube, 3), 0.50, "the median of 0.45, 0.46, 0.50, 0.52, 0.55");
+    assert_eq!(refined_surface_height(&pre, &cube, 6), 0.9);
+    assert!((refined_surface_height(&pre, &cube, 1) - 1.5 / 7.0).abs() < 1e-6, "an empty slice: its centre");
+    // slice_at inverts the slice centres and clamps.
+    for h in 0..SLICES {
+        assert_eq!(slice_at(&cube, (h as f32 + 0.5) / 7.0), h);
+    }
+    assert_eq!((slice_at(&cube, -3.0), slice_at(&cube, 5.0)), (0, SLICES - 1));
 }

@@ -69,6 +69,10 @@ fn small_oracle() -> DetectorOracle {
 }
 
 fn small_oracle_with(target: PositiveTarget) -> DetectorOracle {
+    small_oracle_full(target, false)
+}
+
+fn small_oracle_full(target: PositiveTarget, surfaces: bool) -> DetectorOracle {
     let (frame, pre) = real_frame();
     let chairs: Vec<Cuboid> = frame.objects.iter().filter(|o| o.category == "chair").map(|o| o.cuboid).collect();
     assert!(!chairs.is_empty());
@@ -81,6 +85,7 @@ fn small_oracle_with(target: PositiveTarget) -> DetectorOracle {
         engine: FeatureEngine::Fast(FastOptions::default()),
         target,
         yaw_anchor: YawAnchor::Walls,
+        surfaces,
     };
     let positive = TrainingExample::new("chair".into(), &pre, Some(chairs[0]), &chairs[1..]);
     let negative = TrainingExample::new("none".into(), &pre, None, &[]);
@@ -298,6 +303,72 @@ fn train_writes_a_model_and_resumes_to_the_same_weights() {
     assert!(a["weights"].as_array().unwrap().iter().any(|v| v.as_f64().unwrap() != 0.0));
 }
 
+/// Latent support surfaces end to end: a cuboid model, then `--surfaces-from` it (CCCP rounds recorded in
+/// the model, version 2, the progress file written), `--resume` from that progress, and `detect` with the
+/// surface model reports each detection's surface inside its box.
+#[test]
+fn train_with_surfaces_writes_a_version_2_model_that_detect_uses() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = tiny_dataset(dir.path());
+    let data = data.to_str().unwrap();
+    let cuboid = dir.path().join("cuboid/bed.json");
+    let out = run(&train_args(data, cuboid.to_str().unwrap(), "3"));
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let surface = dir.path().join("surface/bed.json");
+    let mut args = train_args(data, surface.to_str().unwrap(), "3");
+    args.extend(["--surfaces-from", cuboid.to_str().unwrap(), "--cccp-rounds", "2"]);
+    let out = run(&args);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let read = |p: &Path| -> serde_json::Value { serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap() };
+    let model = read(&surface);
+    assert_eq!(model["version"], 2);
+    assert_eq!(model["surface"]["slice"].as_array().unwrap().len(), 875);
+    let rounds = model["training"]["surfaces"]["rounds"].as_array().unwrap();
+    assert!((1..=2).contains(&rounds.len()), "{rounds:?}");
+    for round in rounds {
+        // The imputed slices of the 3 positives.
+        assert_eq!(round["slices"].as_array().unwrap().iter().map(|v| v.as_u64().unwrap()).sum::<u64>(), 3);
+    }
+    let progress = PathBuf::from(format!("{}.cccp", surface.display()));
+    assert!(read(&progress)["latents"].as_array().unwrap().len() >= 3, "one slice per example");
+    let mut resumed = args.clone();
+    resumed.push("--resume");
+    let out = run(&resumed);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(read(&surface)["version"], 2);
+    // The surface of a cuboid model is refused as a start.
+    let again_out = dir.path().join("again/bed.json");
+    let mut again = train_args(data, again_out.to_str().unwrap(), "3");
+    again.extend(["--surfaces-from", surface.to_str().unwrap()]);
+    let out = run(&again);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("already a model with surfaces"));
+    // Detection with the surface model.
+    let detections = dir.path().join("detections");
+    let frame = std::fs::read_dir(data).unwrap().flatten().map(|e| e.path()).find(|p| p.is_dir()).unwrap();
+    let out = run(&[
+        "detect",
+        frame.to_str().unwrap(),
+        "--models",
+        surface.parent().unwrap().to_str().unwrap(),
+        "--out",
+        detections.to_str().unwrap(),
+        "--min-score",
+        "-5",
+        "--no-overlay",
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let name = frame.file_name().unwrap().to_str().unwrap();
+    let found = read(&detections.join(format!("{name}.json")));
+    let list = found["detections"].as_array().unwrap();
+    assert!(!list.is_empty());
+    for d in list {
+        let z = d["surface_z"].as_f64().expect("every detection of a surface model has a surface_z");
+        let (centre, height) = (d["centre"][2].as_f64().unwrap(), d["size"][2].as_f64().unwrap());
+        assert!((z - centre).abs() <= height / 2.0, "surface {z} outside the box {centre} ± {height}/2");
+    }
+}
+
 #[test]
 fn train_rejects_bad_input_with_clear_errors() {
     let dir = tempfile::tempdir().unwrap();
@@ -358,4 +429,75 @@ fn train_rejects_bad_input_with_clear_errors() {
         assert!(stderr.contains(needle), "{args:?}: expected '{needle}' in: {stderr}");
         assert!(!stderr.contains("panicked"), "{stderr}");
     }
+}
+
+/// Latent support surfaces (paper §4.1): loss-augmented inference maximises jointly over the window's
+/// hypotheses and their seven slices, checked against a brute force over features computed independently
+/// (the cuboid engine and the surface engine); the answer's feature vector is `[φ_cuboid, φ_surface(h), e_h]`;
+/// the ground truth's features follow the latent set for it, and imputation picks its best slice.
+#[test]
+fn surface_inference_maximises_over_hypotheses_and_slices() {
+    use cog_gpu::features::surface::{SurfaceEngine, SLICES, SLICE_DIM};
+    use cog_gpu::learn::latent::{impute, LatentOracle};
+    use cog_gpu::learn::SeparationOracle;
+    let oracle = small_oracle_full(PositiveTarget::BestWindow, true);
+    let layout = oracle.settings.layout;
+    let dim = layout.dim();
+    assert_eq!(SeparationOracle::dim(&oracle), dim + SLICE_DIM + SLICES);
+    let w: Vec<f64> =
+        (0..SeparationOracle::dim(&oracle)).map(|n| (((n * 2654435761) % 1000) as f64 / 1000.0 - 0.45) * 0.3).collect();
+    let dot = |row: &[f32], weights: &[f64]| row.iter().zip(weights).map(|(&a, &b)| a as f64 * b).sum::<f64>();
+    for (i, ex) in oracle.examples.iter().enumerate() {
+        let window = ex.window(&oracle.settings);
+        let hyps = &window.hypotheses.hypotheses;
+        let cuboid = FastEngine::new(&window.scene, &layout, FastOptions::default()).features(hyps);
+        let slices = SurfaceEngine::new(&window.scene, layout.groups, FastOptions::default()).slices(hyps);
+        let per_hyp = SLICES * SLICE_DIM;
+        let mut best = if ex.truth.is_some() { 1.0f64 } else { 0.0 };
+        for n in 0..hyps.len() {
+            let cuboid_score = dot(&cuboid[n * dim..(n + 1) * dim], &w[..dim]);
+            for h in 0..SLICES {
+                let slice = &slices[n * per_hyp + h * SLICE_DIM..n * per_hyp + (h + 1) * SLICE_DIM];
+                let value = window.losses[n] as f64
+                    + cuboid_score
+                    + dot(slice, &w[dim..dim + SLICE_DIM])
+                    + w[dim + SLICE_DIM + h];
+                best = best.max(value);
+            }
+        }
+        let answer = SeparationOracle::most_violated(&oracle, i, &w).unwrap();
+        let value = answer.loss + dot(&answer.features, &w);
+        assert!((value - best).abs() <= 1e-3 * (1.0 + best.abs()), "example {i}: oracle {value}, brute force {best}");
+        let indicator = &answer.features[dim + SLICE_DIM..];
+        let ones = indicator.iter().filter(|&&v| v == 1.0).count();
+        let zeros = indicator.iter().filter(|&&v| v == 0.0).count();
+        assert!((ones, zeros) == (1, SLICES - 1) || indicator.iter().all(|&v| v == 0.0), "{indicator:?}");
+        if let Some(t) = window.target {
+            // φ(x, y, h) of the ground truth for each h, and the imputed slice is the best of them.
+            let mut best_h = (0, f64::NEG_INFINITY);
+            for h in 0..SLICES {
+                let features = LatentOracle::ground_truth_features(&oracle, i, h).unwrap();
+                assert_eq!(&features[..dim], &cuboid[t * dim..(t + 1) * dim]);
+                let slice = &slices[t * per_hyp + h * SLICE_DIM..t * per_hyp + (h + 1) * SLICE_DIM];
+                assert_eq!(&features[dim..dim + SLICE_DIM], slice);
+                assert_eq!(features[dim + SLICE_DIM + h], 1.0);
+                let score = dot(&features, &w);
+                if score > best_h.1 {
+                    best_h = (h, score);
+                }
+            }
+            assert_eq!(oracle.num_latents(i), SLICES);
+            assert_eq!(impute(&oracle, &w).unwrap()[i], best_h.0);
+        } else {
+            assert_eq!(oracle.num_latents(i), 1);
+        }
+    }
+    // Setting the latents changes the ground truth's features to that slice.
+    let positive = (0..oracle.examples.len()).find(|&i| oracle.examples[i].truth.is_some()).unwrap();
+    let mut latents = vec![0; oracle.examples.len()];
+    latents[positive] = 5;
+    oracle.set_latents(&latents).unwrap();
+    let truth = SeparationOracle::ground_truth_features(&oracle, positive).unwrap();
+    assert_eq!(truth, LatentOracle::ground_truth_features(&oracle, positive, 5).unwrap());
+    assert!(oracle.set_latents(&[7, 0]).is_err(), "slice 7 does not exist");
 }

@@ -30,12 +30,13 @@ use cog_gpu::diagnose::{
 };
 use cog_gpu::draw::category_colour;
 use cog_gpu::eval::{
-    bootstrap_aps, evaluate_categories, mean_ap, percentile_interval, Bootstrap, CategoryEvaluation, Detection,
-    FrameDetections,
+    bootstrap_aps, evaluate_categories, mean_ap, percentile_interval, surface_accuracy, Bootstrap, CategoryEvaluation,
+    Detection, FrameDetections, SurfaceAccuracy,
 };
 use cog_gpu::features::Preprocessed;
 use cog_gpu::frame::{read_annotations, Dataset, DepthSource, Frame, Object};
 use cog_gpu::model::{read_models_dir, Model};
+use cog_gpu::synth::{read_support_heights, SUPPORT_FILE};
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -70,6 +71,11 @@ pub struct Args {
     /// precision) instead of the AP report.
     #[arg(long)]
     pub diagnose: bool,
+    /// Also report how close the support surfaces inferred by models with latent surfaces (`surface_z` of
+    /// the detections) lie to the true ones of synthetic frames (their `synth_support.json`): per category,
+    /// of the true positives, the share within 5 cm of the nearest and of the main (top) true surface.
+    #[arg(long, conflicts_with_all = ["diagnose", "layout"])]
+    pub surfaces: bool,
     /// With --diagnose: models directory (`<category>.json`) whose sliding windows give the window recall
     /// ceiling (reads and preprocesses every frame with ground truth of a modelled category).
     #[arg(long, requires = "diagnose")]
@@ -156,6 +162,9 @@ struct Report {
     detections: BTreeMap<String, usize>,
     #[serde(skip_serializing_if = "Option::is_none")]
     bootstrap: Option<BootstrapSummary>,
+    /// `--surfaces`: the support-surface accuracy of each category with inferred surfaces.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    surfaces: Option<Vec<SurfaceAccuracy>>,
 }
 
 /// The requested categories, checked against the 19 known ones.
@@ -351,6 +360,8 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     if let Some(dir) = &args.plots {
         write_plots(dir, &results)?;
     }
+    let surfaces =
+        if args.surfaces { Some(surface_report(&frames, &truth, &detections, &categories, args.iou)?) } else { None };
     if args.json {
         let report = Report {
             iou: args.iou,
@@ -361,6 +372,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
             ground_truth: results.iter().map(|r| (r.category.clone(), r.ground_truth)).collect(),
             detections: results.iter().map(|r| (r.category.clone(), r.detections)).collect(),
             bootstrap,
+            surfaces,
         };
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
@@ -368,8 +380,67 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         if let Some(summary) = &bootstrap {
             print_bootstrap(&results, map, summary);
         }
+        if let Some(surfaces) = &surfaces {
+            print_surfaces(surfaces);
+        }
     }
     super::batch_result(&failures, names.len())
+}
+
+/// Tolerance of the support-surface report (the 5 cm).
+const SURFACE_TOLERANCE_M: f32 = 0.05;
+
+/// `--surfaces`: [`surface_accuracy`] of every category whose detections carry a surface, against the true
+/// surfaces of the frames' support files (frames without one are counted in a warning and give none).
+fn surface_report(
+    frames: &[PathBuf],
+    truth: &[Vec<Object>],
+    detections: &[Vec<Detection>],
+    categories: &[String],
+    iou: f32,
+) -> anyhow::Result<Vec<SurfaceAccuracy>> {
+    let supports: Vec<Vec<Vec<f32>>> = frames
+        .par_iter()
+        .zip(truth)
+        .map(|(dir, objects)| Ok(read_support_heights(dir, objects.len())?.unwrap_or_default()))
+        .collect::<anyhow::Result<_>>()?;
+    let without = supports.iter().zip(truth).filter(|(s, t)| s.is_empty() && !t.is_empty()).count();
+    if without > 0 {
+        log::warn!("{without} frames with objects have no {SUPPORT_FILE} (not synthetic): no true surfaces there");
+    }
+    Ok(categories
+        .iter()
+        .filter(|c| detections.iter().flatten().any(|d| &d.category == *c && d.surface_z.is_some()))
+        .map(|c| surface_accuracy(truth, &supports, detections, c, iou, SURFACE_TOLERANCE_M))
+        .collect())
+}
+
+fn print_surfaces(surfaces: &[SurfaceAccuracy]) {
+    if surfaces.is_empty() {
+        println!("support surfaces: no detection carries an inferred surface (no model with surfaces)");
+        return;
+    }
+    println!(
+        "support surfaces of the true positives (inferred surface_z against the true support heights, ≤ {} cm):",
+        SURFACE_TOLERANCE_M * 100.0
+    );
+    println!(
+        "{:<12} {:>8} {:>9} {:>15} {:>13} {:>14}",
+        "category", "TP", "measured", "nearest ≤ tol", "main ≤ tol", "median error"
+    );
+    let share =
+        |n: usize, of: usize| if of > 0 { format!("{:.1} %", 100.0 * n as f32 / of as f32) } else { "-".into() };
+    for s in surfaces {
+        println!(
+            "{:<12} {:>8} {:>9} {:>15} {:>13} {:>14}",
+            s.category,
+            s.true_positives,
+            s.measured,
+            share(s.within_nearest, s.measured),
+            share(s.within_main, s.measured),
+            s.median_error_m.map_or("-".into(), |e| format!("{:.1} cm", 100.0 * e))
+        );
+    }
 }
 
 fn percent(ap: Option<f32>) -> String {

@@ -38,12 +38,15 @@ use anyhow::{bail, Context};
 use cog_gpu::category::{normalise_name, CATEGORIES};
 use cog_gpu::features::fast::{FastOptions, DEFAULT_SUBDIVISIONS};
 use cog_gpu::features::hypotheses::DEFAULT_MIN_POINTS;
+use cog_gpu::features::surface::{SLICES, SLICE_DIM};
 use cog_gpu::features::{budget, FeatureLayout, Groups, SizeQuantiles, YawAnchor};
 use cog_gpu::frame::Dataset;
 use cog_gpu::learn::detector::{
     cached_rows_per_example, collect_examples, instances_of, read_all_annotations, train_detector, DetectorOracle,
     ExampleLimits, FeatureEngine, PositiveTarget, TrainingExample, TrainingSettings,
 };
+use cog_gpu::learn::detector::{surface_weights, train_latent_detector, LatentProgress, LatentSettings, SURFACE_DIM};
+use cog_gpu::learn::latent::impute;
 use cog_gpu::learn::{CuttingPlane, SsvmOptions};
 use cog_gpu::model::{FeaturePath, FeatureSettings, Model, WindowSettings};
 
@@ -135,6 +138,31 @@ pub struct Args {
     /// (camera, `2πk/16`).
     #[arg(long, value_enum, default_value_t = AnchorArg::Walls)]
     pub yaw_anchor: AnchorArg,
+    /// Train with latent support surfaces (paper §4.1; a version-2 model): MODEL is the pre-trained cuboid
+    /// model of the same category and features (e.g. assets/models/table.json), whose centre voxel layer
+    /// initialises the surface weights.
+    #[arg(long, value_name = "MODEL")]
+    pub surfaces_from: Option<PathBuf>,
+    /// With --surfaces-from: how the first CCCP round's slices are chosen: `upward`, each ground truth's
+    /// slice with the most upward-facing points, or `centre`, the paper's initialisation (surface weights
+    /// from the pre-trained model's centre layer, height biases random in [0, 1], slices imputed with them).
+    #[arg(long, value_enum, default_value_t = SurfaceInitArg::Upward)]
+    pub surface_init: SurfaceInitArg,
+    #[arg(value_parser = options::iterations)]
+    /// With --surfaces-from: most CCCP rounds (each a full S-SVM solve with the slices imputed).
+    #[arg(long, default_value_t = 3)]
+    pub cccp_rounds: usize,
+    #[arg(value_parser = options::iterations)]
+    /// With --surfaces-from: full passes over the sliding windows allowed to each CCCP round after the first.
+    #[arg(long, default_value_t = 2)]
+    pub round_full_passes: usize,
+}
+
+/// `--surface-init` values.
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum SurfaceInitArg {
+    Upward,
+    Centre,
 }
 
 /// `--yaw-anchor` values.
@@ -197,10 +225,53 @@ fn check_examples(
     cog_gpu::limits::check_memory(
         "the candidate cache",
         vectors,
-        settings.layout.dim() as f64 * 4.0,
+        // with surfaces, each candidate also keeps its seven slices
+        (settings.layout.dim() + if settings.surfaces { SLICES * SLICE_DIM } else { 0 }) as f64 * 4.0,
         "lower --candidates, --positives or --negatives",
     )?;
     Ok(())
+}
+
+/// The pre-trained cuboid model of `--surfaces-from`: it must be a version-1 model of the category with
+/// the layout being trained.
+fn pretrained_model(path: &std::path::Path, category: &str, layout: &FeatureLayout) -> anyhow::Result<Model> {
+    let model = Model::read(path)?;
+    if model.category != category {
+        bail!("--surfaces-from {}: a '{}' model, training '{category}'", path.display(), model.category);
+    }
+    if model.layout != *layout {
+        bail!(
+            "--surfaces-from {}: its features ({}) are not the ones being trained ({}); match --groups and --no-expand",
+            path.display(),
+            model.layout_id,
+            layout.id()
+        );
+    }
+    if model.surface.is_some() {
+        bail!("--surfaces-from {}: already a model with surfaces; give the cuboid model", path.display());
+    }
+    Ok(model)
+}
+
+/// The paper's initialisation of a latent model (§4.1): the pre-trained cuboid weights, the surface weights
+/// copied from their centre voxel layer ([`cog_gpu::features::surface::centre_slice_weights`]), and the
+/// height biases `u_h` drawn uniformly from [0, 1] by a fixed generator (so that training is repeatable);
+/// the first CCCP round's slices are imputed with it.
+fn initial_surface_weights(model: &Model, layout: &FeatureLayout) -> anyhow::Result<Vec<f64>> {
+    let slice = cog_gpu::features::surface::centre_slice_weights(layout, &model.weights)?;
+    let mut state: u64 = 0x2545_F491_4F6C_DD1D;
+    let indicator: Vec<f32> = (0..cog_gpu::features::surface::SLICES)
+        .map(|_| {
+            // xorshift64*: a fixed, documented sequence.
+            state ^= state >> 12;
+            state ^= state << 25;
+            state ^= state >> 27;
+            (state.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 40) as f32 / (1u64 << 24) as f32
+        })
+        .collect();
+    let w: Vec<f64> = model.weights.iter().chain(&slice).chain(&indicator).map(|&v| v as f64).collect();
+    debug_assert_eq!(w.len(), layout.dim() + SURFACE_DIM);
+    Ok(w)
 }
 
 /// Parses a comma-separated group list.
@@ -229,6 +300,11 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         bail!("unknown category '{}'; the categories are: {}", args.category, CATEGORIES.join(", "));
     }
     let layout = FeatureLayout::new([5, 5, 5], !args.no_expand, parse_groups(&args.groups)?)?;
+    let pretrained =
+        args.surfaces_from.as_deref().map(|path| pretrained_model(path, &category, &layout)).transpose()?;
+    if pretrained.is_some() && args.features != PathArg::Fast {
+        bail!("--surfaces-from needs the fast feature path (--features fast)");
+    }
     let out = args.out.clone().unwrap_or_else(|| PathBuf::from("models").join(format!("{category}.json")));
     let checkpoint = PathBuf::from(format!("{}.ckpt", out.display()));
     if args.resume && !checkpoint.is_file() {
@@ -269,6 +345,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         engine,
         target,
         yaw_anchor: args.yaw_anchor.into(),
+        surfaces: pretrained.is_some(),
     };
     let limits = ExampleLimits { positives: args.positives, negatives: args.negatives };
     log::info!(
@@ -302,12 +379,52 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     };
     let mut solver = if args.resume {
         log::info!("resuming from {}", checkpoint.display());
-        CuttingPlane::resume(ssvm, &checkpoint)?
+        CuttingPlane::resume(ssvm.clone(), &checkpoint)?
     } else {
-        CuttingPlane::new(ssvm)?
+        CuttingPlane::new(ssvm.clone())?
     };
     // Convergence counts only when found by a full pass (see `DetectorOracle`'s candidate cache).
-    let trained = train_detector(&oracle, &mut solver)?;
+    let (trained, latent) = match &pretrained {
+        None => (train_detector(&oracle, &mut solver)?, None),
+        Some(model) => {
+            let progress_path = PathBuf::from(format!("{}.cccp", out.display()));
+            let progress = if args.resume {
+                let text = std::fs::read_to_string(&progress_path)
+                    .with_context(|| format!("--resume: reading the CCCP progress {}", progress_path.display()))?;
+                let progress: LatentProgress = serde_json::from_str(&text)
+                    .with_context(|| format!("{}: not a CCCP progress file", progress_path.display()))?;
+                if progress.latents.len() != oracle.examples.len() {
+                    bail!(
+                        "{}: {} slices for {} examples: not this training's progress",
+                        progress_path.display(),
+                        progress.latents.len(),
+                        oracle.examples.len()
+                    );
+                }
+                log::info!("resuming CCCP at round {}", progress.next_round + 1);
+                progress
+            } else {
+                let latents = match args.surface_init {
+                    SurfaceInitArg::Upward => oracle.upward_slices(),
+                    SurfaceInitArg::Centre => impute(&oracle, &initial_surface_weights(model, &layout)?)?,
+                };
+                LatentProgress { next_round: 0, latents, rounds: Vec::new() }
+            };
+            let settings = LatentSettings {
+                max_rounds: args.cccp_rounds.max(1),
+                tolerance: 1e-3,
+                full_passes_per_round: args.round_full_passes.max(1),
+            };
+            let save = |progress: &LatentProgress| -> cog_gpu::error::Result<()> {
+                let text = serde_json::to_string(progress).map_err(|e| cog_gpu::error::Error::Input(e.to_string()))?;
+                let temporary = PathBuf::from(format!("{}.tmp", progress_path.display()));
+                std::fs::write(&temporary, text).map_err(|e| cog_gpu::error::Error::io(&temporary, e))?;
+                std::fs::rename(&temporary, &progress_path).map_err(|e| cog_gpu::error::Error::io(&progress_path, e))
+            };
+            let latent = train_latent_detector(&mut oracle, &ssvm, progress, &settings, args.resume, save)?;
+            (latent.last.clone(), Some(latent))
+        }
+    };
     let solution = trained.solution.clone();
     let seconds = started.elapsed().as_secs_f64();
     let status = match (solution.converged, trained.verified) {
@@ -351,8 +468,22 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         "constraints": solution.num_constraints,
         "seconds": seconds,
         "cog_gpu_version": env!("CARGO_PKG_VERSION"),
+        "surfaces": latent.as_ref().map(|l| serde_json::json!({
+            "pretrained": args.surfaces_from.as_ref().map(|p| p.display().to_string()),
+            "init": match args.surface_init { SurfaceInitArg::Upward => "upward", SurfaceInitArg::Centre => "centre" },
+            "cccp_converged": l.converged,
+            "rounds": l.rounds.iter().map(|r| serde_json::json!({
+                "ssvm_objective": r.ssvm_objective,
+                "cached_latent_objective": r.objective,
+                "changed": r.changed,
+                "iterations": r.iterations,
+                "converged": r.converged,
+                "slices": r.histogram,
+            })).collect::<Vec<_>>(),
+        })),
     });
-    let weights: Vec<f32> = solution.w.iter().map(|&v| v as f32).collect();
+    let all_weights: Vec<f32> = solution.w.iter().map(|&v| v as f32).collect();
+    let weights = all_weights[..layout.dim()].to_vec();
     let features = FeatureSettings {
         path: match args.features {
             PathArg::Fast => FeaturePath::Fast,
@@ -362,7 +493,10 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     };
     let window =
         WindowSettings { step: args.detect_step, min_points: args.min_points, yaw_anchor: args.yaw_anchor.into() };
-    let model = Model::new(&category, layout, sizes, window, features, weights, training)?;
+    let mut model = Model::new(&category, layout, sizes, window, features, weights, training)?;
+    if latent.is_some() {
+        model = model.with_surface(surface_weights(&all_weights[layout.dim()..]))?;
+    }
     model.write(&out)?;
     println!(
         "wrote {} ({category}: {positives} positives, {} iterations, {}, {:.0} s)",

@@ -18,8 +18,9 @@
 //!   ablation switches both parts together;
 //! * within the slice the order is the layout's voxel order, `(j·5 + i)·35 + entry` (`i` along the width
 //!   from the left, `j` along the depth from the front);
-//! * the height reported for slice `h` is its centre, `bottom + (h + ½)·height/7`: within `height/14` of a
-//!   surface inside the slice (at most 5.4 cm for a 0.75 m table);
+//! * the height of slice `h` is its centre, `bottom + (h + ½)·height/7` ([`surface_height`]): within
+//!   `height/14` of a surface inside the slice (at most 5.4 cm for a 0.75 m table); detection reports the
+//!   surface measured in the chosen slice, [`refined_surface_height`];
 //! * ties between slices go to the lowest `h`, as in [`crate::learn::latent::impute`];
 //! * the paper initialises the surface weights from "the center slice of pre-trained cuboid descriptors":
 //!   [`centre_slice_weights`] copies the cuboid model's weights of the middle layer of its base grid.
@@ -27,8 +28,10 @@
 use super::fast::{FastEngine, FastOptions};
 use super::feature_layout::{FeatureLayout, Groups, PER_VOXEL};
 use super::hypotheses::Hypothesis;
+use super::preprocess::{normal_bin, Preprocessed};
 use super::scene::FeatureScene;
 use crate::error::{Error, Result};
+use crate::geometry::Cuboid;
 
 /// Number of slices, i.e. of latent surface heights.
 pub const SLICES: usize = 7;
@@ -46,7 +49,7 @@ pub fn surface_layout(groups: Groups) -> FeatureLayout {
 
 /// The surface part of a latent model's weights: `w_slice` ([`SLICE_DIM`] entries) and the height biases
 /// `u_h` (the weights of the indicator `e_h`).
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SurfaceWeights {
     pub slice: Vec<f32>,
     pub indicator: [f32; SLICES],
@@ -109,6 +112,35 @@ pub fn best_slice(scores: &[f32; SLICES]) -> (usize, f32) {
 /// The reported surface height (upright z, metres) of slice `h` of a hypothesis: the slice's centre.
 pub fn surface_height(hyp: &Hypothesis, h: usize) -> f32 {
     hyp.bottom + (h as f32 + 0.5) * hyp.size.z / SLICES as f32
+}
+
+/// The reported height of the support surface in slice `h` of `cuboid` (upright z, metres): the median
+/// height of the points inside the cuboid's footprint, within the slice's height range, whose normal lies
+/// in the normal histogram's up cone ([`crate::features::preprocess::normal_bin`] 0) — the surface the slice
+/// holds, measured instead of quantised to the slice — or the slice's centre when it holds no such point.
+/// (The paper reports no height; a slice is `height/7` thick, so its centre alone is up to `height/14` off.)
+pub fn refined_surface_height(pre: &Preprocessed, cuboid: &Cuboid, h: usize) -> f32 {
+    let thickness = cuboid.size.z / SLICES as f32;
+    let low = cuboid.bottom() + h as f32 * thickness;
+    let high = low + thickness;
+    let mut heights: Vec<f32> = pre
+        .points
+        .iter()
+        .zip(&pre.normals)
+        .filter(|(p, n)| p.z >= low && p.z <= high && normal_bin(**n) == 0 && cuboid.contains(**p))
+        .map(|(p, _)| p.z)
+        .collect();
+    if heights.is_empty() {
+        return low + 0.5 * thickness;
+    }
+    heights.sort_by(f32::total_cmp);
+    heights[heights.len() / 2]
+}
+
+/// The slice of `cuboid` whose centre is `z` (the inverse of [`surface_height`], clamped to `0..SLICES`).
+pub fn slice_at(cuboid: &Cuboid, z: f32) -> usize {
+    let slice = ((z - cuboid.bottom()) / (cuboid.size.z / SLICES as f32) - 0.5).round();
+    (slice.max(0.0) as usize).min(SLICES - 1)
 }
 
 /// The paper's initialisation of `w_slice`: the cuboid model's weights of the middle voxel layer of its

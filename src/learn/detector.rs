@@ -22,6 +22,12 @@
 //! * Loss (eq. 5): `1 − IoU·(1 + cos Δθ)/2` ([`structured_loss`]). Hypotheses whose footprints cannot
 //!   overlap the truth's have loss 1 without an IoU computation.
 //!
+//! # Latent support surfaces (paper §4.1)
+//! With [`TrainingSettings::surfaces`], φ is `[φ_cuboid, φ_surface(h), e_h]` ([`crate::features::surface`]):
+//! every answer (a window box, or the ground truth) maximises over its seven slices, the cache keeps each
+//! candidate's slices, and the ground truths' slices are latent, imputed by CCCP
+//! ([`train_latent_detector`]). "No object" has φ = 0 and a single latent value.
+//!
 //! # What is cached per example (memory against time)
 //! An example keeps its preprocessed points (other instances removed, ~2 MB at 320×240) and, after every
 //! full pass, its [`DetectorOracle::candidate_count`] candidates: their **feature vectors**, losses and
@@ -37,16 +43,23 @@ use std::sync::Mutex;
 use glam::Vec3;
 use rayon::prelude::*;
 
+use super::latent::{impute, CccpRound, LatentOracle};
 use super::one_slack::{OneSlack, PassSummary};
-use super::{Constraint, CuttingPlane, SeparationOracle, Solution};
+use super::{Constraint, CuttingPlane, SeparationOracle, Solution, SsvmOptions};
 use crate::error::{Error, Result};
 use crate::features::cpu;
 use crate::features::fast::{FastEngine, FastOptions};
+use crate::features::feature_layout::{NORMALS, PER_VOXEL};
 use crate::features::hypotheses::{
     frame_wall_direction, nearest_yaw_index, sliding_window, yaws_under, HypothesisSet, WindowOptions, YawAnchor,
 };
+use crate::features::surface::{best_slice, SurfaceEngine, SurfaceWeights, SLICES, SLICE_DIM, SLICE_VOXELS};
 use crate::features::{FeatureLayout, FeatureScene, Hypothesis, Preprocessed};
 use crate::geometry::{structured_loss, Cuboid};
+
+/// Offset, within a voxel's features, of the normal histogram's up bin (bin 0 of
+/// [`crate::features::preprocess::normal_bin`]).
+const PER_VOXEL_NORMALS_UP: usize = NORMALS;
 
 /// Which feature implementation training (and a model) uses.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -71,7 +84,21 @@ pub struct TrainingSettings {
     pub target: PositiveTarget,
     /// Where the window's 16 yaws start (see [`crate::features::hypotheses`]).
     pub yaw_anchor: YawAnchor,
+    /// Latent support surfaces (paper §4.1, [`crate::features::surface`]): the joint feature vector is
+    /// `[φ_cuboid, φ_surface(h), e_h]` ([`TrainingSettings::dim`]) and every answer maximises over the
+    /// seven slices `h`; the fast path only.
+    pub surfaces: bool,
 }
+
+impl TrainingSettings {
+    /// Length of the joint feature vector: the layout's, plus [`SLICE_DIM`] + [`SLICES`] with surfaces.
+    pub fn dim(&self) -> usize {
+        self.layout.dim() + if self.surfaces { SURFACE_DIM } else { 0 }
+    }
+}
+
+/// Length of the surface part of a latent model's weights: `w_slice` and the seven height biases `u_h`.
+pub const SURFACE_DIM: usize = SLICE_DIM + SLICES;
 
 /// The output a positive example's margin is enforced for.
 ///
@@ -199,6 +226,65 @@ enum Scorer<'a> {
     Fast(FastEngine<'a>),
 }
 
+/// The cuboid scorer and, with surfaces, the slices' engine of one scene.
+struct ExampleScorer<'a> {
+    cuboid: Scorer<'a>,
+    surface: Option<SurfaceEngine<'a>>,
+}
+
+impl<'a> ExampleScorer<'a> {
+    fn new(settings: &TrainingSettings, scene: &'a FeatureScene) -> ExampleScorer<'a> {
+        let surface = match (settings.surfaces, settings.engine) {
+            (true, FeatureEngine::Fast(options)) => Some(SurfaceEngine::new(scene, settings.layout.groups, options)),
+            _ => None,
+        };
+        ExampleScorer { cuboid: Scorer::new(settings, scene), surface }
+    }
+
+    /// Cuboid features (row-major, `layout.dim()` per hypothesis) and, with surfaces, the slices (row-major,
+    /// `SLICES × SLICE_DIM` per hypothesis; empty without).
+    fn features(&self, hypotheses: &[Hypothesis]) -> (Vec<f32>, Vec<f32>) {
+        let slices = self.surface.as_ref().map_or_else(Vec::new, |s| s.slices(hypotheses));
+        (self.cuboid.features(hypotheses), slices)
+    }
+
+    /// `max_h w·φ(hypothesis, h)` (or `w·φ` without surfaces) of every hypothesis.
+    fn scores(&self, hypotheses: &[Hypothesis], w: &[f32], cuboid_dim: usize) -> Vec<f32> {
+        let mut scores = self.cuboid.scores(hypotheses, &w[..cuboid_dim]);
+        if let Some(surface) = &self.surface {
+            let weights = surface_weights(&w[cuboid_dim..]);
+            for (score, slices) in scores.iter_mut().zip(surface.slice_scores(hypotheses, &weights)) {
+                *score += best_slice(&slices).1;
+            }
+        }
+        scores
+    }
+}
+
+/// The surface part of a joint weight vector (`w_slice`, then `u_h`).
+pub fn surface_weights(surface_part: &[f32]) -> SurfaceWeights {
+    SurfaceWeights {
+        slice: surface_part[..SLICE_DIM].to_vec(),
+        indicator: std::array::from_fn(|h| surface_part[SLICE_DIM + h]),
+    }
+}
+
+/// `w_slice·φ_surface(h) + u_h` of each slice, from the `SLICES × SLICE_DIM` slices of one hypothesis.
+fn slice_values(slices: &[f32], surface_part: &[f32]) -> [f32; SLICES] {
+    std::array::from_fn(|h| {
+        dot(&slices[h * SLICE_DIM..(h + 1) * SLICE_DIM], &surface_part[..SLICE_DIM]) + surface_part[SLICE_DIM + h]
+    })
+}
+
+/// The joint feature vector `[φ_cuboid, φ_surface(h), e_h]`.
+fn joint_features(cuboid: &[f32], slices: &[f32], h: usize) -> Vec<f32> {
+    let mut features = Vec::with_capacity(cuboid.len() + SURFACE_DIM);
+    features.extend_from_slice(cuboid);
+    features.extend_from_slice(&slices[h * SLICE_DIM..(h + 1) * SLICE_DIM]);
+    features.extend((0..SLICES).map(|k| if k == h { 1.0 } else { 0.0 }));
+    features
+}
+
 impl<'a> Scorer<'a> {
     fn new(settings: &TrainingSettings, scene: &'a FeatureScene) -> Scorer<'a> {
         match settings.engine {
@@ -237,8 +323,10 @@ pub enum Answer {
 struct Candidates {
     indices: Vec<u32>,
     losses: Vec<f32>,
-    /// `indices.len() × dim`, row-major.
+    /// `indices.len() × layout.dim()`, row-major: the cuboid features.
     features: Vec<f32>,
+    /// With surfaces, `indices.len() × SLICES × SLICE_DIM`, row-major: each candidate's seven slices.
+    slices: Vec<f32>,
 }
 
 /// How many of the boxes nearest a positive's truth a full pass caches besides its `candidate_count`
@@ -279,8 +367,13 @@ fn tie_key(n: u32) -> u32 {
 pub struct DetectorOracle {
     pub settings: TrainingSettings,
     pub examples: Vec<TrainingExample>,
-    /// φ of each example's ground truth (zeros for "no object").
+    /// The cuboid part of φ of each example's ground truth (zeros for "no object").
     truth_features: Vec<Vec<f32>>,
+    /// With surfaces, the seven slices of each positive's ground truth (`SLICES × SLICE_DIM`; empty for
+    /// "no object").
+    truth_slices: Vec<Vec<f32>>,
+    /// With surfaces, each ground truth's imputed slice ([`DetectorOracle::set_latents`]).
+    latents: Vec<AtomicUsize>,
     /// Hypotheses kept per example by a full pass.
     pub candidate_count: usize,
     /// A periodic full pass every this many batch calls (0: only when forced).
@@ -303,8 +396,11 @@ impl DetectorOracle {
         if examples.is_empty() {
             return Err(Error::Input("no training examples".into()));
         }
+        if settings.surfaces && settings.engine == FeatureEngine::Exact {
+            return Err(Error::Input("latent support surfaces need the fast feature path (--features fast)".into()));
+        }
         let dim = settings.layout.dim();
-        let truth_features = examples
+        let truths: Vec<(Vec<f32>, Vec<f32>)> = examples
             .par_iter()
             .map(|ex| match &ex.truth {
                 Some(truth) if settings.target == PositiveTarget::BestWindow => {
@@ -313,22 +409,26 @@ impl DetectorOracle {
                         Some(t) => window.hypotheses.hypotheses[t],
                         None => window.truth_hypothesis(truth),
                     };
-                    Scorer::new(&settings, &window.scene).features(&[hypothesis])
+                    ExampleScorer::new(&settings, &window.scene).features(&[hypothesis])
                 }
                 Some(truth) => {
                     let yaws = ex.yaws(settings.yaw_anchor);
                     let scene = FeatureScene::new(ex.pre.clone(), &yaws, settings.step);
                     let hypothesis = Hypothesis::from_cuboid(&scene, nearest_yaw_index(&yaws, truth.yaw), truth);
-                    Scorer::new(&settings, &scene).features(&[hypothesis])
+                    ExampleScorer::new(&settings, &scene).features(&[hypothesis])
                 }
-                None => vec![0.0; dim],
+                None => (vec![0.0; dim], Vec::new()),
             })
             .collect();
+        let (truth_features, truth_slices) = truths.into_iter().unzip();
         let candidates = (0..examples.len()).map(|_| Mutex::new(Candidates::default())).collect();
+        let latents = (0..examples.len()).map(|_| AtomicUsize::new(SLICES / 2)).collect();
         Ok(DetectorOracle {
             settings,
             examples,
             truth_features,
+            truth_slices,
+            latents,
             candidate_count: 100,
             full_every: 0,
             max_full_passes: 4,
@@ -340,6 +440,63 @@ impl DetectorOracle {
             full_pass_micros: AtomicU64::new(0),
             candidates,
         })
+    }
+
+    /// Sets the ground truths' surface slices (one per example; ignored for "no object" examples), which
+    /// fix [`SeparationOracle::ground_truth_features`] for the next S-SVM solve (a CCCP round).
+    pub fn set_latents(&self, latents: &[usize]) -> Result<()> {
+        if latents.len() != self.examples.len() || latents.iter().any(|&h| h >= SLICES) {
+            return Err(Error::Input(format!(
+                "{} latent slices for {} examples (each below {SLICES})",
+                latents.len(),
+                self.examples.len()
+            )));
+        }
+        for (slot, &h) in self.latents.iter().zip(latents) {
+            slot.store(h, Ordering::SeqCst);
+        }
+        Ok(())
+    }
+
+    /// Each ground truth's slice with the most upward-facing points (the sum over its 25 voxels of the
+    /// normal histogram's up bin, [`crate::features::preprocess::normal_bin`] 0) among slices 1–6: the
+    /// geometric evidence of a horizontal surface, for initialising CCCP. Slice 0 is left out because its
+    /// upward points are mostly the floor the object stands on (visible under tables and around every
+    /// box that is a little too large), not a surface of the object. Ties go to the lowest slice; a
+    /// ground truth without upward points gets the centre slice, a "no object" example its only latent, 0.
+    pub fn upward_slices(&self) -> Vec<usize> {
+        let up = PER_VOXEL_NORMALS_UP;
+        self.truth_slices
+            .iter()
+            .map(|slices| {
+                if slices.is_empty() {
+                    return 0;
+                }
+                let upward = |h: usize| -> f32 {
+                    (0..SLICE_VOXELS)
+                        .map(|v| slices.get(h * SLICE_DIM + v * PER_VOXEL + up).copied().unwrap_or(0.0))
+                        .sum()
+                };
+                // Slice 0 never wins: it scores below any upward point elsewhere.
+                let (h, most) = best_slice(&std::array::from_fn(|h| if h == 0 { -1.0 } else { upward(h) }));
+                if most > 0.0 {
+                    h
+                } else {
+                    SLICES / 2
+                }
+            })
+            .collect()
+    }
+
+    /// The ground truths' current surface slices.
+    pub fn latents(&self) -> Vec<usize> {
+        self.latents.iter().map(|h| h.load(Ordering::SeqCst)).collect()
+    }
+
+    /// Allows `extra` more full passes from now on (each CCCP round after the first gets its own budget; the
+    /// cached candidates of the previous round stay).
+    pub fn allow_more_full_passes(&mut self, extra: usize) {
+        self.max_full_passes = self.full_passes() + extra;
     }
 
     /// Whether the latest batch call was a full pass.
@@ -372,7 +529,7 @@ impl DetectorOracle {
     }
 
     /// `argmax Δ + w·φ` over the example's answers (the whole window on a full pass, the cached candidates
-    /// otherwise), with its loss and features.
+    /// otherwise; with surfaces jointly over each answer's seven slices), with its loss and features.
     fn argmax(&self, example: usize, w: &[f32], full: bool) -> Result<(Answer, f32, Vec<f32>)> {
         let ex = &self.examples[example];
         let dim = self.settings.layout.dim();
@@ -381,41 +538,77 @@ impl DetectorOracle {
         }
         let cache = self.lock_candidates(example)?;
         let candidates = &*cache;
+        let surfaces = self.settings.surfaces;
+        let slice_len = SLICES * SLICE_DIM;
         let no_object_loss = if ex.truth.is_some() { 1.0 } else { 0.0 };
-        // (answer, loss, value, candidate row)
-        let mut best = (Answer::NoObject, no_object_loss, no_object_loss, None);
+        // (answer, loss, value, candidate row, slice)
+        let mut best = (Answer::NoObject, no_object_loss, no_object_loss, None, 0);
         if ex.truth.is_some() {
-            let truth_score = dot(&self.truth_features[example], w);
+            let (truth_score, h) = self.truth_score(example, w);
             if truth_score > best.2 {
-                best = (Answer::GroundTruth, 0.0, truth_score, None);
+                best = (Answer::GroundTruth, 0.0, truth_score, None, h);
             }
         }
         for (row, (&n, &loss)) in candidates.indices.iter().zip(&candidates.losses).enumerate() {
-            let value = loss + dot(&candidates.features[row * dim..(row + 1) * dim], w);
+            let mut value = loss + dot(&candidates.features[row * dim..(row + 1) * dim], &w[..dim]);
+            let mut h = 0;
+            if surfaces {
+                let slices = &candidates.slices[row * slice_len..(row + 1) * slice_len];
+                let (best_h, slice_value) = best_slice(&slice_values(slices, &w[dim..]));
+                value += slice_value;
+                h = best_h;
+            }
             if value > best.2 {
-                best = (Answer::Hypothesis(n as usize), loss, value, Some(row));
+                best = (Answer::Hypothesis(n as usize), loss, value, Some(row), h);
             }
         }
         let features = match (best.0, best.3) {
-            (Answer::GroundTruth, _) => self.truth_features[example].clone(),
+            (Answer::GroundTruth, _) => self.truth_joint_features(example, best.4),
+            (Answer::Hypothesis(_), Some(row)) if surfaces => joint_features(
+                &candidates.features[row * dim..(row + 1) * dim],
+                &candidates.slices[row * slice_len..(row + 1) * slice_len],
+                best.4,
+            ),
             (Answer::Hypothesis(_), Some(row)) => candidates.features[row * dim..(row + 1) * dim].to_vec(),
-            _ => vec![0.0; dim],
+            _ => vec![0.0; self.settings.dim()],
         };
         Ok((best.0, best.1, features))
+    }
+
+    /// The ground truth's best score over its latent slices at `w` and that slice (0 without surfaces).
+    fn truth_score(&self, example: usize, w: &[f32]) -> (f32, usize) {
+        let dim = self.settings.layout.dim();
+        let cuboid = dot(&self.truth_features[example], &w[..dim]);
+        if !self.settings.surfaces || self.truth_slices[example].is_empty() {
+            return (cuboid, 0);
+        }
+        let (h, value) = best_slice(&slice_values(&self.truth_slices[example], &w[dim..]));
+        (cuboid + value, h)
+    }
+
+    /// `φ(x_i, y_i, h)`: the ground truth's features with slice `h` (zeros for "no object").
+    fn truth_joint_features(&self, example: usize, h: usize) -> Vec<f32> {
+        if !self.settings.surfaces {
+            return self.truth_features[example].clone();
+        }
+        if self.truth_slices[example].is_empty() {
+            return vec![0.0; self.settings.dim()];
+        }
+        joint_features(&self.truth_features[example], &self.truth_slices[example], h)
     }
 
     /// A full pass over one example: scores its whole window at `w` and replaces its cached candidates.
     fn refresh_candidates(&self, example: usize, w: &[f32]) -> Result<()> {
         let ex = &self.examples[example];
         let window = ex.window(&self.settings);
-        let scorer = Scorer::new(&self.settings, &window.scene);
+        let scorer = ExampleScorer::new(&self.settings, &window.scene);
         let hypotheses = &window.hypotheses.hypotheses;
         // At w = 0 (the first pass of a fresh run) every score is 0: no need to compute them.
         let scores = if w.iter().all(|&v| v == 0.0) {
             vec![0.0; hypotheses.len()]
         } else {
             self.scored_hypotheses.fetch_add(hypotheses.len() as u64, Ordering::SeqCst);
-            scorer.scores(hypotheses, w)
+            scorer.scores(hypotheses, w, self.settings.layout.dim())
         };
         let value = |n: u32| window.losses[n as usize] + scores[n as usize];
         let mut order: Vec<u32> = (0..hypotheses.len() as u32).collect();
@@ -441,10 +634,33 @@ impl DetectorOracle {
         order.sort_unstable();
         order.dedup();
         let chosen: Vec<Hypothesis> = order.iter().map(|&n| hypotheses[n as usize]).collect();
-        let features = scorer.features(&chosen);
+        let (features, slices) = scorer.features(&chosen);
         let losses = order.iter().map(|&n| window.losses[n as usize]).collect();
-        *self.lock_candidates(example)? = Candidates { indices: order, losses, features };
+        *self.lock_candidates(example)? = Candidates { indices: order, losses, features, slices };
         Ok(())
+    }
+
+    /// The latent objective `½‖w‖² + C·mean_i max(0, max(Δ + wᵀφ) − max_h wᵀφ(x_i, y_i, h))` with the
+    /// inner max over each example's cached candidates (plus the ground truth and "no object"); no window
+    /// is scored.
+    pub fn cached_objective(&self, w: &[f64], c: f64) -> Result<f64> {
+        let w32: Vec<f32> = w.iter().map(|&v| v as f32).collect();
+        let slacks: Vec<f64> = (0..self.examples.len())
+            .into_par_iter()
+            .map(|i| {
+                let (_, loss, features) = self.argmax(i, &w32, false)?;
+                let value = loss as f64 + features.iter().zip(w).map(|(&f, &v)| f as f64 * v).sum::<f64>();
+                let truth: f64 = if self.examples[i].truth.is_some() {
+                    let (score, _) = self.truth_score(i, &w32);
+                    score as f64
+                } else {
+                    0.0
+                };
+                Ok((value - truth).max(0.0))
+            })
+            .collect::<Result<_>>()?;
+        let norm: f64 = w.iter().map(|v| v * v).sum();
+        Ok(0.5 * norm + c * slacks.iter().sum::<f64>() / slacks.len().max(1) as f64)
     }
 
     /// `argmax Δ + w·φ` over the example's answers, with its loss: a full pass over the window when the
@@ -466,11 +682,11 @@ impl SeparationOracle for DetectorOracle {
     }
 
     fn dim(&self) -> usize {
-        self.settings.layout.dim()
+        self.settings.dim()
     }
 
     fn ground_truth_features(&self, example: usize) -> Result<Vec<f32>> {
-        Ok(self.truth_features[example].clone())
+        Ok(self.truth_joint_features(example, self.latents[example].load(Ordering::SeqCst)))
     }
 
     fn most_violated_batch(&self, examples: &[usize], w: &[f64]) -> Result<Vec<Constraint>> {
@@ -509,6 +725,33 @@ impl SeparationOracle for DetectorOracle {
         let full = self.needs_full_pass(example)?;
         let (_, loss, features) = self.argmax(example, &w32, full)?;
         Ok(Constraint { loss: loss as f64, features })
+    }
+}
+
+impl LatentOracle for DetectorOracle {
+    fn num_examples(&self) -> usize {
+        self.examples.len()
+    }
+
+    fn dim(&self) -> usize {
+        self.settings.dim()
+    }
+
+    /// Seven slices for a positive with surfaces; one (no choice) otherwise.
+    fn num_latents(&self, example: usize) -> usize {
+        if self.settings.surfaces && !self.truth_slices[example].is_empty() {
+            SLICES
+        } else {
+            1
+        }
+    }
+
+    fn ground_truth_features(&self, example: usize, latent: usize) -> Result<Vec<f32>> {
+        Ok(self.truth_joint_features(example, latent))
+    }
+
+    fn most_violated(&self, example: usize, w: &[f64]) -> Result<Constraint> {
+        SeparationOracle::most_violated(self, example, w)
     }
 }
 
@@ -554,6 +797,125 @@ pub fn train_detector(oracle: &DetectorOracle, solver: &mut CuttingPlane) -> Res
         last_pass: one_slack.last_pass(),
         inference_hypotheses_per_second: if seconds > 0.0 { scored as f64 / seconds } else { 0.0 },
     })
+}
+
+/// Settings of [`train_latent_detector`].
+#[derive(Clone, Debug)]
+pub struct LatentSettings {
+    /// Most CCCP rounds (each a full [`train_detector`] run).
+    pub max_rounds: usize,
+    /// Stop when the objective over the cached candidates fell by less than this since the previous round.
+    pub tolerance: f64,
+    /// Full passes over the sliding windows allowed to each round after the first (the first round has the
+    /// oracle's [`DetectorOracle::max_full_passes`]); every round keeps the previous round's candidates.
+    pub full_passes_per_round: usize,
+}
+
+/// The outcome of [`train_latent_detector`].
+#[derive(Clone, Debug)]
+pub struct LatentDetectorSolution {
+    /// The last round's solve.
+    pub last: DetectorSolution,
+    /// The ground truths' slices imputed from the final w.
+    pub latents: Vec<usize>,
+    pub rounds: Vec<CccpRound>,
+    /// Stopped at a fixed point (no imputed slice changed) or below the tolerance, not at the round cap.
+    pub converged: bool,
+}
+
+/// The latent S-SVM of the detector with support surfaces, solved by CCCP ([`super::latent`]'s algorithm
+/// with [`train_detector`]'s cached and full passes as the inner solve): each round fixes the ground
+/// truths' slices ([`DetectorOracle::set_latents`]), solves the S-SVM from scratch (a fresh cutting-plane
+/// run; the candidate cache stays), then imputes every positive's slice `h_i = argmax_h wᵀφ(x_i, y_i, h)`
+/// ([`super::latent::impute`]).
+///
+/// `progress` says where to start (round 0 with the initial slices, or where an interrupted run stood);
+/// `save` is called with the progress before every round. With `resume_checkpoint`, the first round run
+/// continues from the solver's checkpoint (`ssvm.checkpoint`) when there is one.
+///
+/// A round's reported `objective` is the latent objective evaluated over the **cached** candidates (plus
+/// the ground truth and "no object") with the re-imputed slices: a full pass over every window per round
+/// would cost as much as the round's own full passes. `ssvm_objective` is the round's 1-slack primal with
+/// the slices it was given, an upper bound on the latent objective at its w (re-imputing only raises the
+/// ground truths' scores), up to the solver's ε.
+pub fn train_latent_detector(
+    oracle: &mut DetectorOracle,
+    ssvm: &SsvmOptions,
+    progress: LatentProgress,
+    settings: &LatentSettings,
+    resume_checkpoint: bool,
+    mut save: impl FnMut(&LatentProgress) -> Result<()>,
+) -> Result<LatentDetectorSolution> {
+    if !oracle.settings.surfaces {
+        return Err(Error::Input("latent training needs an oracle with surfaces".into()));
+    }
+    if settings.max_rounds == 0 {
+        return Err(Error::Input("latent training: at least one CCCP round".into()));
+    }
+    let LatentProgress { next_round, mut latents, mut rounds } = progress;
+    let mut initial = [0usize; SLICES];
+    (0..latents.len()).filter(|&i| oracle.num_latents(i) > 1).for_each(|i| initial[latents[i].min(SLICES - 1)] += 1);
+    log::info!("CCCP starts at round {} with the slices (bottom to top) {initial:?}", next_round + 1);
+    let mut converged = false;
+    let mut last = None;
+    for round in next_round..settings.max_rounds.max(next_round + 1) {
+        oracle.set_latents(&latents)?;
+        save(&LatentProgress { next_round: round, latents: latents.clone(), rounds: rounds.clone() })?;
+        if round > 0 {
+            oracle.allow_more_full_passes(settings.full_passes_per_round.max(1));
+        }
+        let mut solver = match (&ssvm.checkpoint, resume_checkpoint && round == next_round) {
+            (Some(path), true) if path.is_file() => CuttingPlane::resume(ssvm.clone(), path)?,
+            _ => CuttingPlane::new(ssvm.clone())?,
+        };
+        let trained = train_detector(oracle, &mut solver)?;
+        let w = &trained.solution.w;
+        let imputed = impute(&*oracle, w)?;
+        let changed = imputed.iter().zip(&latents).filter(|(a, b)| a != b).count();
+        oracle.set_latents(&imputed)?;
+        let objective = oracle.cached_objective(w, ssvm.c)?;
+        let mut histogram = vec![0usize; SLICES];
+        for (i, &h) in imputed.iter().enumerate() {
+            if oracle.num_latents(i) > 1 {
+                histogram[h] += 1;
+            }
+        }
+        log::info!(
+            "CCCP round {}: S-SVM objective {:.5}, latent objective over the cached candidates {objective:.5}, \
+             {changed} slices changed, imputed slices (bottom to top) {histogram:?}",
+            round + 1,
+            trained.solution.primal
+        );
+        let previous = rounds.last().map(|r: &CccpRound| r.objective);
+        rounds.push(CccpRound {
+            ssvm_objective: trained.solution.primal,
+            objective,
+            changed,
+            iterations: trained.solution.iterations,
+            converged: trained.solution.converged,
+            histogram,
+        });
+        latents = imputed;
+        last = Some(trained);
+        if changed == 0 || previous.is_some_and(|p| p - objective < settings.tolerance) {
+            converged = true;
+            break;
+        }
+    }
+    let last = last.ok_or_else(|| Error::Input("latent training ran no round".into()))?;
+    Ok(LatentDetectorSolution { last, latents, rounds, converged })
+}
+
+/// Where latent training stands between rounds (saved before each round, so that `--resume` continues the
+/// interrupted round from its cutting-plane checkpoint with the slices it was started with).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct LatentProgress {
+    /// The round (0-based) that runs next with `latents`.
+    pub next_round: usize,
+    /// The ground truths' slices for that round, one per example.
+    pub latents: Vec<usize>,
+    /// The rounds done so far.
+    pub rounds: Vec<CccpRound>,
 }
 
 /// How many examples to take from a dataset.

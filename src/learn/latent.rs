@@ -80,7 +80,7 @@ pub struct CccpOptions {
 }
 
 /// What one CCCP round did.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CccpRound {
     /// Primal objective of the round's S-SVM (with the latents it was given).
     pub ssvm_objective: f64,

@@ -401,6 +401,45 @@ pub fn render_frame(
     }
 }
 
+/// The true support-surface heights (upright z, the main one first) of each annotated object of a synthetic
+/// frame, from its [`SUPPORT_FILE`], indexed like the frame's annotations (`objects` of them; an object the
+/// file does not list gets none). `Ok(None)` when the frame has no support file (not a synthetic frame).
+/// For evaluation and tests only: detectors never read it.
+pub fn read_support_heights(dir: &std::path::Path, objects: usize) -> crate::error::Result<Option<Vec<Vec<f32>>>> {
+    use crate::error::Error;
+    let path = dir.join(SUPPORT_FILE);
+    if !path.is_file() {
+        return Ok(None);
+    }
+    let text = crate::frame::read_text(&path)?;
+    let value: Value =
+        serde_json::from_str(&text).map_err(|e| Error::invalid(&path, format!("not a support file: {e}")))?;
+    let listed = value["objects"].as_array().ok_or_else(|| Error::invalid(&path, "has no \"objects\" list"))?;
+    let mut heights = vec![Vec::new(); objects];
+    for (n, object) in listed.iter().enumerate() {
+        let index = object["annotation_index"]
+            .as_u64()
+            .ok_or_else(|| Error::invalid(&path, format!("objects[{n}] has no annotation_index")))?
+            as usize;
+        if index >= objects {
+            return Err(Error::invalid(
+                &path,
+                format!("objects[{n}] names annotation {index}, the frame has {objects} annotated objects"),
+            ));
+        }
+        let surfaces = object["support_surfaces"].as_array().map(Vec::as_slice).unwrap_or(&[]);
+        heights[index] = surfaces
+            .iter()
+            .map(|s| {
+                s["z"].as_f64().map(|z| z as f32).ok_or_else(|| {
+                    Error::invalid(&path, format!("objects[{n}] has a support surface without a numeric z"))
+                })
+            })
+            .collect::<crate::error::Result<_>>()?;
+    }
+    Ok(Some(heights))
+}
+
 fn round4(x: f32) -> f64 {
     ((x as f64) * 1e4).round() / 1e4
 }
