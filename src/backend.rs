@@ -9,7 +9,8 @@
 use crate::error::Result;
 use crate::features::fast::FastEngine;
 use crate::features::{cpu, FeatureLayout, FeatureScene, Hypothesis};
-use crate::gpu::fast::{fast_scores_gpu, use_kernel_on};
+pub use crate::gpu::fast::FastJob;
+use crate::gpu::fast::{fast_scores_gpu, fast_scores_gpu_jobs, use_kernel_on, FastChunking};
 use crate::gpu::GpuContext;
 use crate::room_layout::voxels::{self, ScoringTables, YawCells};
 use crate::room_layout::RoomBox;
@@ -70,6 +71,26 @@ impl<'a> Backend<'a> {
                 }
             },
             Backend::Cpu => engine.scores(hypotheses, weights),
+        }
+    }
+
+    /// [`Backend::fast_scores`] of several jobs on one engine (one per model whose fast-path settings the
+    /// engine serves): on the GPU all of them in as few submissions as the batch budget allows, with the
+    /// lattice points uploaded once and tables that several jobs use built once; on the CPU one after the
+    /// other. Returns each job's scores.
+    pub fn fast_scores_jobs(&self, engine: &FastEngine, jobs: &[FastJob]) -> Vec<Vec<f32>> {
+        let on_cpu = || jobs.iter().map(|job| engine.scores(job.hypotheses, job.weights)).collect();
+        match self {
+            Backend::Gpu(ctx) if use_kernel_on(ctx) => {
+                match fast_scores_gpu_jobs(ctx, engine, jobs, FastChunking::default()) {
+                    Ok(scores) => scores,
+                    Err(e) => {
+                        log::warn!("fast_scores on the GPU failed ({e}): scoring on the CPU");
+                        on_cpu()
+                    }
+                }
+            }
+            _ => on_cpu(),
         }
     }
 

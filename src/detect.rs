@@ -19,7 +19,7 @@ use glam::Vec3;
 use image::RgbImage;
 use rayon::prelude::*;
 
-use crate::backend::Backend;
+use crate::backend::{Backend, FastJob};
 use crate::draw::{category_colour, contrasting, draw_cuboid_with, draw_label, shade_convex_polygon};
 use crate::error::{Error, Result};
 use crate::eval::{Detection, FrameDetections};
@@ -83,17 +83,22 @@ impl<'a> FastEngines<'a> {
 
     /// The engine of `model` on `scene`, built on first use.
     pub fn get(&mut self, scene: &'a FeatureScene, model: &Model) -> &FastEngine<'a> {
-        let options = model.features.fast_options();
-        let same =
-            |e: &FastEngine| std::ptr::eq(e.scene(), scene) && *e.layout() == model.layout && e.options() == options;
-        let index = match self.engines.iter().position(same) {
+        let index = match self.position(scene, model) {
             Some(index) => index,
             None => {
-                self.engines.push(FastEngine::new(scene, &model.layout, options));
+                self.engines.push(FastEngine::new(scene, &model.layout, model.features.fast_options()));
                 self.engines.len() - 1
             }
         };
         &self.engines[index]
+    }
+
+    /// Index of the engine that serves `model` on `scene`, if built.
+    fn position(&self, scene: &FeatureScene, model: &Model) -> Option<usize> {
+        let options = model.features.fast_options();
+        self.engines
+            .iter()
+            .position(|e| std::ptr::eq(e.scene(), scene) && *e.layout() == model.layout && e.options() == options)
     }
 
     /// Seconds the engines spent building layer tables, summed over threads.
@@ -132,10 +137,67 @@ pub fn score_hypotheses_with_slices<'a>(
     engines: &mut FastEngines<'a>,
 ) -> Result<(Vec<f32>, Option<Vec<u8>>)> {
     let weights = std::slice::from_ref(&model.weights);
-    let mut scores = match model.features.path {
+    let scores = match model.features.path {
         FeaturePath::Fast => backend.fast_scores(engines.get(scene, model), hypotheses, weights),
         FeaturePath::Exact => backend.scores(scene, &model.layout, hypotheses, weights)?.0,
     };
+    Ok(finish_scores(scene, model, hypotheses, scores))
+}
+
+/// One model's scores of its hypotheses and, with latent support surfaces, each one's best slice.
+pub type ModelScores = (Vec<f32>, Option<Vec<u8>>);
+
+/// Every model's [`score_hypotheses_with_slices`] at once (`scenes[m]` and `hypotheses[m]` are model m's):
+/// the fast-path models that share an engine are scored in one [`Backend::fast_scores_jobs`] call (on the
+/// GPU: one submission per batch for all of them, tables shared). The scores equal the one-by-one ones.
+pub fn score_models<'a>(
+    scenes: &[&'a FeatureScene],
+    models: &[Model],
+    hypotheses: &[&[Hypothesis]],
+    backend: Backend,
+    engines: &mut FastEngines<'a>,
+) -> Result<Vec<ModelScores>> {
+    let mut raw: Vec<Option<Vec<f32>>> = vec![None; models.len()];
+    // Fast-path models grouped by engine, in model order.
+    let mut by_engine: Vec<(usize, Vec<usize>)> = Vec::new();
+    for (m, model) in models.iter().enumerate() {
+        if model.features.path == FeaturePath::Fast {
+            engines.get(scenes[m], model);
+            let index = engines.position(scenes[m], model).expect("built above");
+            match by_engine.iter_mut().find(|(e, _)| *e == index) {
+                Some((_, members)) => members.push(m),
+                None => by_engine.push((index, vec![m])),
+            }
+        }
+    }
+    for (index, members) in &by_engine {
+        let jobs: Vec<FastJob> = members
+            .iter()
+            .map(|&m| FastJob { hypotheses: hypotheses[m], weights: std::slice::from_ref(&models[m].weights) })
+            .collect();
+        for (&m, scores) in members.iter().zip(backend.fast_scores_jobs(&engines.engines[*index], &jobs)) {
+            raw[m] = Some(scores);
+        }
+    }
+    let mut out = Vec::with_capacity(models.len());
+    for (m, model) in models.iter().enumerate() {
+        let scores = match raw[m].take() {
+            Some(scores) => scores,
+            None => backend.scores(scenes[m], &model.layout, hypotheses[m], std::slice::from_ref(&model.weights))?.0,
+        };
+        out.push(finish_scores(scenes[m], model, hypotheses[m], scores));
+    }
+    Ok(out)
+}
+
+/// Adds the bias and, for a model with latent support surfaces, the best slice's surface score to the
+/// voxel scores `scores` of `hypotheses`; returns the scores and the chosen slices.
+fn finish_scores(
+    scene: &FeatureScene,
+    model: &Model,
+    hypotheses: &[Hypothesis],
+    mut scores: Vec<f32>,
+) -> (Vec<f32>, Option<Vec<u8>>) {
     scores.iter_mut().for_each(|s| *s += model.bias);
     let slices = model.surface.as_ref().map(|surface| {
         let engine = SurfaceEngine::new(scene, model.layout.groups, model.features.fast_options());
@@ -150,7 +212,7 @@ pub fn score_hypotheses_with_slices<'a>(
             })
             .collect()
     });
-    Ok((scores, slices))
+    (scores, slices)
 }
 
 /// Detects every model's category in `frame`.
@@ -274,20 +336,28 @@ pub fn detect_preprocessed_timed(
             .or_insert_with(|| FeatureScene::new(pre.clone(), &frame_yaws.yaws(anchor), step));
     }
     stages.yaw_grids_s += lap();
-    let mut candidates = Vec::new();
+    // Every model's window and fast-path engine first, then all models scored together (on the GPU in one
+    // submission per batch), then each model's candidates.
     let mut engines = FastEngines::new();
-    for model in models {
-        let scene = &scenes[&(model.window.step.to_bits(), model.window.yaw_anchor)];
-        let window =
-            sliding_window(scene, &WindowOptions { sizes: model.sizes(), min_points: model.window.min_points });
-        let hypotheses = &window.hypotheses;
+    let model_scenes: Vec<&FeatureScene> =
+        models.iter().map(|m| &scenes[&(m.window.step.to_bits(), m.window.yaw_anchor)]).collect();
+    let mut windows = Vec::with_capacity(models.len());
+    for (model, scene) in models.iter().zip(&model_scenes) {
+        windows
+            .push(sliding_window(scene, &WindowOptions { sizes: model.sizes(), min_points: model.window.min_points }));
         stages.window_s += lap();
         if model.features.path == FeaturePath::Fast {
             engines.get(scene, model);
             stages.lattices_s += lap();
         }
-        let (scores, slices) = score_hypotheses_with_slices(scene, model, hypotheses, backend, &mut engines)?;
-        stages.score_s += lap();
+    }
+    let all_hypotheses: Vec<&[Hypothesis]> = windows.iter().map(|w| w.hypotheses.as_slice()).collect();
+    let all_scores = score_models(&model_scenes, models, &all_hypotheses, backend, &mut engines)?;
+    stages.score_s += lap();
+    let mut candidates = Vec::new();
+    for (((model, scene), hypotheses), (scores, slices)) in
+        models.iter().zip(&model_scenes).zip(&all_hypotheses).zip(all_scores)
+    {
         stages.hypotheses += hypotheses.len();
         if let Some(n) = scores.iter().position(|s| !s.is_finite()) {
             return Err(Error::Input(format!(

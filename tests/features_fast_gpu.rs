@@ -14,9 +14,13 @@ use std::path::Path;
 
 use cog_gpu::features::fast::{FastEngine, FastOptions};
 use cog_gpu::features::feature_layout::{FeatureLayout, Groups};
+use cog_gpu::features::{sliding_window, WindowOptions};
 use cog_gpu::features::{Hypothesis, PreparedWindow, SizeQuantiles};
 use cog_gpu::frame::{DepthSource, Frame};
-use cog_gpu::gpu::fast::{fast_scores_gpu, fast_scores_gpu_chunked, fast_scores_reference, MAX_CHUNK};
+use cog_gpu::gpu::fast::{
+    fast_scores_gpu, fast_scores_gpu_chunked, fast_scores_gpu_jobs, fast_scores_reference, fast_scores_reference_jobs,
+    FastChunking, FastJob,
+};
 use cog_gpu::gpu::GpuContext;
 use cog_gpu::synth::{self, SynthOptions};
 
@@ -94,7 +98,7 @@ fn compare_paths(
 ) -> Vec<f32> {
     let engine = FastEngine::new(&window.scene, layout, FastOptions::default());
     let engine_scores = engine.scores(hyps, weights);
-    let reference = fast_scores_reference(&engine, hyps, weights, MAX_CHUNK).unwrap();
+    let reference = fast_scores_reference(&engine, hyps, weights, FastChunking::default()).unwrap();
     let gpu = fast_scores_gpu(ctx, &engine, hyps, weights).unwrap();
     // Σ|w_i·φ_i|: every feature is ≥ 0, so the engine's scores with |w| are exactly that sum.
     let abs_weights: Vec<Vec<f32>> = weights.iter().map(|w| w.iter().map(|x| x.abs()).collect()).collect();
@@ -149,7 +153,7 @@ fn gpu_fast_scores_honour_switched_off_groups_and_other_grids() {
 }
 
 #[test]
-fn chunked_dispatches_and_weight_passes_equal_the_single_dispatch() {
+fn chunked_dispatches_batches_and_weight_passes_equal_the_single_dispatch() {
     let Some(ctx) = context() else { return };
     let window = synthetic_window("bed");
     let layout = FeatureLayout::default();
@@ -158,13 +162,54 @@ fn chunked_dispatches_and_weight_passes_equal_the_single_dispatch() {
     let weights = random_weights(&layout, 10, 4);
     let engine = FastEngine::new(&window.scene, &layout, FastOptions::default());
     let whole = fast_scores_gpu(&ctx, &engine, &hyps, &weights).unwrap();
-    let chunked = fast_scores_gpu_chunked(&ctx, &engine, &hyps, &weights, 7).unwrap();
+    let chunks_of_7 = FastChunking { max_chunk: 7, ..FastChunking::default() };
+    let chunked = fast_scores_gpu_chunked(&ctx, &engine, &hyps, &weights, chunks_of_7).unwrap();
     assert_eq!(bits(&chunked), bits(&whole), "chunks of 7 hypotheses");
-    // The CPU twin runs the same dispatches: chunking does not change its bits either.
-    let reference = fast_scores_reference(&engine, &hyps, &weights, 7).unwrap();
-    assert_eq!(bits(&reference), bits(&fast_scores_reference(&engine, &hyps, &weights, MAX_CHUNK).unwrap()));
+    // A submission per table group (any group is larger than one byte), and chunks of 7 within them.
+    let one_group_per_batch = FastChunking { max_chunk: 7, max_batch_bytes: 1 };
+    let batched = fast_scores_gpu_chunked(&ctx, &engine, &hyps, &weights, one_group_per_batch).unwrap();
+    assert_eq!(bits(&batched), bits(&whole), "one submission per table group");
+    // The CPU twin runs the same dispatches: chunking and batching do not change its bits either.
+    let reference = fast_scores_reference(&engine, &hyps, &weights, chunks_of_7).unwrap();
+    let reference_whole = fast_scores_reference(&engine, &hyps, &weights, FastChunking::default()).unwrap();
+    assert_eq!(bits(&reference), bits(&reference_whole));
+    let reference_batched = fast_scores_reference(&engine, &hyps, &weights, one_group_per_batch).unwrap();
+    assert_eq!(bits(&reference_batched), bits(&reference_whole));
     let abs_weights: Vec<Vec<f32>> = weights.iter().map(|w| w.iter().map(|x| x.abs()).collect()).collect();
     let magnitude = engine.scores(&hyps, &abs_weights);
     assert_scores_match(&whole, &reference, &magnitude, "ten weight vectors: GPU vs CPU twin");
     assert_scores_match(&whole, &engine.scores(&hyps, &weights), &magnitude, "ten weight vectors: GPU vs engine");
+}
+
+#[test]
+fn several_jobs_in_one_call_equal_one_call_each() {
+    let Some(ctx) = context() else { return };
+    // Three models' windows on one scene (one engine): bed, chair and bed again (the repeated job shares
+    // every table with the first), with one, one and nine weight vectors.
+    let window = synthetic_window("bed");
+    let layout = FeatureLayout::default();
+    let engine = FastEngine::new(&window.scene, &layout, FastOptions::default());
+    let chair_window = sliding_window(&window.scene, &WindowOptions { sizes: sizes("chair"), min_points: 50 });
+    let bed = sample(&window, 300);
+    let stride = (chair_window.hypotheses.len() / 300).max(1);
+    let chair: Vec<Hypothesis> = chair_window.hypotheses.iter().step_by(stride).take(300).copied().collect();
+    assert!(chair.len() >= 100, "{} chair hypotheses", chair.len());
+    let weights = [random_weights(&layout, 1, 5), random_weights(&layout, 1, 6), random_weights(&layout, 9, 7)];
+    let jobs = [
+        FastJob { hypotheses: &bed, weights: &weights[0] },
+        FastJob { hypotheses: &chair, weights: &weights[1] },
+        FastJob { hypotheses: &bed, weights: &weights[2] },
+    ];
+    let together = fast_scores_gpu_jobs(&ctx, &engine, &jobs, FastChunking::default()).unwrap();
+    let twin_together = fast_scores_reference_jobs(&engine, &jobs, FastChunking::default()).unwrap();
+    assert_eq!(together.len(), 3);
+    for (n, job) in jobs.iter().enumerate() {
+        let alone = fast_scores_gpu(&ctx, &engine, job.hypotheses, job.weights).unwrap();
+        assert_eq!(bits(&together[n]), bits(&alone), "job {n}: GPU, together vs alone");
+        let twin_alone = fast_scores_reference(&engine, job.hypotheses, job.weights, FastChunking::default()).unwrap();
+        assert_eq!(bits(&twin_together[n]), bits(&twin_alone), "job {n}: CPU twin, together vs alone");
+        let abs_weights: Vec<Vec<f32>> = job.weights.iter().map(|w| w.iter().map(|x| x.abs()).collect()).collect();
+        let magnitude = engine.scores(job.hypotheses, &abs_weights);
+        assert_scores_match(&together[n], &engine.scores(job.hypotheses, job.weights), &magnitude, &format!("job {n}"));
+    }
 }

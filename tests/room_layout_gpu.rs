@@ -5,6 +5,8 @@
 //! The GPU tests need a Vulkan adapter (lavapipe: mesa-vulkan-drivers; run with NODEVICE_SELECT=1) unless
 //! COG_GPU_SKIP_GPU_TESTS=1, in which case they say they skip.
 
+mod common;
+
 use std::sync::OnceLock;
 
 use cog_gpu::frame::{DepthSource, Frame};
@@ -15,6 +17,7 @@ use cog_gpu::gpu::room_layout::{
 use cog_gpu::gpu::{self, GpuContext};
 use cog_gpu::room_layout::voxels::{scores_cpu, Discretisation, ScoringTables, BAND_MM, CUBICAL_SPLITS, NO_REGION};
 use cog_gpu::room_layout::{hypotheses, LayoutScene};
+use common::{wgsl_const, wgsl_struct_size};
 
 static GPU: OnceLock<Option<GpuContext>> = OnceLock::new();
 
@@ -62,22 +65,7 @@ fn kernel_twin_and_reference_agree_on_a_real_frame() {
 
 /// The WGSL module, parsed by naga.
 fn shader() -> naga::Module {
-    let source = include_str!("../shaders/room_layout.wgsl");
-    naga::front::wgsl::parse_str(source).expect("room_layout.wgsl parses")
-}
-
-/// The value of WGSL `const NAME` as i64.
-fn wgsl_const(module: &naga::Module, name: &str) -> i64 {
-    let (_, constant) = module
-        .constants
-        .iter()
-        .find(|(_, c)| c.name.as_deref() == Some(name))
-        .unwrap_or_else(|| panic!("no const {name} in room_layout.wgsl"));
-    match module.global_expressions[constant.init] {
-        naga::Expression::Literal(naga::Literal::U32(v)) => v as i64,
-        naga::Expression::Literal(naga::Literal::I32(v)) => v as i64,
-        ref other => panic!("const {name} is {other:?}, expected an integer literal"),
-    }
+    common::shader_module("room_layout.wgsl")
 }
 
 #[test]
@@ -94,13 +82,7 @@ fn shared_constants_match_the_shader() {
 #[test]
 fn shared_structs_have_the_rust_sizes() {
     let module = shader();
-    let mut layouter = naga::proc::Layouter::default();
-    layouter.update(module.to_ctx()).unwrap();
-    let size = |name: &str| {
-        let (handle, _) = module.types.iter().find(|(_, t)| t.name.as_deref() == Some(name)).unwrap();
-        layouter[handle].size as usize
-    };
-    assert_eq!(size("LayoutParams"), std::mem::size_of::<LayoutParams>());
-    assert_eq!(size("YawRange"), std::mem::size_of::<YawRange>());
-    assert_eq!(size("RoomBox"), std::mem::size_of::<GpuRoomBox>());
+    assert_eq!(wgsl_struct_size(&module, "LayoutParams"), std::mem::size_of::<LayoutParams>());
+    assert_eq!(wgsl_struct_size(&module, "YawRange"), std::mem::size_of::<YawRange>());
+    assert_eq!(wgsl_struct_size(&module, "RoomBox"), std::mem::size_of::<GpuRoomBox>());
 }

@@ -377,15 +377,18 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         prune_after: Some(args.prune_after),
         qp_tolerance: 1e-7,
     };
-    let mut solver = if args.resume {
-        log::info!("resuming from {}", checkpoint.display());
-        CuttingPlane::resume(ssvm.clone(), &checkpoint)?
-    } else {
-        CuttingPlane::new(ssvm.clone())?
-    };
-    // Convergence counts only when found by a full pass (see `DetectorOracle`'s candidate cache).
+    // Convergence counts only when found by a full pass (see `DetectorOracle`'s candidate cache). The
+    // latent path builds (and resumes) its solver per CCCP round itself.
     let (trained, latent) = match &pretrained {
-        None => (train_detector(&oracle, &mut solver)?, None),
+        None => {
+            let mut solver = if args.resume {
+                log::info!("resuming from {}", checkpoint.display());
+                CuttingPlane::resume(ssvm.clone(), &checkpoint)?
+            } else {
+                CuttingPlane::new(ssvm.clone())?
+            };
+            (train_detector(&oracle, &mut solver)?, None)
+        }
         Some(model) => {
             let progress_path = PathBuf::from(format!("{}.cccp", out.display()));
             let progress = if args.resume {

@@ -75,15 +75,25 @@ impl Default for FastOptions {
 
 /// One point as the fast path bins it.
 #[derive(Clone, Copy, Debug, Default)]
-struct LatticePoint {
+pub(crate) struct LatticePoint {
     /// Ground cell index `t·cells_s + s`.
-    cell: u32,
+    pub(crate) cell: u32,
     /// Height (metres).
-    z: f32,
-    normal_bin: u8,
-    cog_bins: [u8; 2],
+    pub(crate) z: f32,
+    pub(crate) normal_bin: u8,
+    pub(crate) cog_bins: [u8; 2],
     /// Fixed-point shares of the gradient magnitude for the two COG bins (0 when it has none).
-    cog_shares: [u32; 2],
+    pub(crate) cog_shares: [u32; 2],
+}
+
+/// Where the voxel layers of one [`LayerTable`] lie along z: layer `k` holds the points with
+/// `⌊(z − z_lo) · inv_step⌋ = k`, `k < layers`. Computed once ([`FastEngine::table_span`]) for the CPU
+/// table and the GPU kernel that builds the same table.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TableSpan {
+    pub z_lo: f32,
+    pub inv_step: f32,
+    pub layers: usize,
 }
 
 /// Step 1 of the module doc: the points of one yaw on the ground lattice.
@@ -260,15 +270,35 @@ impl<'a> FastEngine<'a> {
     /// Step 2: the layer table of one (yaw, bottom, height).
     pub(crate) fn table(&self, key: TableKey) -> LayerTable {
         let started = Instant::now();
-        let lattice = &self.lattices[key.yaw_index as usize];
+        let table = LayerTable::build(&self.lattices[key.yaw_index as usize], self.table_span(key));
+        self.table_nanos.fetch_add(started.elapsed().as_nanos() as u64, Ordering::Relaxed);
+        table
+    }
+
+    /// The voxel layers of the table of `key` along z: the expanded box's z extent cut into the grid's
+    /// `nz` layers.
+    pub(crate) fn table_span(&self, key: TableKey) -> TableSpan {
         let g = self.layout.grid();
         let expansion = self.layout.expansion();
         let (bottom, height) = (f32::from_bits(key.bottom_bits), f32::from_bits(key.height_bits));
         let extent = height * expansion[2];
         let z_lo = bottom + 0.5 * height - 0.5 * extent;
-        let table = LayerTable::build(lattice, z_lo, extent / g[2] as f32, g[2] as usize);
-        self.table_nanos.fetch_add(started.elapsed().as_nanos() as u64, Ordering::Relaxed);
-        table
+        TableSpan { z_lo, inv_step: 1.0 / (extent / g[2] as f32), layers: g[2] as usize }
+    }
+
+    /// The lattice of yaw `yaw_index` (step 1), for the GPU kernel that builds tables from it.
+    pub fn lattice(&self, yaw_index: usize) -> &YawLattice {
+        &self.lattices[yaw_index]
+    }
+
+    /// The z layers of the table `hyp` is scored from.
+    pub fn table_span_of(&self, hyp: &Hypothesis) -> TableSpan {
+        self.table_span(key_of(hyp))
+    }
+
+    /// The words of the table `hyp` is scored from (step 2 on the CPU), for tests against the GPU's.
+    pub fn table_words_of(&self, hyp: &Hypothesis) -> Vec<u32> {
+        self.table(key_of(hyp)).sums
     }
 
     /// Step 3 for one hypothesis: calls `visit([i, j, k], integer sums)` for every non-empty voxel.
@@ -451,6 +481,21 @@ pub(crate) fn group_by_table(hypotheses: &[Hypothesis]) -> Vec<(TableKey, Vec<us
 }
 
 impl YawLattice {
+    /// Cells along s and t.
+    pub(crate) fn cells(&self) -> [usize; 2] {
+        self.cells
+    }
+
+    /// The binned points, in binning order.
+    pub(crate) fn points(&self) -> &[LatticePoint] {
+        &self.points
+    }
+
+    /// Entries per row and rows per layer of this yaw's [`LayerTable`]s (cells + 1 along s and t).
+    pub(crate) fn table_stride(&self) -> [usize; 2] {
+        [self.cells[0] + 1, self.cells[1] + 1]
+    }
+
     fn build(
         scene: &FeatureScene,
         grid: &YawGrid,
@@ -494,12 +539,12 @@ impl YawLattice {
 }
 
 impl LayerTable {
-    fn build(lattice: &YawLattice, z_lo: f32, z_step: f32, layers: usize) -> LayerTable {
-        let [cs, ct] = lattice.cells;
-        let stride = [cs + 1, ct + 1];
+    fn build(lattice: &YawLattice, span: TableSpan) -> LayerTable {
+        let TableSpan { z_lo, inv_step, layers } = span;
+        let stride = lattice.table_stride();
+        let cs = lattice.cells[0];
         let per_layer = stride[0] * stride[1];
         let mut sums = vec![0u32; layers * per_layer * CHANNELS];
-        let inv_step = 1.0 / z_step;
         for p in &lattice.points {
             let layer = ((p.z - z_lo) * inv_step).floor();
             if !(layer >= 0.0 && layer < layers as f32) {
@@ -540,11 +585,6 @@ impl LayerTable {
     /// All entries, layer by layer, `(k·stride[1] + y)·stride[0] + x` entries of [`CHANNELS`] words each.
     pub(crate) fn sums(&self) -> &[u32] {
         &self.sums
-    }
-
-    /// Entries per row (cells along s + 1) and rows per layer (cells along t + 1).
-    pub(crate) fn stride(&self) -> [usize; 2] {
-        self.stride
     }
 
     /// The sums of layer `k` over the cells `< x` along s and `< y` along t, in place.

@@ -37,6 +37,7 @@
 
 pub mod depth_points;
 pub mod fast;
+pub mod fast_tables;
 pub mod features;
 pub mod room_layout;
 
@@ -168,6 +169,8 @@ pub struct Kernels {
     pub depth_points: Kernel,
     pub features: Kernel,
     pub fast_scores: Kernel,
+    pub fast_table_scatter: Kernel,
+    pub fast_table_scan: Kernel,
     pub room_layout: Kernel,
 }
 
@@ -177,6 +180,8 @@ impl Kernels {
             depth_points: Kernel::new(device, &depth_points::KERNEL)?,
             features: Kernel::new(device, &features::KERNEL)?,
             fast_scores: Kernel::new(device, &fast::KERNEL)?,
+            fast_table_scatter: Kernel::new(device, &fast_tables::SCATTER_KERNEL)?,
+            fast_table_scan: Kernel::new(device, &fast_tables::SCAN_KERNEL)?,
             room_layout: Kernel::new(device, &room_layout::KERNEL)?,
         })
     }
@@ -392,6 +397,59 @@ impl GpuContext {
             layout: &kernel.bind_group_layout,
             entries: &entries,
         })
+    }
+
+    /// Bind group 0 of `kernel`, binding `i` = the byte range `(offset, size)` of `ranges[i].0` (offsets
+    /// must be multiples of the device's storage / uniform offset alignment, sizes non-zero).
+    pub fn bind_group_ranges(&self, kernel: &Kernel, ranges: &[(&wgpu::Buffer, u64, u64)]) -> wgpu::BindGroup {
+        let entries: Vec<wgpu::BindGroupEntry> = ranges
+            .iter()
+            .enumerate()
+            .map(|(i, &(buffer, offset, size))| wgpu::BindGroupEntry {
+                binding: i as u32,
+                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                    buffer,
+                    offset,
+                    size: wgpu::BufferSize::new(size),
+                }),
+            })
+            .collect();
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(kernel.label),
+            layout: &kernel.bind_group_layout,
+            entries: &entries,
+        })
+    }
+
+    /// Records several 1-D dispatches of `kernel` (`(bind group, invocations)` each, in order) in one
+    /// compute pass: no submission and no wait between them.
+    pub fn encode_dispatches(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        kernel: &Kernel,
+        jobs: &[(wgpu::BindGroup, u32)],
+    ) -> Result<()> {
+        if kernel.workgroup_size[1] != 1 || kernel.workgroup_size[2] != 1 {
+            return Err(Error::Gpu(format!(
+                "kernel '{}' has workgroup size {:?}; a 1-D dispatch needs y = z = 1",
+                kernel.label, kernel.workgroup_size
+            )));
+        }
+        let grids = jobs
+            .iter()
+            .map(|(_, invocations)| self.workgroup_grid(invocations.div_ceil(kernel.workgroup_size[0])))
+            .collect::<Result<Vec<_>>>()?;
+        let mut pass = encoder
+            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(kernel.label), timestamp_writes: None });
+        pass.set_pipeline(&kernel.pipeline);
+        for ((bind_group, _), [x, y, z]) in jobs.iter().zip(grids) {
+            if x == 0 {
+                continue;
+            }
+            pass.set_bind_group(0, bind_group, &[]);
+            pass.dispatch_workgroups(x, y, z);
+        }
+        Ok(())
     }
 
     /// Workgroup counts (x, y, 1) covering at least `workgroups` workgroups with x and y within

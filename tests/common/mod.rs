@@ -39,3 +39,39 @@ pub fn write_tiny_frame(root: &Path, name: &str, objects: Vec<Object>) {
     };
     frame.write(root.join(name)).unwrap();
 }
+
+/// The WGSL module `shaders/<file>`, parsed by naga.
+#[allow(dead_code)]
+pub fn shader_module(file: &str) -> naga::Module {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders").join(file);
+    let source = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    naga::front::wgsl::parse_str(&source).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+/// The value of WGSL `const NAME` (an integer literal) in `module`, as i64.
+#[allow(dead_code)]
+pub fn wgsl_const(module: &naga::Module, name: &str) -> i64 {
+    let (_, constant) = module
+        .constants
+        .iter()
+        .find(|(_, c)| c.name.as_deref() == Some(name))
+        .unwrap_or_else(|| panic!("no const {name} in the shader"));
+    match module.global_expressions[constant.init] {
+        naga::Expression::Literal(naga::Literal::U32(v)) => v as i64,
+        naga::Expression::Literal(naga::Literal::I32(v)) => v as i64,
+        ref other => panic!("const {name} is {other:?}, expected an integer literal"),
+    }
+}
+
+/// The size in bytes of WGSL struct `name` in `module`, as naga lays it out.
+#[allow(dead_code)]
+pub fn wgsl_struct_size(module: &naga::Module, name: &str) -> usize {
+    let mut layouter = naga::proc::Layouter::default();
+    layouter.update(module.to_ctx()).unwrap();
+    let (handle, _) = module
+        .types
+        .iter()
+        .find(|(_, t)| t.name.as_deref() == Some(name))
+        .unwrap_or_else(|| panic!("no struct {name}"));
+    layouter[handle].size as usize
+}

@@ -1,0 +1,219 @@
+//! The fast path's layer tables built on the GPU (`shaders/fast_tables.wgsl`): step 2 of
+//! [`crate::features::fast`] from one yaw's lattice points, so that the GPU path uploads each yaw's points
+//! once per call instead of every (yaw, bottom, height) table.
+//!
+//! # Design
+//! A table is built by three dispatches (scatter the points with atomic `u32` adds, running sums along s,
+//! then along t) into a zeroed range of a buffer; [`crate::gpu::fast`] records them for every table group
+//! of a batch, in three phases, before the scoring dispatches of the same submission. The integer sums
+//! wrap exactly as on the CPU, so the table is the same words as [`LayerTable`]'s whatever the order of the
+//! atomic adds (tested against `LayerTable::build` and the twins, on lavapipe).
+//!
+//! Each point's layer is `⌊(z − z_lo) · inv_step⌋` with `z_lo` and `inv_step` computed once on the CPU
+//! ([`TableSpan`]): a subtraction and a multiplication, correctly rounded on both sides (Vulkan requires it
+//! of `OpFSub`/`OpFMul`), so a point falls in the same layer on the GPU and the CPU.
+//!
+//! # CPU twins
+//! [`scatter_main`] and [`scan_main`] are the entry points in Rust, one invocation per call;
+//! [`build_table_reference`] runs them over a whole table in invocation order.
+
+use bytemuck::{Pod, Zeroable};
+
+use super::{BufferBinding, GpuContext, KernelSpec};
+use crate::error::{Error, Result};
+use crate::features::fast::{LatticePoint, TableSpan, YawLattice, CHANNELS};
+use crate::features::feature_layout::COG;
+
+const BINDINGS: &[BufferBinding] =
+    &[BufferBinding::Uniform, BufferBinding::StorageRead, BufferBinding::StorageReadWrite];
+
+/// The scatter entry point (registered in [`super::Kernels`]).
+pub const SCATTER_KERNEL: KernelSpec = KernelSpec {
+    label: "fast_tables scatter",
+    source: include_str!("../../shaders/fast_tables.wgsl"),
+    entry_point: "scatter",
+    bindings: BINDINGS,
+};
+
+/// The scan entry point (registered in [`super::Kernels`]).
+pub const SCAN_KERNEL: KernelSpec = KernelSpec {
+    label: "fast_tables scan",
+    source: include_str!("../../shaders/fast_tables.wgsl"),
+    entry_point: "scan",
+    bindings: BINDINGS,
+};
+
+/// The shader's `SCAN_ROWS`: running sums along s.
+pub const SCAN_ROWS: u32 = 1;
+/// The shader's `SCAN_COLUMNS`: running sums along t.
+pub const SCAN_COLUMNS: u32 = 2;
+
+/// Twin of WGSL `struct TablePoint`: one lattice point.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct TablePoint {
+    /// Ground cell `t·cells_s + s`.
+    pub cell: u32,
+    /// Height (metres).
+    pub z: f32,
+    /// Normal bin | COG bin 0 << 8 | COG bin 1 << 16.
+    pub bins: u32,
+    pub share0: u32,
+    pub share1: u32,
+}
+const _: () = assert!(std::mem::size_of::<TablePoint>() == 20);
+
+impl From<&LatticePoint> for TablePoint {
+    fn from(p: &LatticePoint) -> TablePoint {
+        TablePoint {
+            cell: p.cell,
+            z: p.z,
+            bins: u32::from(p.normal_bin) | (u32::from(p.cog_bins[0]) << 8) | (u32::from(p.cog_bins[1]) << 16),
+            share0: p.cog_shares[0],
+            share1: p.cog_shares[1],
+        }
+    }
+}
+
+/// Twin of WGSL `struct TableParams`: one table's shape and z layers, and the dispatch's job.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct TableParams {
+    /// Entries per row (cells_s + 1), rows per layer (cells_t + 1), layers, cells_s.
+    pub shape: [u32; 4],
+    /// Point count, scan mode ([`SCAN_ROWS`] or [`SCAN_COLUMNS`]; unused by the scatter), unused, unused.
+    pub job: [u32; 4],
+    /// z_lo, 1 / layer height, unused, unused.
+    pub span: [f32; 4],
+}
+const _: () = assert!(std::mem::size_of::<TableParams>() == 48);
+// The shader hard-codes the entry layout: CHANNELS words, the COG bins from word COG.
+const _: () = assert!(CHANNELS == 36 && COG == 26);
+
+/// The lattice's points as the shader reads them.
+pub fn table_points(lattice: &YawLattice) -> Vec<TablePoint> {
+    lattice.points().iter().map(TablePoint::from).collect()
+}
+
+/// The params of a table of `span` over `lattice`, for the dispatch `mode` (0 for the scatter).
+pub fn table_params(lattice: &YawLattice, span: TableSpan, mode: u32) -> TableParams {
+    let [row, rows] = lattice.table_stride();
+    TableParams {
+        shape: [row as u32, rows as u32, span.layers as u32, lattice.cells()[0] as u32],
+        job: [lattice.points().len() as u32, mode, 0, 0],
+        span: [span.z_lo, span.inv_step, 0.0, 0.0],
+    }
+}
+
+/// Words of the table `params` describes.
+pub fn table_words(params: &TableParams) -> usize {
+    let [row, rows, layers, _] = params.shape.map(|v| v as usize);
+    layers * rows * row * CHANNELS
+}
+
+/// Invocations of each of the three dispatches that build the table of `params`: scatter, rows, columns.
+pub fn table_invocations(params: &TableParams) -> [u32; 3] {
+    let [row, rows, layers, _] = params.shape;
+    let channels = CHANNELS as u32;
+    [params.job[0], layers * rows * channels, layers * row * channels]
+}
+
+/// The shader's `scatter` for invocation `n`.
+pub fn scatter_main(params: &TableParams, points: &[TablePoint], table: &mut [u32], n: usize) {
+    if n >= params.job[0] as usize {
+        return;
+    }
+    let p = points[n];
+    let layer = ((p.z - params.span[0]) * params.span[1]).floor();
+    if !(layer >= 0.0 && layer < params.shape[2] as f32) {
+        return;
+    }
+    let [row, rows, _, cells_s] = params.shape.map(|v| v as usize);
+    let x = p.cell as usize % cells_s;
+    let y = p.cell as usize / cells_s;
+    // Cell (x, y) is entry (x + 1, y + 1) before the prefix sums.
+    let base = ((layer as usize * rows + y + 1) * row + x + 1) * CHANNELS;
+    let mut atomic_add = |at: usize, value: u32| table[at] = table[at].wrapping_add(value);
+    atomic_add(base, 1);
+    atomic_add(base + 1 + (p.bins & 0xff) as usize, 1);
+    atomic_add(base + COG + ((p.bins >> 8) & 0xff) as usize, p.share0);
+    atomic_add(base + COG + ((p.bins >> 16) & 0xff) as usize, p.share1);
+}
+
+/// The shader's `scan` for invocation `n` (the mode is `params.job[1]`).
+pub fn scan_main(params: &TableParams, table: &mut [u32], n: usize) {
+    let [row, rows, layers, _] = params.shape.map(|v| v as usize);
+    let c = n % CHANNELS;
+    if params.job[1] == SCAN_ROWS {
+        if n >= layers * rows * CHANNELS {
+            return;
+        }
+        // n / CHANNELS = k·rows + y: the row's first entry.
+        let first = (n / CHANNELS) * row * CHANNELS + c;
+        let mut acc = 0u32;
+        for x in 1..row {
+            let at = first + x * CHANNELS;
+            acc = acc.wrapping_add(table[at]);
+            table[at] = acc;
+        }
+    } else {
+        if n >= layers * row * CHANNELS {
+            return;
+        }
+        let x = (n / CHANNELS) % row;
+        let k = n / (CHANNELS * row);
+        let mut acc = 0u32;
+        for y in 1..rows {
+            let at = ((k * rows + y) * row + x) * CHANNELS + c;
+            acc = acc.wrapping_add(table[at]);
+            table[at] = acc;
+        }
+    }
+}
+
+/// The twins over a whole table: every scatter invocation, then every row scan, then every column scan.
+pub fn build_table_reference(lattice: &YawLattice, span: TableSpan) -> Vec<u32> {
+    let points = table_points(lattice);
+    let scatter = table_params(lattice, span, 0);
+    let mut table = vec![0u32; table_words(&scatter)];
+    let [point_count, row_jobs, column_jobs] = table_invocations(&scatter);
+    for n in 0..point_count as usize {
+        scatter_main(&scatter, &points, &mut table, n);
+    }
+    for n in 0..row_jobs as usize {
+        scan_main(&table_params(lattice, span, SCAN_ROWS), &mut table, n);
+    }
+    for n in 0..column_jobs as usize {
+        scan_main(&table_params(lattice, span, SCAN_COLUMNS), &mut table, n);
+    }
+    table
+}
+
+/// One table built on the GPU and read back (for tests and benchmarks; the scoring path builds its tables
+/// inside its own submission, see [`crate::gpu::fast`]).
+pub fn build_table_gpu(ctx: &GpuContext, lattice: &YawLattice, span: TableSpan) -> Result<Vec<u32>> {
+    let points = table_points(lattice);
+    let scatter = table_params(lattice, span, 0);
+    let words = table_words(&scatter);
+    let max_binding = ctx.limits.max_storage_buffer_binding_size.min(ctx.limits.max_buffer_size);
+    if (words * 4) as u64 > max_binding {
+        return Err(Error::Gpu(format!(
+            "fast_tables: a table of {} bytes exceeds the storage-binding limit of {max_binding} bytes",
+            words * 4
+        )));
+    }
+    ctx.checked("fast_tables kernels", || {
+        let point_buffer = ctx.storage_buffer("table points", &points);
+        let table = ctx.output_buffer("fast table", (words * 4) as u64);
+        let invocations = table_invocations(&scatter);
+        let mut encoder =
+            ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("fast_tables") });
+        for (step, mode) in [0, SCAN_ROWS, SCAN_COLUMNS].into_iter().enumerate() {
+            let kernel = if step == 0 { &ctx.kernels.fast_table_scatter } else { &ctx.kernels.fast_table_scan };
+            let uniform = ctx.uniform_buffer("table params", &table_params(lattice, span, mode));
+            let bind_group = ctx.bind_group(kernel, &[&uniform, &point_buffer, &table]);
+            ctx.encode_dispatch(&mut encoder, kernel, &bind_group, invocations[step])?;
+        }
+        ctx.read_buffer_after(encoder, &table, words)
+    })
+}
