@@ -497,6 +497,7 @@ pub fn fast_scores_gpu_jobs(
         let mut weight_buffers: Vec<Option<wgpu::Buffer>> = Vec::new();
         let mut submissions = 0usize;
         let mut dispatch_count = 0usize;
+        let mut tables = (0usize, 0u64);
         let scores = run(engine, jobs, chunking, false, |dispatches| {
             for d in dispatches {
                 let bytes = 4 * fast_tables_words(engine, d) as u64;
@@ -513,12 +514,21 @@ pub fn fast_scores_gpu_jobs(
             }
             submissions += 1;
             dispatch_count += dispatches.len();
+            for (n, d) in dispatches.iter().enumerate() {
+                if n == 0 || dispatches[n - 1].group != d.group {
+                    tables.0 += 1;
+                    tables.1 += 4 * fast_tables_words(engine, d) as u64;
+                }
+            }
             run_batch(ctx, engine, dispatches, &weight_buffers)
         })?;
         log::debug!(
-            "fast_scores: {} jobs, {} hypotheses in {dispatch_count} scoring dispatches, {submissions} submissions",
+            "fast_scores: {} jobs, {} hypotheses, {} tables ({:.1} MB) built on the GPU, {dispatch_count} scoring \
+             dispatches, {submissions} submissions",
             jobs.len(),
-            jobs.iter().map(|j| j.hypotheses.len()).sum::<usize>()
+            jobs.iter().map(|j| j.hypotheses.len()).sum::<usize>(),
+            tables.0,
+            tables.1 as f64 * 1e-6
         );
         Ok(scores)
     })
