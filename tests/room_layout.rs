@@ -1,7 +1,8 @@
 //! Room layout (`cog_gpu::room_layout`): free-space IoU against hand-computed boxes, the Manhattan and
 //! cubical region assignment of hand-placed points, the summed-area IoU against the direct count, the
 //! hypotheses' 80 % rule, the orientation features against their closed form, the wall leaks against a
-//! direct count, the model file, and the PLY writer read back.
+//! direct count, the floor and ceiling snapped to constructed planes, the model file,
+//! and the PLY writer read back.
 
 use cog_gpu::frame::RoomLayout;
 use cog_gpu::geometry::Camera;
@@ -14,7 +15,10 @@ use cog_gpu::room_layout::voxels::{
     box_features, cubical_region, features, manhattan_region, Discretisation, ScoringTables, YawCells, BOX_FEATURES,
     LAYERS, ORIENTATION_FEATURES,
 };
-use cog_gpu::room_layout::{orientation_yaw, room_axes, to_mm, LayoutScene, RoomBox, ORIENTATIONS};
+use cog_gpu::room_layout::{
+    orientation_yaw, room_axes, snap_floor_and_ceiling, to_mm, LayoutScene, RoomBox, MIN_ROOM_HEIGHT, ORIENTATIONS,
+    SNAP_MIN_POINTS,
+};
 use glam::{Mat3, Vec2, Vec3};
 
 /// A camera at the upright origin looking along +y with no tilt, with a very wide field of view (focal
@@ -278,6 +282,40 @@ fn wall_leaks_count_the_points_beyond_each_wall() {
     assert!(cells.points_beyond_walls(&walls_at_3)[0] >= 2000);
     let own = RoomBox { yaw_index: k as u32, u0: -2100, u1: 2100, v0: 0, v1: 5100 };
     assert_eq!(cells.points_beyond_walls(&own), [0, 0, 0, 0]);
+}
+
+#[test]
+fn floor_and_ceiling_snap_to_their_planes() {
+    // A floor at −1.2 m (100 points facing up) with a noise tail to −1.25 m (the 0.001 quantile's side),
+    // walls, and a ceiling at 1.4 m (100 points facing down): 2.6 m high, seen.
+    let mut points = Vec::new();
+    let mut normals = Vec::new();
+    for i in 0..100 {
+        let x = i as f32 * 0.01;
+        points.push(Vec3::new(x, 2.0, -1.2 + if i % 10 == 0 { -0.05 } else { 0.0 }));
+        normals.push(Vec3::Z);
+        points.push(Vec3::new(x, 2.0, 1.4 + if i % 10 == 0 { 0.03 } else { 0.0 }));
+        normals.push(Vec3::NEG_Z);
+        points.push(Vec3::new(x, 3.0, -1.0 + 0.02 * i as f32));
+        normals.push(Vec3::NEG_Y);
+    }
+    // Quantiles at the noise tails: both snap to the planes' medians.
+    assert_eq!(snap_floor_and_ceiling(&points, &normals, -1.25, 1.43), (-1.2, 1.4));
+    // No ceiling seen (without the ceiling's points the highest reach 0.98 m, 2.18 m above the floor):
+    // floor + MIN_ROOM_HEIGHT.
+    let (unseen_points, unseen_normals): (Vec<Vec3>, Vec<Vec3>) =
+        points.iter().zip(&normals).filter(|(_, n)| n.z > -0.5).map(|(p, n)| (*p, *n)).unzip();
+    let (floor, ceiling) = snap_floor_and_ceiling(&unseen_points, &unseen_normals, -1.25, 0.98);
+    assert_eq!(floor, -1.2);
+    assert!((ceiling - (-1.2 + MIN_ROOM_HEIGHT)).abs() < 1e-6, "{ceiling}");
+    // Fewer than SNAP_MIN_POINTS facing points near a quantile: the quantile stays.
+    let few = SNAP_MIN_POINTS - 1;
+    let sparse_points: Vec<Vec3> = points.iter().step_by(3).take(few).copied().collect();
+    let sparse_normals: Vec<Vec3> = normals.iter().step_by(3).take(few).copied().collect();
+    assert_eq!(snap_floor_and_ceiling(&sparse_points, &sparse_normals, -1.25, 1.43).0, -1.25);
+    // Points facing the wrong way (a table top's underside near the floor) do not snap the floor.
+    let down: Vec<Vec3> = normals.iter().map(|n| -*n).collect();
+    assert_eq!(snap_floor_and_ceiling(&points, &down, -1.25, 1.43), (-1.25, 1.43));
 }
 
 #[test]

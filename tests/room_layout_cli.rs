@@ -1,10 +1,11 @@
 //! The room-layout commands through the binary on small synthetic frames: `train-layout` → `layout`
-//! (JSON, overlay, PLY) → `eval --layout`; `detect` with a layout model beside the detector models; and
+//! (JSON, overlay, PLY) → `eval --layout` (with `--bootstrap --versus`); `detect` with a layout model beside the detector models; and
 //! bad inputs, which must exit with status 1 naming the file, never panic.
 
 use std::path::Path;
 use std::process::{Command, Output};
 
+use cog_gpu::eval::{bootstrap_frames, percentile_interval, Bootstrap};
 use serde_json::Value;
 
 fn run(args: &[&str]) -> Output {
@@ -86,6 +87,43 @@ fn train_layout_eval_and_detect_end_to_end() {
     // The heuristic baseline writes the same files.
     ok(&["layout", &p("data"), "--heuristic", "--out", &p("heuristic"), "--no-overlay"]);
     assert_eq!(json(&dir.path().join(format!("heuristic/{frame}.json")))["layout"]["method"], "heuristic");
+
+    // `--bootstrap --versus`: the intervals are those of the per-frame IoUs resampled by the library's
+    // frame draws (recomputed here from the printed IoUs), the difference is the difference of the means,
+    // and a directory against itself differs by exactly 0.
+    let eval_json = |versus: &str| -> Value {
+        let (data, out, versus) = (p("data"), p("out"), p(versus));
+        let args = ["eval", "--layout", "--data", &data, "--detections", &out, "--json", "--bootstrap", "300"];
+        let args = [&args[..], &["--bootstrap-seed", "7", "--versus", &versus]].concat();
+        serde_json::from_str(&ok(&args)).unwrap()
+    };
+    let report = eval_json("heuristic");
+    let column = |key: &str| -> Vec<f64> {
+        report["per_frame"].as_array().unwrap().iter().map(|f| f[key].as_f64().unwrap_or(0.0)).collect()
+    };
+    let (ious, other) = (column("iou"), column("versus_iou"));
+    let draws = bootstrap_frames(3, Bootstrap { resamples: 300, seed: 7 });
+    let interval = |values: &[f64]| -> (f32, f32) {
+        let means: Vec<f32> =
+            draws.iter().map(|d| (d.iter().map(|&f| values[f]).sum::<f64>() / d.len() as f64) as f32).collect();
+        percentile_interval(&means, 0.9).unwrap()
+    };
+    let pair = |v: &Value| (v[0].as_f64().unwrap() as f32, v[1].as_f64().unwrap() as f32);
+    let b = &report["bootstrap"];
+    assert_eq!((b["resamples"].as_u64(), b["seed"].as_u64()), (Some(300), Some(7)));
+    assert_eq!(pair(&b["mean_iou_interval"]), interval(&ious));
+    assert_eq!(pair(&b["versus"]["mean_iou_interval"]), interval(&other));
+    let differences: Vec<f64> = ious.iter().zip(&other).map(|(a, b)| a - b).collect();
+    assert_eq!(pair(&b["versus"]["difference_interval"]), interval(&differences));
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    assert!((b["versus"]["difference"].as_f64().unwrap() - (mean(&ious) - mean(&other))).abs() < 1e-12);
+    let (lo, hi) = pair(&b["mean_iou_interval"]);
+    // Means of resampled frames lie between the smallest and the largest frame's IoU.
+    let (min, max) = ious.iter().fold((f64::MAX, f64::MIN), |(a, b), &x| (a.min(x), b.max(x)));
+    assert!(lo <= hi && lo as f64 >= min - 1e-6 && hi as f64 <= max + 1e-6, "{lo} {hi} {ious:?}");
+    let itself = eval_json("out");
+    assert_eq!(itself["bootstrap"]["versus"]["difference"].as_f64(), Some(0.0));
+    assert_eq!(pair(&itself["bootstrap"]["versus"]["difference_interval"]), (0.0, 0.0));
 
     // A models directory with a detector and the layout model: detect reads both.
     let models = dir.path().join("models");

@@ -92,16 +92,18 @@ pub struct Args {
     /// (see `eval_layout`).
     #[arg(long, conflicts_with_all = ["diagnose", "plots", "categories"])]
     pub layout: bool,
-    /// Add a 90 % bootstrap interval to every AP and the mAP: N resamples of the evaluated frames with
-    /// replacement (percentile intervals; see `cog_gpu::eval::bootstrap_aps`). 1 000 is a good N.
-    #[arg(long, value_name = "N", conflicts_with_all = ["diagnose", "layout"], value_parser = clap::value_parser!(u32).range(2..=100_000))]
+    /// Add a 90 % bootstrap interval to every AP and the mAP (with --layout: to the mean free-space IoU):
+    /// N resamples of the evaluated frames with replacement (percentile intervals; see
+    /// `cog_gpu::eval::bootstrap_aps`). 1 000 is a good N.
+    #[arg(long, value_name = "N", conflicts_with = "diagnose", value_parser = clap::value_parser!(u32).range(2..=100_000))]
     pub bootstrap: Option<u32>,
     /// Seed of the bootstrap's resampling (same seed, same frames drawn, same interval).
     #[arg(long, default_value_t = 0, requires = "bootstrap")]
     pub bootstrap_seed: u64,
     /// With --bootstrap: a second detections directory of the same frames (e.g. another model); prints
     /// its APs and the paired 90 % interval of the difference (--detections minus --versus), both sets
-    /// evaluated on the same resamples.
+    /// evaluated on the same resamples. With --layout: a second directory of layout files, and the paired
+    /// interval of the difference of the mean free-space IoUs.
     #[arg(long, value_name = "DIR", requires = "bootstrap")]
     pub versus: Option<PathBuf>,
 }
@@ -110,7 +112,7 @@ pub struct Args {
 type Interval = (f32, f32);
 
 /// The central probability of the `--bootstrap` intervals.
-const BOOTSTRAP_LEVEL: f32 = 0.9;
+pub(super) const BOOTSTRAP_LEVEL: f32 = 0.9;
 
 /// The `--bootstrap` part of the report.
 #[derive(Serialize)]
@@ -232,7 +234,11 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         if let Some(split) = &args.split {
             dataset = dataset.with_split(split)?;
         }
-        return super::eval_layout::run(&dataset.frames, &args.detections, args.json, args.fail_fast);
+        let bootstrap = args.bootstrap.map(|resamples| super::eval_layout::LayoutBootstrap {
+            settings: Bootstrap { resamples: resamples as usize, seed: args.bootstrap_seed },
+            versus: args.versus.clone(),
+        });
+        return super::eval_layout::run(&dataset.frames, &args.detections, args.json, args.fail_fast, bootstrap);
     }
     let categories = categories(&args.categories)?;
     let models = match &args.models {

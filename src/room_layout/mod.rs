@@ -18,6 +18,12 @@
 //!   0.999 quantile is then the top of the visible walls, far below the ceiling. When the points reach less
 //!   than [`MIN_ROOM_HEIGHT`] above the floor, the ceiling is put at floor + [`MIN_ROOM_HEIGHT`] (rooms are
 //!   at least that high; our deviation from the paper, which loses the free space above the visible walls).
+//!   Then each snaps to its plane ([`snap_floor_and_ceiling`]): the median height of the horizontal points
+//!   (normal within 30° of vertical, facing into the room) within [`SNAP_BAND_M`] of the quantile, when
+//!   there are at least [`SNAP_MIN_POINTS`] of them (our addition: the 0.001 quantile is the lower tail of
+//!   the floor's depth noise, 1.4 cm below the annotated floor at the median of the training frames (seed
+//!   11), and free-space IoU on 0.1 m voxels loses a whole layer of the visible floor when a voxel centre
+//!   falls in between — 0.75 points of the annotated footprint's own IoU on those frames, 98.39 → 99.14).
 //! - **Orientations**: a rectangle turned by 90° is the same rectangle, so the paper's 18 orientations in
 //!   [0°, 180°) are only 9 distinct rooms. We keep 45 *distinct* ones: yaws `−44° + 2°·k`, k = 0..44, i.e.
 //!   [−44°, 44°] in 2° steps, evenly spaced modulo 90° and including 0° (walls square to the camera's
@@ -66,6 +72,10 @@ pub const FLOOR_QUANTILE: f32 = 0.001;
 pub const CEILING_QUANTILE: f32 = 0.999;
 /// Least floor-to-ceiling height of a room (metres); see the module doc.
 pub const MIN_ROOM_HEIGHT: f32 = 2.4;
+/// Floor and ceiling snap to the horizontal points within this distance (metres) of their quantiles.
+pub const SNAP_BAND_M: f32 = 0.1;
+/// Fewest such points (of the subsampled cloud) for a snap; fewer keep the quantile.
+pub const SNAP_MIN_POINTS: usize = 20;
 /// Number of distinct orientations (see the module doc).
 pub const ORIENTATIONS: usize = 45;
 /// First orientation (degrees) and step between orientations.
@@ -153,7 +163,6 @@ impl LayoutScene {
             (Some(f), Some(c)) => (f, c),
             _ => return Err(Error::Input(format!("frame '{}' has no points with depth", frame.name))),
         };
-        let ceiling = ceiling.max(floor + MIN_ROOM_HEIGHT);
         let stride = subsampling_stride(cloud.len());
         let keep: Vec<usize> = (0..cloud.len())
             .filter(|&i| {
@@ -170,9 +179,35 @@ impl LayoutScene {
             )));
         }
         let normals = estimate_normals(&points);
+        let (floor, ceiling) = snap_floor_and_ceiling(&points, &normals, floor, ceiling);
         let camera = Camera::new(frame.intrinsics(), frame.rtilt());
         Ok(LayoutScene { camera, image_size: [frame.width(), frame.height()], points, normals, floor, ceiling, stride })
     }
+}
+
+/// Floor and ceiling from their height quantiles `(floor_q, ceiling_q)` and the subsampled points with
+/// their normals (see the module doc): each snaps to the median height of the horizontal points facing
+/// into the room within [`SNAP_BAND_M`] of its quantile (at least [`SNAP_MIN_POINTS`] of them), and the
+/// ceiling, when it is not seen (its quantile less than [`MIN_ROOM_HEIGHT`] above the floor), is put at
+/// floor + [`MIN_ROOM_HEIGHT`].
+pub fn snap_floor_and_ceiling(points: &[Vec3], normals: &[Vec3], floor_q: f32, ceiling_q: f32) -> (f32, f32) {
+    let horizontal = voxels::AXIS_COS;
+    let median_height = |keep: &dyn Fn(Vec3, Vec3) -> bool| -> Option<f32> {
+        let mut heights: Vec<f32> =
+            points.iter().zip(normals).filter(|(&p, &n)| keep(p, n)).map(|(p, _)| p.z).collect();
+        if heights.len() < SNAP_MIN_POINTS {
+            return None;
+        }
+        quantile_of_unsorted(&mut heights, 0.5)
+    };
+    let floor =
+        median_height(&|p, n| n.z >= horizontal && p.z >= floor_q && p.z <= floor_q + SNAP_BAND_M).unwrap_or(floor_q);
+    if ceiling_q < floor + MIN_ROOM_HEIGHT {
+        return (floor, floor + MIN_ROOM_HEIGHT);
+    }
+    let ceiling = median_height(&|p, n| n.z <= -horizontal && p.z <= ceiling_q && p.z >= ceiling_q - SNAP_BAND_M)
+        .unwrap_or(ceiling_q);
+    (floor, ceiling.max(floor + MIN_ROOM_HEIGHT))
 }
 
 /// Smallest pixel stride `s` with `n / s² ≤ MAX_LAYOUT_POINTS`.

@@ -74,7 +74,7 @@ pub const ALONG_B: u32 = 1;
 pub const HORIZONTAL: u32 = 2;
 pub const OTHER: u32 = 3;
 /// `cos 30°`: a normal within 30° of an axis belongs to that axis's class.
-const AXIS_COS: f32 = 0.866_025_4;
+pub const AXIS_COS: f32 = 0.866_025_4;
 /// Manhattan regions per layer; cubical regions per layer and splits per horizontal axis.
 pub const MANHATTAN_REGIONS: u32 = 12;
 pub const CUBICAL_SPLITS: i32 = 4;
