@@ -20,13 +20,16 @@ use image::RgbImage;
 use rayon::prelude::*;
 
 use crate::backend::{Backend, FastJob};
+use crate::category::SURFACE_CATEGORIES;
 use crate::draw::{category_colour, contrasting, draw_cuboid_with, draw_label, shade_convex_polygon};
 use crate::error::{Error, Result};
 use crate::eval::{Detection, FrameDetections};
 use crate::features::budget;
 use crate::features::fast::FastEngine;
 use crate::features::hypotheses::{sliding_window, FrameYaws, WindowOptions, YawAnchor};
-use crate::features::surface::{best_slice, refined_surface_height, slice_at, surface_height, SurfaceEngine};
+use crate::features::surface::{
+    best_slice, measured_surface_height, refined_surface_height, slice_at, surface_height, SurfaceEngine,
+};
 use crate::features::{FeatureScene, Hypothesis, Preprocessed};
 use crate::frame::Frame;
 use crate::geometry::Camera;
@@ -386,11 +389,15 @@ pub fn detect_preprocessed_timed(
     let nms =
         NmsOptions { iou_threshold: options.nms_iou, max_detections: Some(options.max_per_category), top_k: None };
     let mut detections = nms_detections(&candidates, &nms);
-    // The survivors' surfaces, measured in their chosen slices (a few per category; every point visited).
-    detections.par_iter_mut().filter(|d| d.surface_z.is_some()).for_each(|d| {
+    // The survivors' surfaces (a few per category; every point visited): measured in the chosen slice of a
+    // model with latent surfaces, from the points alone for the other detections of surface categories.
+    detections.par_iter_mut().for_each(|d| {
         let cuboid = d.cuboid();
-        let z = d.surface_z.unwrap_or(cuboid.centre.z);
-        d.surface_z = Some(refined_surface_height(&pre, &cuboid, slice_at(&cuboid, z)));
+        d.surface_z = match d.surface_z {
+            Some(z) => Some(refined_surface_height(&pre, &cuboid, slice_at(&cuboid, z))),
+            None if SURFACE_CATEGORIES.contains(&d.category.as_str()) => measured_surface_height(&pre, &cuboid),
+            None => None,
+        };
     });
     calibrate(&mut detections, models);
     stages.nms_s += lap();

@@ -1,6 +1,6 @@
 //! Support-surface slices (paper §4.1, `features::surface`): a constructed table top lands in the slice
 //! that holds its height and nowhere else; slice scores equal the dot products of the slice features;
-//! the centre-slice initialisation copies the right weights.
+//! the centre-slice initialisation copies the right weights; the surface measured from the points alone.
 
 use cog_gpu::features::fast::FastOptions;
 use cog_gpu::features::feature_layout::{FeatureLayout, Groups, DENSITY, NORMALS, PER_VOXEL};
@@ -271,4 +271,63 @@ fn the_refined_surface_is_the_median_of_the_slice_upward_points() {
         assert_eq!(slice_at(&cube, (h as f32 + 0.5) / 7.0), h);
     }
     assert_eq!((slice_at(&cube, -3.0), slice_at(&cube, 5.0)), (0, SLICES - 1));
+}
+
+/// The surface measured from the points alone (models without latent surfaces): the fullest 2 cm height bin
+/// of the upward points in the footprint, with its neighbours, gives the median; a smaller, higher face
+/// (things standing on the top), the floor around and under the box, sideways normals and points outside
+/// the footprint do not move it; a top a little above a low box is still found; too few points give none.
+#[test]
+fn the_measured_surface_is_the_fullest_horizontal_face_in_the_footprint() {
+    use cog_gpu::features::surface::{measured_surface_height, MEASURED_MIN_POINTS};
+    // A table 0.75 m high, 1 × 0.6 m, turned by 30°, on a floor at z = 0.
+    let table = Cuboid::new(Vec3::new(0.5, 3.0, 0.375), Vec3::new(1.0, 0.6, 0.75), 30f32.to_radians());
+    let mut points = Vec::new();
+    let mut normals = Vec::new();
+    let mut add = |local: Vec3, n: Vec3| {
+        points.push(table.from_local(local - Vec3::new(0.0, 0.0, 0.375)));
+        normals.push(n);
+    };
+    // The top: 8 × 5 points at 0.75 m ± 1 cm of noise (median 0.75 exactly).
+    for i in 0..8 {
+        for j in 0..5 {
+            let noise = [-0.01, 0.0, 0.01, 0.0, 0.0][(i + j) % 5];
+            add(Vec3::new(-0.45 + 0.12 * i as f32, -0.25 + 0.12 * j as f32, 0.75 + noise), Vec3::Z);
+        }
+    }
+    // A box on it (12 upward points at 0.85 m), the floor inside the footprint (30 at 0 m), the legs'
+    // sideways points, and a sofa seat beside the table (outside the footprint, 60 points at 0.45 m).
+    for k in 0..12 {
+        add(Vec3::new(0.01 * k as f32, 0.0, 0.85), Vec3::Z);
+    }
+    for k in 0..30 {
+        add(Vec3::new(-0.3 + 0.02 * k as f32, 0.1, 0.0), Vec3::Z);
+    }
+    for k in 0..30 {
+        add(Vec3::new(0.45, 0.25, 0.02 * k as f32), Vec3::X);
+    }
+    for k in 0..60 {
+        add(Vec3::new(0.7 + 0.01 * k as f32, 0.0, 0.45), Vec3::Z);
+    }
+    let gradients = vec![Vec2::ZERO; points.len()];
+    let camera = Camera::new([500.0, 500.0, 320.5, 240.5], Mat3::IDENTITY);
+    let pre = Preprocessed { camera, image_size: [640, 480], points, normals, gradients, floor: 0.0 };
+    assert_eq!(measured_surface_height(&pre, &table), Some(0.75));
+    // A window box 0.1 m too low (top at 0.65 m; one slice, 0.093 m, above it reaches 0.743 m) reaches only
+    // the 8 top points at 0.74 m: fewer than MEASURED_MIN_POINTS, so no surface rather than a wrong one.
+    let low_box = Cuboid::new(Vec3::new(0.5, 3.0, 0.325), Vec3::new(1.0, 0.6, 0.65), table.yaw);
+    assert_eq!(measured_surface_height(&pre, &low_box), None);
+    // A box 5 cm lower than the top (top at 0.7 m: reach 0.8 m) finds the top.
+    let lower_box = Cuboid::new(Vec3::new(0.5, 3.0, 0.35), Vec3::new(1.0, 0.6, 0.7), table.yaw);
+    assert_eq!(measured_surface_height(&pre, &lower_box), Some(0.75));
+    // Fewer than MEASURED_MIN_POINTS upward points near the peak: no surface.
+    let few: Vec<usize> =
+        (0..pre.points.len()).filter(|&i| pre.normals[i] == Vec3::Z).take(MEASURED_MIN_POINTS - 1).collect();
+    let sparse = Preprocessed {
+        points: few.iter().map(|&i| pre.points[i]).collect(),
+        normals: few.iter().map(|&i| pre.normals[i]).collect(),
+        gradients: vec![Vec2::ZERO; few.len()],
+        ..pre.clone()
+    };
+    assert_eq!(measured_surface_height(&sparse, &table), None);
 }

@@ -20,7 +20,9 @@
 //!   from the left, `j` along the depth from the front);
 //! * the height of slice `h` is its centre, `bottom + (h + ½)·height/7` ([`surface_height`]): within
 //!   `height/14` of a surface inside the slice (at most 5.4 cm for a 0.75 m table); detection reports the
-//!   surface measured in the chosen slice, [`refined_surface_height`];
+//!   surface measured in the chosen slice, [`refined_surface_height`]; a model without latent surfaces of
+//!   a category with support surfaces ([`crate::category::SURFACE_CATEGORIES`]) reports the surface
+//!   measured from the points alone, [`measured_surface_height`];
 //! * ties between slices go to the lowest `h`, as in [`crate::learn::latent::impute`];
 //! * the paper initialises the surface weights from "the center slice of pre-trained cuboid descriptors":
 //!   [`centre_slice_weights`] copies the cuboid model's weights of the middle layer of its base grid.
@@ -135,6 +137,52 @@ pub fn refined_surface_height(pre: &Preprocessed, cuboid: &Cuboid, h: usize) -> 
     }
     heights.sort_by(f32::total_cmp);
     heights[heights.len() / 2]
+}
+
+/// Height bins (metres) of [`measured_surface_height`]'s histogram of upward-facing points.
+pub const MEASURED_BIN_M: f32 = 0.02;
+/// Fewest upward-facing points around the histogram's peak (the peak bin and its two neighbours) for
+/// [`measured_surface_height`] to report a surface.
+pub const MEASURED_MIN_POINTS: usize = 10;
+
+/// The support surface of a detected `cuboid` measured from the points alone, for models without latent
+/// surfaces (our addition to the paper, whose surfaces are the latent slices): of the points inside the
+/// cuboid's footprint whose normal lies in the up cone ([`normal_bin`] 0) and whose height lies between
+/// one slice (`height/7`) above the cuboid's bottom — below that the floor it stands on shows around a box
+/// a little too large — and one slice above its top (a window box can be lower than the object), the
+/// heights are histogrammed in [`MEASURED_BIN_M`] bins from that lower bound; the surface is the median
+/// height of the points in the fullest bin and its two neighbours (ties: the lowest bin), or `None` when
+/// those hold fewer than [`MEASURED_MIN_POINTS`]. The surface with the most points is the object's
+/// largest horizontal face seen from the camera: a bed's mattress rather than its pillows, a table's top
+/// rather than what stands on it.
+pub fn measured_surface_height(pre: &Preprocessed, cuboid: &Cuboid) -> Option<f32> {
+    let slice = cuboid.size.z / SLICES as f32;
+    let (low, high) = (cuboid.bottom() + slice, cuboid.top() + slice);
+    let half = 0.5 * cuboid.size.truncate();
+    let heights: Vec<f32> = pre
+        .points
+        .iter()
+        .zip(&pre.normals)
+        .filter(|(p, n)| {
+            let l = cuboid.to_local(**p);
+            p.z >= low && p.z <= high && l.x.abs() <= half.x && l.y.abs() <= half.y && normal_bin(**n) == 0
+        })
+        .map(|(p, _)| p.z)
+        .collect();
+    let bins = ((high - low) / MEASURED_BIN_M).ceil().max(1.0) as usize;
+    let bin_of = |z: f32| (((z - low) / MEASURED_BIN_M) as usize).min(bins - 1);
+    let mut counts = vec![0usize; bins];
+    for &z in &heights {
+        counts[bin_of(z)] += 1;
+    }
+    let around = |b: usize| counts[b.saturating_sub(1)..(b + 2).min(bins)].iter().sum::<usize>();
+    let peak = (0..bins).fold(0, |best, b| if around(b) > around(best) { b } else { best });
+    if around(peak) < MEASURED_MIN_POINTS {
+        return None;
+    }
+    let mut near: Vec<f32> = heights.into_iter().filter(|&z| bin_of(z).abs_diff(peak) <= 1).collect();
+    near.sort_by(f32::total_cmp);
+    Some(near[near.len() / 2])
 }
 
 /// The slice of `cuboid` whose centre is `z` (the inverse of [`surface_height`], clamped to `0..SLICES`).
