@@ -45,6 +45,12 @@ for set in validation development test; do
     done
 done
 
+echo "== synthetic test set: Manhattan voxels against the others, 90 % intervals (paired, 1000 resamples) =="
+for other in heuristic cubical; do
+    "$BIN" eval --layout --data "$WORK/test" --detections "$WORK/test-manhattan" --bootstrap 1000 \
+        --versus "$WORK/test-$other" | tail -1
+done
+
 echo "== real annotated frame =="
 REAL=../shared/data/sunrgbd/kv1-b3dodata-img_0063
 for method in manhattan heuristic; do
