@@ -124,19 +124,29 @@ pub fn surface_height(hyp: &Hypothesis, h: usize) -> f32 {
 pub fn refined_surface_height(pre: &Preprocessed, cuboid: &Cuboid, h: usize) -> f32 {
     let thickness = cuboid.size.z / SLICES as f32;
     let low = cuboid.bottom() + h as f32 * thickness;
-    let high = low + thickness;
-    let mut heights: Vec<f32> = pre
-        .points
+    upper_median(upward_heights(pre, cuboid, low, low + thickness)).unwrap_or(low + 0.5 * thickness)
+}
+
+/// Heights of the points inside `cuboid`'s footprint, between `low` and `high` (inclusive, upright z),
+/// whose normal lies in the up cone ([`normal_bin`] 0), in point order: the evidence of both surface
+/// measures.
+fn upward_heights(pre: &Preprocessed, cuboid: &Cuboid, low: f32, high: f32) -> Vec<f32> {
+    let half = 0.5 * cuboid.size.truncate();
+    pre.points
         .iter()
         .zip(&pre.normals)
-        .filter(|(p, n)| p.z >= low && p.z <= high && normal_bin(**n) == 0 && cuboid.contains(**p))
+        .filter(|(p, n)| {
+            let l = cuboid.to_local(**p);
+            p.z >= low && p.z <= high && l.x.abs() <= half.x && l.y.abs() <= half.y && normal_bin(**n) == 0
+        })
         .map(|(p, _)| p.z)
-        .collect();
-    if heights.is_empty() {
-        return low + 0.5 * thickness;
-    }
-    heights.sort_by(f32::total_cmp);
-    heights[heights.len() / 2]
+        .collect()
+}
+
+/// The upper median (element `n/2` in ascending order), `None` for no values.
+fn upper_median(mut values: Vec<f32>) -> Option<f32> {
+    values.sort_by(f32::total_cmp);
+    values.get(values.len() / 2).copied()
 }
 
 /// Height bins (metres) of [`measured_surface_height`]'s histogram of upward-facing points.
@@ -158,31 +168,20 @@ pub const MEASURED_MIN_POINTS: usize = 10;
 pub fn measured_surface_height(pre: &Preprocessed, cuboid: &Cuboid) -> Option<f32> {
     let slice = cuboid.size.z / SLICES as f32;
     let (low, high) = (cuboid.bottom() + slice, cuboid.top() + slice);
-    let half = 0.5 * cuboid.size.truncate();
-    let heights: Vec<f32> = pre
-        .points
-        .iter()
-        .zip(&pre.normals)
-        .filter(|(p, n)| {
-            let l = cuboid.to_local(**p);
-            p.z >= low && p.z <= high && l.x.abs() <= half.x && l.y.abs() <= half.y && normal_bin(**n) == 0
-        })
-        .map(|(p, _)| p.z)
-        .collect();
+    let heights = upward_heights(pre, cuboid, low, high);
     let bins = ((high - low) / MEASURED_BIN_M).ceil().max(1.0) as usize;
     let bin_of = |z: f32| (((z - low) / MEASURED_BIN_M) as usize).min(bins - 1);
     let mut counts = vec![0usize; bins];
     for &z in &heights {
         counts[bin_of(z)] += 1;
     }
-    let around = |b: usize| counts[b.saturating_sub(1)..(b + 2).min(bins)].iter().sum::<usize>();
-    let peak = (0..bins).fold(0, |best, b| if around(b) > around(best) { b } else { best });
-    if around(peak) < MEASURED_MIN_POINTS {
+    // Points in each bin with its two neighbours; the first maximum is the peak.
+    let around: Vec<usize> = (0..bins).map(|b| counts[b.saturating_sub(1)..(b + 2).min(bins)].iter().sum()).collect();
+    let peak = (0..bins).fold(0, |best, b| if around[b] > around[best] { b } else { best });
+    if around[peak] < MEASURED_MIN_POINTS {
         return None;
     }
-    let mut near: Vec<f32> = heights.into_iter().filter(|&z| bin_of(z).abs_diff(peak) <= 1).collect();
-    near.sort_by(f32::total_cmp);
-    Some(near[near.len() / 2])
+    upper_median(heights.into_iter().filter(|&z| bin_of(z).abs_diff(peak) <= 1).collect())
 }
 
 /// The slice of `cuboid` whose centre is `z` (the inverse of [`surface_height`], clamped to `0..SLICES`).

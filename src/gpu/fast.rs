@@ -499,8 +499,13 @@ pub fn fast_scores_gpu_jobs(
         let mut dispatch_count = 0usize;
         let mut tables = (0usize, 0u64);
         let scores = run(engine, jobs, chunking, false, |dispatches| {
-            for d in dispatches {
+            for (n, d) in dispatches.iter().enumerate() {
                 let bytes = 4 * fast_tables_words(engine, d) as u64;
+                // Dispatches of one table group are consecutive and share its table.
+                if n == 0 || dispatches[n - 1].group != d.group {
+                    tables.0 += 1;
+                    tables.1 += bytes;
+                }
                 if bytes > max_binding {
                     return Err(Error::Gpu(format!(
                         "fast_scores: a layer table of {bytes} bytes exceeds the storage-binding limit of \
@@ -514,12 +519,6 @@ pub fn fast_scores_gpu_jobs(
             }
             submissions += 1;
             dispatch_count += dispatches.len();
-            for (n, d) in dispatches.iter().enumerate() {
-                if n == 0 || dispatches[n - 1].group != d.group {
-                    tables.0 += 1;
-                    tables.1 += 4 * fast_tables_words(engine, d) as u64;
-                }
-            }
             run_batch(ctx, engine, dispatches, &weight_buffers)
         })?;
         log::debug!(
