@@ -116,10 +116,10 @@ fn the_shipped_layout_model_lays_out_the_real_frame() {
 
 /// The shipped context cascade (`assets/models/cascade.json`) has this build's feature set and a context
 /// category for each shipped model; through the README's main command (`detect`, which applies it with the
-/// room of the shipped layout model) the sample bedroom's detections are rescored and its best detection
-/// is still its bed.
+/// room of the shipped layout model) the sample bedroom's detections are rescored and its two best
+/// detections are still correct, the bed one of them.
 #[test]
-fn the_shipped_cascade_rescores_the_sample_and_keeps_the_bed_first() {
+fn the_shipped_cascade_rescores_the_sample_and_keeps_its_best_two_correct() {
     use cog_gpu::cascade::{Cascade, FEATURES};
     let cascade = Cascade::read(&Path::new(MODELS).join(cog_gpu::cascade::FILE_NAME)).unwrap();
     assert_eq!(cascade.features, FEATURES);
@@ -143,9 +143,18 @@ fn the_shipped_cascade_rescores_the_sample_and_keeps_the_bed_first() {
     let staged = detections.iter().filter(|d| cascade.stages.contains_key(&d.category)).count();
     assert_eq!(rescored, staged, "every detection of a category with a second stage is rescored");
     assert!(rescored > 0);
+    // The two best detections are correct (3D IoU ≥ 0.25 with an annotated object of their category),
+    // on two different objects, one of them the bed. (The cascade puts the sample's nightstand, found by
+    // the nightstand model's 0.1 m window, level with the bed: 1.00 and 0.99; see the README.)
     let frame = Frame::read(SAMPLE, DepthSource::Raw).unwrap();
-    let truth = frame.objects.iter().find(|o| o.category == "bed").unwrap().cuboid;
-    let best = &detections[0];
-    assert_eq!(best.category, "bed", "best detection {best:?}");
-    assert!(iou_3d(&best.cuboid(), &truth) >= 0.25, "best detection {best:?}");
+    let matched: Vec<usize> = detections[..2]
+        .iter()
+        .map(|d| {
+            let hit =
+                frame.objects.iter().position(|o| o.category == d.category && iou_3d(&d.cuboid(), &o.cuboid) >= 0.25);
+            hit.unwrap_or_else(|| panic!("{d:?} is not a correct detection; best two {:?}", &detections[..2]))
+        })
+        .collect();
+    assert_ne!(matched[0], matched[1], "both best detections are on one object: {:?}", &detections[..2]);
+    assert!(detections[..2].iter().any(|d| d.category == "bed"), "the bed is not among {:?}", &detections[..2]);
 }

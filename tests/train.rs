@@ -9,7 +9,7 @@ use cog_gpu::features::fast::{FastEngine, FastOptions};
 use cog_gpu::features::hypotheses::{anchored_yaws, default_yaws, nearest_yaw_index};
 use cog_gpu::features::{FeatureLayout, Groups, Preprocessed, SizeQuantiles, YawAnchor};
 use cog_gpu::frame::{DepthSource, Frame};
-use cog_gpu::geometry::{structured_loss, Cuboid};
+use cog_gpu::geometry::{iou_3d, structured_loss, Cuboid};
 use cog_gpu::learn::detector::{
     without_points_in, Answer, DetectorOracle, FeatureEngine, PositiveTarget, TrainingExample, TrainingSettings,
 };
@@ -63,6 +63,37 @@ fn other_instances_lose_exactly_their_points() {
     assert!(kept.points.iter().all(|p| !others.iter().any(|c| c.contains(*p))));
 }
 
+#[test]
+fn ignored_instances_keep_their_points_and_lose_only_the_boxes_that_detect_them() {
+    let (frame, pre) = real_frame();
+    // The frame's two bookshelves stand side by side against the wall.
+    let shelves = frame_instances(&frame, "bookshelf");
+    assert_eq!(shelves.len(), 2);
+    let settings = small_settings(&shelves, PositiveTarget::BestWindow, false);
+    let ignoring = TrainingExample::ignoring_others("ignoring".into(), &pre, Some(shelves[0]), &shelves[1..]);
+    assert_eq!(ignoring.pre.points, pre.points);
+    let kept = ignoring.window(&settings);
+    // Independently: the whole window of the frame with no instance ignored, less every box with IoU ≥ 0.25
+    // to the other bookshelf.
+    let whole = TrainingExample::new("whole".into(), &pre, Some(shelves[0]), &[]).window(&settings);
+    let all = &whole.hypotheses.hypotheses;
+    let expected: Vec<usize> =
+        (0..all.len()).filter(|&n| iou_3d(&shelves[1], &all[n].cuboid(&whole.scene)) < 0.25).collect();
+    assert!(expected.len() < all.len(), "no box of the window detects the other bookshelf");
+    assert!(expected.len() > all.len() / 2, "{} of {} boxes left", expected.len(), all.len());
+    assert_eq!(kept.hypotheses.hypotheses.len(), expected.len());
+    for (k, &n) in expected.iter().enumerate() {
+        assert_eq!(kept.hypotheses.hypotheses[k].cuboid(&kept.scene), all[n].cuboid(&whole.scene));
+    }
+    // The target is the same box (none of the dropped ones is nearest the truth), the losses those of the
+    // kept boxes.
+    let target = kept.target.expect("a box overlaps the truth");
+    assert_eq!(Some(expected[target]), whole.target);
+    for (k, &n) in expected.iter().enumerate() {
+        assert_eq!(kept.losses[k], whole.losses[n]);
+    }
+}
+
 /// A small problem on the real frame: chair sizes, a coarse window, the 3×3×3 grid.
 fn small_oracle() -> DetectorOracle {
     small_oracle_with(PositiveTarget::Exact)
@@ -72,12 +103,14 @@ fn small_oracle_with(target: PositiveTarget) -> DetectorOracle {
     small_oracle_full(target, false)
 }
 
-fn small_oracle_full(target: PositiveTarget, surfaces: bool) -> DetectorOracle {
-    let (frame, pre) = real_frame();
-    let chairs: Vec<Cuboid> = frame.objects.iter().filter(|o| o.category == "chair").map(|o| o.cuboid).collect();
-    assert!(!chairs.is_empty());
-    let sizes = SizeQuantiles::from_cuboids(&chairs).unwrap().sizes().into_iter().step_by(7).collect();
-    let settings = TrainingSettings {
+fn frame_instances(frame: &Frame, category: &str) -> Vec<Cuboid> {
+    frame.objects.iter().filter(|o| o.category == category).map(|o| o.cuboid).collect()
+}
+
+/// The sizes of `instances`, a coarse window, the 3×3×3 grid.
+fn small_settings(instances: &[Cuboid], target: PositiveTarget, surfaces: bool) -> TrainingSettings {
+    let sizes = SizeQuantiles::from_cuboids(instances).unwrap().sizes().into_iter().step_by(7).collect();
+    TrainingSettings {
         layout: FeatureLayout::new([3, 3, 3], false, Groups::ALL).unwrap(),
         sizes,
         step: 0.3,
@@ -86,7 +119,14 @@ fn small_oracle_full(target: PositiveTarget, surfaces: bool) -> DetectorOracle {
         target,
         yaw_anchor: YawAnchor::Walls,
         surfaces,
-    };
+    }
+}
+
+fn small_oracle_full(target: PositiveTarget, surfaces: bool) -> DetectorOracle {
+    let (frame, pre) = real_frame();
+    let chairs = frame_instances(&frame, "chair");
+    assert!(!chairs.is_empty());
+    let settings = small_settings(&chairs, target, surfaces);
     let positive = TrainingExample::new("chair".into(), &pre, Some(chairs[0]), &chairs[1..]);
     let negative = TrainingExample::new("none".into(), &pre, None, &[]);
     DetectorOracle::new(settings, vec![positive, negative]).unwrap()

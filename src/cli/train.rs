@@ -9,7 +9,8 @@
 //!   comparable across frames (the caps keep a full pass at about 2.5 minutes on 2 cores);
 //! * the training sliding window uses a 0.2 m centre step (`--step`); the model is written with the
 //!   detection step `--detect-step 0.2` (0.1 m scores 4× more hypotheses for boxes at most 5 cm better
-//!   placed; `detect --step 0.1` still gives it);
+//!   placed; `detect --step 0.1` still gives it; the shipped nightstand, the smallest of the ten, is
+//!   written with 0.1, which raised its test AP by 10.5 points: README, "The shipped models");
 //! * sizes: quantiles of the training annotations of the category;
 //! * features: the fast path (`--features exact` for the exact one, much slower);
 //! * a positive's target output is the window's box nearest the annotation, other boxes' losses are
@@ -21,9 +22,12 @@
 //!   whatever the number of examples; ε (`--eps`, default 0.02) bounds the mean violation;
 //! * each full pass over the sliding windows keeps every example's `--candidates` (100) best hypotheses
 //!   with their feature vectors; the iterations in between search only those (dot products); when they
-//!   find nothing, a full pass checks the whole window; at most `--max-full-passes` (2) full passes (the
+//!   find nothing, a full pass checks the whole window; at most `--max-full-passes` (4) full passes (the
 //!   first, at w = 0, scores nothing and caches random hypotheses plus the boxes nearest the truth; the
-//!   second mines the hard negatives of the trained w);
+//!   others mine the hard negatives of the w trained so far);
+//! * a positive example drops the points of the frame's other instances of the category
+//!   (`--other-instances removed`, the paper's choice), or keeps them and leaves the boxes that detect
+//!   them out of its answers (`ignored`; see `cog_gpu::learn::detector::OtherInstances`);
 //! * the window's 16 yaws start at the frame's wall direction (`--yaw-anchor walls`; `camera` for the
 //!   fixed `2πk/16`; see `cog_gpu::features::hypotheses`), written into the model so detection searches
 //!   the same yaws;
@@ -43,7 +47,7 @@ use cog_gpu::features::{budget, FeatureLayout, Groups, SizeQuantiles, YawAnchor}
 use cog_gpu::frame::Dataset;
 use cog_gpu::learn::detector::{
     cached_rows_per_example, collect_examples, instances_of, read_all_annotations, train_detector, DetectorOracle,
-    ExampleLimits, FeatureEngine, PositiveTarget, TrainingExample, TrainingSettings,
+    ExampleLimits, FeatureEngine, OtherInstances, PositiveTarget, TrainingExample, TrainingSettings,
 };
 use cog_gpu::learn::detector::{surface_weights, train_latent_detector, LatentProgress, LatentSettings, SURFACE_DIM};
 use cog_gpu::learn::latent::impute;
@@ -134,6 +138,11 @@ pub struct Args {
     /// annotated cuboid itself (exact, the paper's choice).
     #[arg(long, value_enum, default_value_t = TargetArg::BestWindow)]
     pub target: TargetArg,
+    /// What a positive example does with the other instances of its category in the frame: `removed`,
+    /// their points taken out (the paper's choice), or `ignored`, their points kept and the boxes that
+    /// would detect them (IoU ≥ 0.25) left out of the example's answers.
+    #[arg(long, value_enum, default_value_t = OthersArg::Removed)]
+    pub other_instances: OthersArg,
     /// Where the window's 16 yaws start: the frame's wall direction (walls) or the camera's heading
     /// (camera, `2πk/16`).
     #[arg(long, value_enum, default_value_t = AnchorArg::Walls)]
@@ -186,6 +195,22 @@ impl From<AnchorArg> for YawAnchor {
 pub enum TargetArg {
     BestWindow,
     Exact,
+}
+
+/// `--other-instances` values.
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum OthersArg {
+    Removed,
+    Ignored,
+}
+
+impl From<OthersArg> for OtherInstances {
+    fn from(arg: OthersArg) -> OtherInstances {
+        match arg {
+            OthersArg::Removed => OtherInstances::Removed,
+            OthersArg::Ignored => OtherInstances::Ignored,
+        }
+    }
 }
 
 /// `--features` values.
@@ -347,7 +372,8 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         yaw_anchor: args.yaw_anchor.into(),
         surfaces: pretrained.is_some(),
     };
-    let limits = ExampleLimits { positives: args.positives, negatives: args.negatives };
+    let limits =
+        ExampleLimits { positives: args.positives, negatives: args.negatives, others: args.other_instances.into() };
     log::info!(
         "{category}: {} instances in {} frames; preparing up to {} positive and {} negative examples",
         truths.len(),
@@ -454,6 +480,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         "positives": positives,
         "negatives": oracle.examples.len() - positives,
         "training_step": args.step,
+        "other_instances": match args.other_instances { OthersArg::Removed => "removed", OthersArg::Ignored => "ignored" },
         "formulation": "1-slack",
         "full_every": args.full_every,
         "full_passes": trained.full_passes,

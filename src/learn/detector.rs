@@ -5,7 +5,11 @@
 //!
 //! # Examples (choices where the paper is terse)
 //! * One example per annotated instance of the category; in a frame with several instances, each copy has
-//!   the points inside the **other** instances' cuboids removed (§3.4, after Vedaldi & Zisserman).
+//!   the points inside the **other** instances' cuboids removed (§3.4, after Vedaldi & Zisserman;
+//!   [`OtherInstances::Removed`]), or, with [`OtherInstances::Ignored`], keeps them and leaves the
+//!   hypotheses that would detect another instance (IoU ≥ [`IGNORED_INSTANCE_IOU`]) out of its output
+//!   space: the model then sees, in training, chairs next to chairs as detection does, and boxes straddling
+//!   two instances are negatives.
 //! * Frames without the category give "no object" examples (y = 0): their ground truth has φ = 0, and
 //!   every cuboid answer costs loss 1, so they teach the detector what is not the category. The paper
 //!   trains on positive images only; negatives from many frames are what make scores comparable across
@@ -55,7 +59,7 @@ use crate::features::hypotheses::{
 };
 use crate::features::surface::{best_slice, SurfaceEngine, SurfaceWeights, SLICES, SLICE_DIM, SLICE_VOXELS};
 use crate::features::{FeatureLayout, FeatureScene, Hypothesis, Preprocessed};
-use crate::geometry::{structured_loss, Cuboid};
+use crate::geometry::{iou_3d, structured_loss, Cuboid};
 
 /// Offset, within a voxel's features, of the normal histogram's up bin (bin 0 of
 /// [`crate::features::preprocess::normal_bin`]).
@@ -119,14 +123,36 @@ pub enum PositiveTarget {
     BestWindow,
 }
 
-/// One training example: a frame's preprocessed points (other instances removed) and its ground truth.
+/// What a positive example does with the **other** instances of its category in the same frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OtherInstances {
+    /// Their points are removed (the paper's choice, after Vedaldi & Zisserman): the example's frame
+    /// holds one instance. The default.
+    Removed,
+    /// Their points stay; the window's hypotheses with IoU ≥ [`IGNORED_INSTANCE_IOU`] to one of them (a
+    /// correct detection of that instance) are not among the example's answers, neither target nor
+    /// negative.
+    Ignored,
+}
+
+/// IoU with another instance at and above which a hypothesis is left out of a positive example's answers
+/// under [`OtherInstances::Ignored`]: the evaluation's threshold of a correct detection (0.25), so that
+/// no box `eval` would count as a true positive is taught as a negative.
+pub const IGNORED_INSTANCE_IOU: f32 = 0.25;
+
+/// One training example: a frame's preprocessed points (other instances removed, or ignored) and its
+/// ground truth.
 #[derive(Clone, Debug)]
 pub struct TrainingExample {
     /// Frame name and instance, for messages.
     pub name: String,
     pub truth: Option<Cuboid>,
-    /// The frame's points without those inside the other instances of the category.
+    /// The frame's points, without those inside the other instances of the category under
+    /// [`OtherInstances::Removed`].
     pub pre: Preprocessed,
+    /// The other instances whose detections are left out of the answers ([`OtherInstances::Ignored`];
+    /// empty otherwise).
+    pub ignored: Vec<Cuboid>,
     /// The whole frame's wall direction (as detection sees the frame, before the other instances' points
     /// are removed), which places the window's yaws under [`YawAnchor::Walls`].
     pub wall_direction: Option<f32>,
@@ -146,7 +172,19 @@ impl TrainingExample {
     /// Builds the example: removes the points inside `others`.
     pub fn new(name: String, pre: &Preprocessed, truth: Option<Cuboid>, others: &[Cuboid]) -> TrainingExample {
         let wall_direction = frame_wall_direction(pre);
-        TrainingExample { name, truth, pre: without_points_in(pre, others), wall_direction }
+        TrainingExample { name, truth, pre: without_points_in(pre, others), ignored: Vec::new(), wall_direction }
+    }
+
+    /// Builds the example under [`OtherInstances::Ignored`]: keeps every point, and leaves the hypotheses
+    /// that detect one of `others` out of the window.
+    pub fn ignoring_others(
+        name: String,
+        pre: &Preprocessed,
+        truth: Option<Cuboid>,
+        others: &[Cuboid],
+    ) -> TrainingExample {
+        let wall_direction = frame_wall_direction(pre);
+        TrainingExample { name, truth, pre: pre.clone(), ignored: others.to_vec(), wall_direction }
     }
 
     /// The window's 16 yaws under `anchor`.
@@ -157,8 +195,17 @@ impl TrainingExample {
     /// The example's yaw grids, sliding window and losses under `settings`.
     pub fn window(&self, settings: &TrainingSettings) -> ExampleWindow {
         let scene = FeatureScene::new(self.pre.clone(), &self.yaws(settings.yaw_anchor), settings.step);
-        let hypotheses =
+        let mut hypotheses =
             sliding_window(&scene, &WindowOptions { sizes: settings.sizes.clone(), min_points: settings.min_points });
+        if !self.ignored.is_empty() {
+            let detects_another = |h: &Hypothesis| {
+                let cuboid = h.cuboid(&scene);
+                self.ignored.iter().any(|other| iou_3d(other, &cuboid) >= IGNORED_INSTANCE_IOU)
+            };
+            let keep: Vec<bool> = hypotheses.hypotheses.par_iter().map(|h| !detects_another(h)).collect();
+            let mut flags = keep.iter();
+            hypotheses.hypotheses.retain(|_| *flags.next().unwrap_or(&true));
+        }
         let truth = self.truth;
         let mut losses: Vec<f32> =
             hypotheses.hypotheses.par_iter().map(|h| hypothesis_loss(truth.as_ref(), &h.cuboid(&scene))).collect();
@@ -925,6 +972,8 @@ pub struct ExampleLimits {
     pub positives: usize,
     /// Frames without the category (spread evenly).
     pub negatives: usize,
+    /// What a positive example does with the other instances in its frame.
+    pub others: OtherInstances,
 }
 
 /// The instances of `category` in a frame's annotations.
@@ -985,7 +1034,10 @@ pub fn collect_examples(
     }
     Ok(jobs
         .into_par_iter()
-        .map(|(name, f, truth, others)| TrainingExample::new(name, pre_of(f), truth, &others))
+        .map(|(name, f, truth, others)| match limits.others {
+            OtherInstances::Removed => TrainingExample::new(name, pre_of(f), truth, &others),
+            OtherInstances::Ignored => TrainingExample::ignoring_others(name, pre_of(f), truth, &others),
+        })
         .collect())
 }
 
