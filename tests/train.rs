@@ -11,7 +11,8 @@ use cog_gpu::features::{FeatureLayout, Groups, Preprocessed, SizeQuantiles, YawA
 use cog_gpu::frame::{DepthSource, Frame};
 use cog_gpu::geometry::{iou_3d, structured_loss, Cuboid};
 use cog_gpu::learn::detector::{
-    without_points_in, Answer, DetectorOracle, FeatureEngine, PositiveTarget, TrainingExample, TrainingSettings,
+    without_points_in, Answer, DetectorOracle, FeatureEngine, OtherInstances, PositiveTarget, TrainingExample,
+    TrainingSettings,
 };
 
 const FRAME: &str = "../shared/data/sunrgbd/kv1-b3dodata-img_0063";
@@ -70,7 +71,8 @@ fn ignored_instances_keep_their_points_and_lose_only_the_boxes_that_detect_them(
     let shelves = frame_instances(&frame, "bookshelf");
     assert_eq!(shelves.len(), 2);
     let settings = small_settings(&shelves, PositiveTarget::BestWindow, false);
-    let ignoring = TrainingExample::ignoring_others("ignoring".into(), &pre, Some(shelves[0]), &shelves[1..]);
+    let ignoring =
+        TrainingExample::with_others("ignoring".into(), &pre, Some(shelves[0]), &shelves[1..], OtherInstances::Ignored);
     assert_eq!(ignoring.pre.points, pre.points);
     let kept = ignoring.window(&settings);
     // Independently: the whole window of the frame with no instance ignored, less every box with IoU ≥ 0.25

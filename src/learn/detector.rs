@@ -169,22 +169,27 @@ pub struct ExampleWindow {
 }
 
 impl TrainingExample {
-    /// Builds the example: removes the points inside `others`.
+    /// Builds the example: removes the points inside `others` ([`OtherInstances::Removed`]).
     pub fn new(name: String, pre: &Preprocessed, truth: Option<Cuboid>, others: &[Cuboid]) -> TrainingExample {
-        let wall_direction = frame_wall_direction(pre);
-        TrainingExample { name, truth, pre: without_points_in(pre, others), ignored: Vec::new(), wall_direction }
+        TrainingExample::with_others(name, pre, truth, others, OtherInstances::Removed)
     }
 
-    /// Builds the example under [`OtherInstances::Ignored`]: keeps every point, and leaves the hypotheses
-    /// that detect one of `others` out of the window.
-    pub fn ignoring_others(
+    /// Builds the example with `others`, the frame's other instances of the category, treated as `mode`
+    /// says: their points removed, or kept with the hypotheses that detect one of them left out of the
+    /// window.
+    pub fn with_others(
         name: String,
         pre: &Preprocessed,
         truth: Option<Cuboid>,
         others: &[Cuboid],
+        mode: OtherInstances,
     ) -> TrainingExample {
         let wall_direction = frame_wall_direction(pre);
-        TrainingExample { name, truth, pre: pre.clone(), ignored: others.to_vec(), wall_direction }
+        let (pre, ignored) = match mode {
+            OtherInstances::Removed => (without_points_in(pre, others), Vec::new()),
+            OtherInstances::Ignored => (pre.clone(), others.to_vec()),
+        };
+        TrainingExample { name, truth, pre, ignored, wall_direction }
     }
 
     /// The window's 16 yaws under `anchor`.
@@ -202,9 +207,9 @@ impl TrainingExample {
                 let cuboid = h.cuboid(&scene);
                 self.ignored.iter().any(|other| iou_3d(other, &cuboid) >= IGNORED_INSTANCE_IOU)
             };
-            let keep: Vec<bool> = hypotheses.hypotheses.par_iter().map(|h| !detects_another(h)).collect();
-            let mut flags = keep.iter();
-            hypotheses.hypotheses.retain(|_| *flags.next().unwrap_or(&true));
+            // rayon's collect keeps the window's order.
+            hypotheses.hypotheses =
+                std::mem::take(&mut hypotheses.hypotheses).into_par_iter().filter(|h| !detects_another(h)).collect();
         }
         let truth = self.truth;
         let mut losses: Vec<f32> =
@@ -1034,10 +1039,7 @@ pub fn collect_examples(
     }
     Ok(jobs
         .into_par_iter()
-        .map(|(name, f, truth, others)| match limits.others {
-            OtherInstances::Removed => TrainingExample::new(name, pre_of(f), truth, &others),
-            OtherInstances::Ignored => TrainingExample::ignoring_others(name, pre_of(f), truth, &others),
-        })
+        .map(|(name, f, truth, others)| TrainingExample::with_others(name, pre_of(f), truth, &others, limits.others))
         .collect())
 }
 
