@@ -27,10 +27,12 @@ pub const CATEGORIES: [&str; 19] = [
 /// The ten large categories of the SUN RGB-D 3D detection benchmark: the first ten of [`CATEGORIES`].
 pub const LARGE_CATEGORIES: &[&str] = CATEGORIES.split_at(10).0;
 
-/// The categories whose objects carry a support surface that other objects stand on (paper §4: beds,
-/// tables, desks, dressers, nightstands): detections of these report a surface height
-/// (`crate::features::surface`), from the model's latent slice or measured from the points.
-pub const SURFACE_CATEGORIES: [&str; 5] = ["bed", "table", "desk", "dresser", "nightstand"];
+/// The categories whose objects carry a support surface that other objects stand on (paper §4: "beds,
+/// tables, desks, dressers, nightstands and the like"; the like, here: a sofa's seat, which carries
+/// cushions and pillows, and a counter's top, which carries sinks): detections of these report a surface
+/// height (`crate::features::surface`), from the model's latent slice or measured from the points, and
+/// the small categories are searched on those surfaces (`crate::features::hypotheses::surface_window`).
+pub const SURFACE_CATEGORIES: [&str; 7] = ["bed", "table", "desk", "dresser", "nightstand", "sofa", "counter"];
 
 /// Annotation names that are room structure, not objects; the frame reader skips them.
 pub const STRUCTURE_NAMES: [&str; 4] = ["wall", "floor", "ceiling", "room"];

@@ -11,6 +11,11 @@
 //! ([`crate::nms`], IoU [`DetectOptions::nms_iou`]) and at most [`DetectOptions::max_per_category`] are
 //! reported; models with a calibration report calibrated probabilities ([`calibrate`]), and all
 //! detections are sorted by score over all categories.
+//!
+//! Models whose window stands on support surfaces ([`Support::Surfaces`]: the small categories) run after
+//! the others: their hypotheses stand on the surfaces of the frame's detections of
+//! [`SURFACE_CATEGORIES`] whose calibrated score is at least [`DetectOptions::support_min_score`]
+//! ([`detected_surfaces`], [`surface_window`]), scored, selected and suppressed the same way.
 
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -26,7 +31,9 @@ use crate::error::{Error, Result};
 use crate::eval::{Detection, FrameDetections};
 use crate::features::budget;
 use crate::features::fast::FastEngine;
-use crate::features::hypotheses::{sliding_window, FrameYaws, WindowOptions, YawAnchor};
+use crate::features::hypotheses::{
+    sliding_window, surface_window, FrameYaws, HypothesisSet, Support, SupportSurface, WindowOptions, YawAnchor,
+};
 use crate::features::surface::{
     best_slice, measured_surface_height, refined_surface_height, slice_at, surface_height, SurfaceEngine,
 };
@@ -49,11 +56,20 @@ pub struct DetectOptions {
     pub candidates: Option<usize>,
     /// Overrides every model's threshold.
     pub min_score: Option<f32>,
+    /// Smallest calibrated probability of a detection of a surface category whose support surface the
+    /// surface models (small objects) search ([`detected_surfaces`]).
+    pub support_min_score: f32,
 }
 
 impl Default for DetectOptions {
     fn default() -> Self {
-        DetectOptions { nms_iou: DEFAULT_NMS_IOU, max_per_category: 20, candidates: None, min_score: None }
+        DetectOptions {
+            nms_iou: DEFAULT_NMS_IOU,
+            max_per_category: 20,
+            candidates: None,
+            min_score: None,
+            support_min_score: DEFAULT_SUPPORT_MIN_SCORE,
+        }
     }
 }
 
@@ -155,7 +171,7 @@ pub type ModelScores = (Vec<f32>, Option<Vec<u8>>);
 /// GPU: one submission per batch for all of them, tables shared). The scores equal the one-by-one ones.
 pub fn score_models<'a>(
     scenes: &[&'a FeatureScene],
-    models: &[Model],
+    models: &[&Model],
     hypotheses: &[&[Hypothesis]],
     backend: Backend,
     engines: &mut FastEngines<'a>,
@@ -339,23 +355,100 @@ pub fn detect_preprocessed_timed(
             .or_insert_with(|| FeatureScene::new(pre.clone(), &frame_yaws.yaws(anchor), step));
     }
     stages.yaw_grids_s += lap();
-    // Every model's window and fast-path engine first, then all models scored together (on the GPU in one
-    // submission per batch), then each model's candidates.
+    let scene_of = |m: &Model| &scenes[&(m.window.step.to_bits(), m.window.yaw_anchor)];
     let mut engines = FastEngines::new();
-    let model_scenes: Vec<&FeatureScene> =
-        models.iter().map(|m| &scenes[&(m.window.step.to_bits(), m.window.yaw_anchor)]).collect();
-    let mut windows = Vec::with_capacity(models.len());
-    for (model, scene) in models.iter().zip(&model_scenes) {
-        windows
-            .push(sliding_window(scene, &WindowOptions { sizes: model.sizes(), min_points: model.window.min_points }));
-        stages.window_s += lap();
-        if model.features.path == FeaturePath::Fast {
-            engines.get(scene, model);
-            stages.lattices_s += lap();
+    // The floor models first; the surface models then search the surfaces of their detections.
+    let (floor_models, surface_models): (Vec<&Model>, Vec<&Model>) =
+        models.iter().partition(|m| m.window.support == Support::Floor);
+    let windows: Vec<HypothesisSet> = floor_models
+        .iter()
+        .map(|model| {
+            let options = WindowOptions { sizes: model.sizes(), min_points: model.window.min_points };
+            let window = sliding_window(scene_of(model), &options);
+            stages.window_s += lap();
+            window
+        })
+        .collect();
+    let mut detections =
+        detect_windows(name, &pre, &floor_models, &windows, scene_of, backend, options, &mut engines, stages)?;
+    lap(); // detect_windows timed its own stages
+    if !surface_models.is_empty() {
+        let surfaces = detected_surfaces(&detections, models, options.support_min_score);
+        let windows: Vec<HypothesisSet> = surface_models
+            .iter()
+            .map(|model| {
+                let options = WindowOptions { sizes: model.sizes(), min_points: model.window.min_points };
+                let window = surface_window(scene_of(model), &options, &surfaces);
+                stages.window_s += lap();
+                window
+            })
+            .collect();
+        detections.extend(detect_windows(
+            name,
+            &pre,
+            &surface_models,
+            &windows,
+            scene_of,
+            backend,
+            options,
+            &mut engines,
+            stages,
+        )?);
+        lap();
+    }
+    stages.tables_thread_s += engines.table_thread_seconds();
+    calibrate(&mut detections, models);
+    stages.nms_s += lap();
+    Ok(FrameDetections { frame: name.to_string(), detections })
+}
+
+/// Default of [`DetectOptions::support_min_score`].
+pub const DEFAULT_SUPPORT_MIN_SCORE: f32 = 0.1;
+
+/// The support surfaces that the surface models search: those of the `detections` of
+/// [`SURFACE_CATEGORIES`] with a surface height whose calibrated probability (its model's calibration;
+/// the raw score for a model without one) is at least `min_score`.
+pub fn detected_surfaces(detections: &[Detection], models: &[Model], min_score: f32) -> Vec<SupportSurface> {
+    detections
+        .iter()
+        .filter(|d| SURFACE_CATEGORIES.contains(&d.category.as_str()))
+        .filter_map(|d| {
+            let model = models.iter().find(|m| m.category == d.category)?;
+            let score = model.calibration.as_ref().map_or(d.score, |c| c.probability(d.score));
+            let z = d.surface_z.filter(|_| score >= min_score)?;
+            Some(SupportSurface { object: d.cuboid(), z })
+        })
+        .collect()
+}
+
+/// Scores `windows[m]` with `models[m]` (all together: one GPU submission per batch), keeps each model's
+/// hypotheses at or above its threshold, runs NMS and measures the survivors' support surfaces; the
+/// scores are still raw (see [`calibrate`]).
+#[allow(clippy::too_many_arguments)]
+fn detect_windows<'a>(
+    name: &str,
+    pre: &Preprocessed,
+    models: &[&Model],
+    windows: &[HypothesisSet],
+    scene_of: impl Fn(&Model) -> &'a FeatureScene,
+    backend: Backend,
+    options: &DetectOptions,
+    engines: &mut FastEngines<'a>,
+    stages: &mut DetectStages,
+) -> Result<Vec<Detection>> {
+    let mut clock = Stopwatch::start();
+    let mut lap = || clock.lap();
+    let model_scenes: Vec<&FeatureScene> = models.iter().map(|m| scene_of(m)).collect();
+    if models.iter().any(|m| m.features.path == FeaturePath::Fast) {
+        for (model, scene) in models.iter().zip(&model_scenes) {
+            if model.features.path == FeaturePath::Fast {
+                engines.get(scene, model);
+            }
         }
+        stages.lattices_s += lap();
     }
     let all_hypotheses: Vec<&[Hypothesis]> = windows.iter().map(|w| w.hypotheses.as_slice()).collect();
-    let all_scores = score_models(&model_scenes, models, &all_hypotheses, backend, &mut engines)?;
+    let all_scores = score_models(&model_scenes, models, &all_hypotheses, backend, engines)?;
     stages.score_s += lap();
     let mut candidates = Vec::new();
     for (((model, scene), hypotheses), (scores, slices)) in
@@ -385,7 +478,6 @@ pub fn detect_preprocessed_timed(
         }));
         stages.select_s += lap();
     }
-    stages.tables_thread_s += engines.table_thread_seconds();
     let nms =
         NmsOptions { iou_threshold: options.nms_iou, max_detections: Some(options.max_per_category), top_k: None };
     let mut detections = nms_detections(&candidates, &nms);
@@ -394,14 +486,13 @@ pub fn detect_preprocessed_timed(
     detections.par_iter_mut().for_each(|d| {
         let cuboid = d.cuboid();
         d.surface_z = match d.surface_z {
-            Some(z) => Some(refined_surface_height(&pre, &cuboid, slice_at(&cuboid, z))),
-            None if SURFACE_CATEGORIES.contains(&d.category.as_str()) => measured_surface_height(&pre, &cuboid),
+            Some(z) => Some(refined_surface_height(pre, &cuboid, slice_at(&cuboid, z))),
+            None if SURFACE_CATEGORIES.contains(&d.category.as_str()) => measured_surface_height(pre, &cuboid),
             None => None,
         };
     });
-    calibrate(&mut detections, models);
     stages.nms_s += lap();
-    Ok(FrameDetections { frame: name.to_string(), detections })
+    Ok(detections)
 }
 
 /// Replaces each detection's raw score by its model's calibrated probability (keeping the raw score in

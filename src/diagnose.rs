@@ -33,7 +33,8 @@ use serde::Serialize;
 
 use crate::detect::overlay_selection;
 use crate::eval::{average_precision, category_truth, scored_boxes, Detection, PrecisionRecall, ScoredBox};
-use crate::features::hypotheses::{sliding_window, FrameYaws, WindowOptions, YawAnchor};
+use crate::features::hypotheses::{sliding_window, surface_window, FrameYaws, Support, WindowOptions, YawAnchor};
+use crate::features::surface::annotated_support_surfaces;
 use crate::features::{FeatureScene, Hypothesis, Preprocessed};
 use crate::frame::Object;
 use crate::geometry::{iou_3d, Cuboid};
@@ -78,7 +79,10 @@ pub fn best_window_ious(scene: &FeatureScene, hypotheses: &[Hypothesis], truths:
 ///
 /// The window is the one [`crate::detect::detect_preprocessed`] enumerates: one [`FeatureScene`] per
 /// distinct `(model.window.step, model.window.yaw_anchor)` (shared by the models with both) with the
-/// frame's [`FrameYaws`], and [`sliding_window`] with the model's sizes and `min_points`. Categories
+/// frame's [`FrameYaws`], and [`sliding_window`] with the model's sizes and `min_points` — for a model
+/// searched on support surfaces, [`surface_window`] on the surfaces of the frame's **annotated** objects
+/// of the surface categories (`annotated_support_surfaces`: the window's ceiling given perfect large-object
+/// detections; detection searches the surfaces of its own detections). Categories
 /// without a model, or without ground truth in the frame, are absent from the result; no scene is built
 /// when no model has ground truth.
 pub fn frame_window_best_ious(pre: &Preprocessed, models: &[Model], objects: &[Object]) -> BTreeMap<String, Vec<f32>> {
@@ -97,8 +101,13 @@ pub fn frame_window_best_ious(pre: &Preprocessed, models: &[Model], objects: &[O
     let mut out = BTreeMap::new();
     for model in wanted {
         let scene = &scenes[&(model.window.step.to_bits(), model.window.yaw_anchor)];
-        let window =
-            sliding_window(scene, &WindowOptions { sizes: model.sizes(), min_points: model.window.min_points });
+        let options = WindowOptions { sizes: model.sizes(), min_points: model.window.min_points };
+        let window = match model.window.support {
+            Support::Floor => sliding_window(scene, &options),
+            // The ceiling of the surface search given the true supporting furniture: the surfaces of the
+            // annotated objects (detection searches those of its detections).
+            Support::Surfaces => surface_window(scene, &options, &annotated_support_surfaces(pre, objects)),
+        };
         let truths = truths_of(&model.category);
         out.insert(model.category.clone(), best_window_ious(scene, &window.hypotheses, &truths));
     }

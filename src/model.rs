@@ -7,7 +7,7 @@
 //!   "layout": {"base_grid": [5, 5, 5], "expanded": true,
 //!              "groups": {"density": true, "normals": true, "cog": true, "view": true}},
 //!   "sizes": {"widths": [5 numbers], "depths": [3], "heights": [3]},
-//!   "window": {"step": 0.1, "min_points": 50, "yaw_anchor": "walls"},
+//!   "window": {"step": 0.1, "min_points": 50, "yaw_anchor": "walls", "support": "floor"},
 //!   "features": {"path": "fast", "subdivisions": 2},
 //!   "bias": 0.0, "threshold": 0.0,
 //!   "weights": [layout.dim() numbers, in the order of `features::feature_layout`],
@@ -46,7 +46,7 @@ use crate::calibration::Calibration;
 use crate::category::{normalise_name, CATEGORIES};
 use crate::error::{Error, Result};
 use crate::features::fast::FastOptions;
-use crate::features::hypotheses::YawAnchor;
+use crate::features::hypotheses::{Support, YawAnchor};
 use crate::features::surface::SurfaceWeights;
 /// The weight bounds live with the weight vectors' definition ([`crate::features::weights`]).
 pub use crate::features::weights::{check_weight_magnitudes, MAX_WEIGHT};
@@ -101,6 +101,11 @@ pub struct WindowSettings {
     /// before the anchor existed, which were trained with `"camera"`.
     #[serde(default)]
     pub yaw_anchor: YawAnchor,
+    /// Where the boxes stand ([`Support`]): `"floor"` (the sliding window) or `"surfaces"` (the support
+    /// surfaces of the frame's detections of [`crate::category::SURFACE_CATEGORIES`], searched after
+    /// them; the small categories). Absent in files written before it existed, which are floor models.
+    #[serde(default)]
+    pub support: Support,
 }
 
 /// One category's detector.

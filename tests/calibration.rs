@@ -4,6 +4,7 @@
 use cog_gpu::calibration::{fit_logistic, label_detections, Calibration, MIN_SLOPE};
 use cog_gpu::detect::{calibrate, overlay_selection};
 use cog_gpu::eval::Detection;
+use cog_gpu::features::Support;
 use cog_gpu::features::YawAnchor;
 use cog_gpu::features::{FeatureLayout, SizeQuantiles};
 use cog_gpu::frame::Object;
@@ -122,7 +123,7 @@ fn tiny_model(category: &str) -> Model {
         category,
         layout,
         SizeQuantiles::from_cuboids(&boxes).unwrap(),
-        WindowSettings { step: 0.2, min_points: 50, yaw_anchor: YawAnchor::Walls },
+        WindowSettings { step: 0.2, min_points: 50, yaw_anchor: YawAnchor::Walls, support: Support::Floor },
         FeatureSettings { path: FeaturePath::Fast, subdivisions: 2 },
         vec![0.0; layout.dim()],
         serde_json::json!({}),

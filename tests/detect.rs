@@ -1,5 +1,6 @@
 //! Detection: scores against an independent computation, NMS and caps, the overlay, and the CLI.
 
+use cog_gpu::features::Support;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -27,7 +28,7 @@ fn density_model(path: FeaturePath, step: f32) -> Model {
         "bed",
         layout,
         bed_sizes(),
-        WindowSettings { step, min_points: 500, yaw_anchor: YawAnchor::Walls },
+        WindowSettings { step, min_points: 500, yaw_anchor: YawAnchor::Walls, support: Support::Floor },
         FeatureSettings { path, subdivisions: 2 },
         weights,
         serde_json::Value::Null,

@@ -1,6 +1,7 @@
 //! `cog_gpu::diagnose` against hand-computed numbers, the window recall on a synthetic frame, and
 //! `cog-gpu eval --diagnose` end to end.
 
+use cog_gpu::features::Support;
 use std::process::Command;
 
 mod common;
@@ -239,7 +240,7 @@ fn window_recall_on_a_synthetic_frame() {
         &category,
         layout,
         sizes,
-        WindowSettings { step, min_points, yaw_anchor: YawAnchor::Walls },
+        WindowSettings { step, min_points, yaw_anchor: YawAnchor::Walls, support: Support::Floor },
         FeatureSettings { path: FeaturePath::Fast, subdivisions: 2 },
         vec![0.0; layout.dim()],
         serde_json::Value::Null,
@@ -354,7 +355,7 @@ fn cli_window_recall_with_models() {
             depths: vec![0.5, 1.0, 2.0],
             heights: vec![0.4, 0.8, 1.6],
         },
-        WindowSettings { step: 0.1, min_points: 20, yaw_anchor: YawAnchor::Walls },
+        WindowSettings { step: 0.1, min_points: 20, yaw_anchor: YawAnchor::Walls, support: Support::Floor },
         FeatureSettings { path: FeaturePath::Fast, subdivisions: 2 },
         vec![0.0; layout.dim()],
         serde_json::Value::Null,

@@ -3,6 +3,7 @@
 //! accepted with a warning), never a panic, an abort or a hang, and its message must name the file or the
 //! flag. The frames are tiny (32×24) so that the whole file runs in seconds.
 
+use cog_gpu::features::Support;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
@@ -113,7 +114,7 @@ fn model(category: &str) -> Model {
         category,
         layout,
         sizes,
-        WindowSettings { step: 0.2, min_points: 5, yaw_anchor: YawAnchor::Walls },
+        WindowSettings { step: 0.2, min_points: 5, yaw_anchor: YawAnchor::Walls, support: Support::Floor },
         FeatureSettings { path: FeaturePath::Fast, subdivisions: 2 },
         weights,
         Value::Null,

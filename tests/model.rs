@@ -1,5 +1,6 @@
 //! Model files: round trip and every validation failure, each naming the file and the problem.
 
+use cog_gpu::features::Support;
 use std::path::Path;
 
 use cog_gpu::features::YawAnchor;
@@ -18,7 +19,7 @@ fn model(category: &str) -> Model {
         category,
         layout,
         sizes(),
-        WindowSettings { step: 0.1, min_points: 50, yaw_anchor: YawAnchor::Walls },
+        WindowSettings { step: 0.1, min_points: 50, yaw_anchor: YawAnchor::Walls, support: Support::Floor },
         FeatureSettings { path: FeaturePath::Fast, subdivisions: 2 },
         weights,
         serde_json::json!({"note": "test"}),
@@ -55,6 +56,26 @@ fn the_yaw_anchor_is_stored_and_old_files_mean_camera() {
     value["window"]["yaw_anchor"] = "north".into();
     std::fs::write(&path, serde_json::to_string(&value).unwrap()).unwrap();
     assert!(Model::read(&path).unwrap_err().to_string().contains("chair.json"));
+}
+
+#[test]
+fn the_support_is_stored_and_old_files_mean_floor() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("pillow.json");
+    let mut m = model("pillow");
+    m.window.support = Support::Surfaces;
+    m.write(&path).unwrap();
+    let text = std::fs::read_to_string(&path).unwrap();
+    assert!(text.contains("\"support\":\"surfaces\""), "{text}");
+    assert_eq!(Model::read(&path).unwrap().window.support, Support::Surfaces);
+    // A file written before the support existed: no field, a floor model.
+    let mut value: serde_json::Value = serde_json::from_str(&text).unwrap();
+    value["window"].as_object_mut().unwrap().remove("support");
+    std::fs::write(&path, serde_json::to_string(&value).unwrap()).unwrap();
+    assert_eq!(Model::read(&path).unwrap().window.support, Support::Floor);
+    value["window"]["support"] = "ceiling".into();
+    std::fs::write(&path, serde_json::to_string(&value).unwrap()).unwrap();
+    assert!(Model::read(&path).unwrap_err().to_string().contains("pillow.json"));
 }
 
 /// Writes `m` as JSON, applies `edit` to the JSON value, and returns the read error message.

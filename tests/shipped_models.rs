@@ -14,23 +14,37 @@ use cog_gpu::model::{read_models_dir, FeaturePath};
 const MODELS: &str = "assets/models";
 const SAMPLE: &str = "assets/sample/synth-bedroom-s52";
 
+/// All 19 categories ship: the ten large ones and box, door, counter, garbage bin with the floor window
+/// and the full 5×5×5 (expanded) layout; pillow, lamp, monitor, TV and sink searched on support surfaces
+/// with the paper's smaller grids (README, "Small objects on support surfaces").
 #[test]
-fn the_ten_shipped_models_load_with_this_builds_layout() {
+fn the_nineteen_shipped_models_load_with_this_builds_layout() {
+    use cog_gpu::category::CATEGORIES;
+    use cog_gpu::features::{Groups, Support};
     let models = read_models_dir(Path::new(MODELS), None).unwrap();
     let mut categories: Vec<&str> = models.iter().map(|m| m.category.as_str()).collect();
     categories.sort_unstable();
-    let mut expected: Vec<&str> = LARGE_CATEGORIES.to_vec();
+    let mut expected: Vec<&str> = CATEGORIES.to_vec();
     expected.sort_unstable();
     assert_eq!(categories, expected);
     let full = FeatureLayout::default();
     for model in &models {
-        assert_eq!(model.layout.id(), full.id(), "{}: the shipped models use the full feature set", model.category);
+        let (grid, support) = match model.category.as_str() {
+            "pillow" | "lamp" | "sink" => ([3, 3, 3], Support::Surfaces),
+            "monitor" | "tv" => ([3, 1, 3], Support::Surfaces),
+            _ => (full.base_grid, Support::Floor),
+        };
+        let layout = FeatureLayout::new(grid, true, Groups::ALL).unwrap();
+        assert_eq!(model.layout.id(), layout.id(), "{}: the shipped models use the full feature set", model.category);
+        assert_eq!(model.window.support, support, "{}", model.category);
         assert_eq!(model.features.path, FeaturePath::Fast, "{}", model.category);
+        assert!(model.calibration.is_some(), "{}: not calibrated", model.category);
         // A trained model: weights on every feature group, not a zero vector.
         let norm: f32 = model.weights.iter().map(|w| w * w).sum::<f32>().sqrt();
         assert!(norm > 0.1, "{}: |w| = {norm}", model.category);
         assert!(model.training.get("converged").is_some(), "{}: training provenance missing", model.category);
     }
+    assert!(LARGE_CATEGORIES.iter().all(|c| categories.contains(c)));
 }
 
 /// The shipped synthetic bedroom holds a bed, a nightstand and a dresser: the shipped models must put a
@@ -80,8 +94,8 @@ fn the_shipped_models_meet_a_floor_on_fresh_synthetic_bedrooms() {
 /// See [`the_shipped_models_meet_a_floor_on_fresh_synthetic_bedrooms`].
 const BED_AP_FLOOR: f32 = 0.5;
 
-/// The README's main command on the shipped synthetic bedroom: with all ten calibrated models, the frame's
-/// best detection over all categories is its bed (3D IoU ≥ 0.25).
+/// The README's main command on the shipped synthetic bedroom: with all 19 calibrated models (no cascade),
+/// the frame's best detection over all categories is its bed (3D IoU ≥ 0.25).
 #[test]
 fn the_sample_bedrooms_best_detection_is_its_bed() {
     let frame = Frame::read(SAMPLE, DepthSource::Raw).unwrap();
@@ -95,7 +109,7 @@ fn the_sample_bedrooms_best_detection_is_its_bed() {
 }
 
 /// The shipped room-layout model (`assets/models/layout.json`, beside the detectors, which the loader
-/// skips: the test above sees exactly ten categories) loads, carries its provenance, and lays out the real
+/// skips: the test above sees exactly the 19 categories) loads, carries its provenance, and lays out the real
 /// annotated frame with a free-space IoU well above chance (the README reports the measured value).
 #[test]
 fn the_shipped_layout_model_lays_out_the_real_frame() {
@@ -157,4 +171,28 @@ fn the_shipped_cascade_rescores_the_sample_and_keeps_its_best_two_correct() {
         .collect();
     assert_ne!(matched[0], matched[1], "both best detections are on one object: {:?}", &detections[..2]);
     assert!(detections[..2].iter().any(|d| d.category == "bed"), "the bed is not among {:?}", &detections[..2]);
+}
+
+/// The small objects' surface search with the shipped models on the shipped synthetic bedroom (three
+/// pillows on its bed): the best pillow detection is correct (3D IoU ≥ 0.25 with an annotated pillow) and
+/// stands on the surface of a detected bed.
+#[test]
+fn the_shipped_pillow_model_finds_a_pillow_on_the_sample_bed() {
+    let frame = Frame::read(SAMPLE, DepthSource::Raw).unwrap();
+    let models = read_models_dir(Path::new(MODELS), Some(&["pillow".to_string(), "bed".to_string()])).unwrap();
+    let result = detect_frame(&frame, &models, Backend::Cpu, &DetectOptions::default()).unwrap();
+    let pillow = result.detections.iter().find(|d| d.category == "pillow").expect("a pillow detection");
+    let best = frame
+        .objects
+        .iter()
+        .filter(|o| o.category == "pillow")
+        .map(|o| iou_3d(&pillow.cuboid(), &o.cuboid))
+        .fold(0.0f32, f32::max);
+    assert!(best >= 0.25, "best pillow {pillow:?}: IoU {best} with the annotated pillows");
+    let bottom = pillow.cuboid().bottom();
+    assert!(
+        result.detections.iter().any(|d| d.category == "bed" && d.surface_z == Some(bottom)),
+        "the pillow's bottom {bottom} is no detected bed's surface: {:?}",
+        result.detections
+    );
 }

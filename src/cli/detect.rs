@@ -18,10 +18,11 @@ use std::time::Instant;
 use anyhow::{bail, Context};
 use cog_gpu::backend::Backend;
 use cog_gpu::cascade::Cascade;
-use cog_gpu::category::normalise_name;
-use cog_gpu::detect::{detect_frame, overlay, overlay_selection, DetectOptions};
+use cog_gpu::category::{normalise_name, SURFACE_CATEGORIES};
+use cog_gpu::detect::{detect_frame, overlay, overlay_selection, DetectOptions, DEFAULT_SUPPORT_MIN_SCORE};
 use cog_gpu::draw::category_colour;
 use cog_gpu::eval::FrameDetections;
+use cog_gpu::features::Support;
 use cog_gpu::frame::RoomLayout;
 use cog_gpu::frame::{is_frame_dir, DepthSource, Frame};
 use cog_gpu::model::read_models_dir;
@@ -43,7 +44,10 @@ pub struct Args {
     /// Output directory for `<frame>.json` and `<frame>.png`.
     #[arg(long, default_value = "detections")]
     pub out: PathBuf,
-    /// Only these categories (comma-separated); default: every model in --models.
+    /// Only these categories (comma-separated); default: every model in --models. A category searched on
+    /// support surfaces (a model with `"support": "surfaces"`: pillow, lamp, ...) brings the models of the
+    /// surface categories (bed, table, desk, dresser, nightstand) with it, whose detections carry the
+    /// surfaces; their detections are reported too.
     #[arg(long, value_delimiter = ',')]
     pub categories: Vec<String>,
     /// IoU above which 3D NMS suppresses a lower-scoring box of the same category.
@@ -56,6 +60,10 @@ pub struct Args {
     /// models' thresholds).
     #[arg(long, allow_hyphen_values = true)]
     pub min_score: Option<f32>,
+    /// Small objects are searched on the support surfaces of the detections of bed, table, desk, dresser
+    /// and nightstand whose (calibrated) score is at least this.
+    #[arg(long, default_value_t = DEFAULT_SUPPORT_MIN_SCORE)]
+    pub support_min_score: f32,
     /// Overrides every model's sliding-window centre step (metres; the shipped models' own is 0.2): finer
     /// is slower (4× the hypotheses at 0.1) and places boxes more precisely.
     #[arg(long, value_parser = options::step)]
@@ -137,6 +145,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         nms_iou: args.nms_iou,
         max_per_category: args.max_per_category,
         min_score: args.min_score,
+        support_min_score: args.support_min_score,
         ..DetectOptions::default()
     };
     detect_options.validate()?;
@@ -145,6 +154,27 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     let models_dir =
         if args.models == Path::new("assets/models") { resolve_default(&args.models) } else { args.models.clone() };
     let mut models = read_models_dir(&models_dir, (!categories.is_empty()).then_some(categories.as_slice()))?;
+    if models.iter().any(|m| m.window.support == Support::Surfaces) && !categories.is_empty() {
+        // The surface models search the surfaces of these categories' detections.
+        let missing: Vec<String> = SURFACE_CATEGORIES
+            .iter()
+            .filter(|c| !models.iter().any(|m| m.category == **c) && models_dir.join(format!("{c}.json")).is_file())
+            .map(|c| c.to_string())
+            .collect();
+        if !missing.is_empty() {
+            log::info!("the support surfaces come from the detections of {}; detecting them too", missing.join(", "));
+            models.extend(read_models_dir(&models_dir, Some(missing.as_slice()))?);
+        }
+    }
+    if models.iter().any(|m| m.window.support == Support::Surfaces)
+        && !models.iter().any(|m| SURFACE_CATEGORIES.contains(&m.category.as_str()))
+    {
+        log::warn!(
+            "{} has models searched on support surfaces but none of {}: they will find nothing",
+            models_dir.display(),
+            SURFACE_CATEGORIES.join(", ")
+        );
+    }
     if let Some(step) = args.step {
         for model in &mut models {
             model.window.step = step;

@@ -43,7 +43,7 @@ use cog_gpu::category::{normalise_name, CATEGORIES};
 use cog_gpu::features::fast::{FastOptions, DEFAULT_SUBDIVISIONS};
 use cog_gpu::features::hypotheses::DEFAULT_MIN_POINTS;
 use cog_gpu::features::surface::{SLICES, SLICE_DIM};
-use cog_gpu::features::{budget, FeatureLayout, Groups, SizeQuantiles, YawAnchor};
+use cog_gpu::features::{budget, FeatureLayout, Groups, SizeQuantiles, Support, YawAnchor};
 use cog_gpu::frame::Dataset;
 use cog_gpu::learn::detector::{
     cached_rows_per_example, collect_examples, instances_of, read_all_annotations, train_detector, DetectorOracle,
@@ -147,6 +147,17 @@ pub struct Args {
     /// (camera, `2πk/16`).
     #[arg(long, value_enum, default_value_t = AnchorArg::Walls)]
     pub yaw_anchor: AnchorArg,
+    /// Where the boxes stand: `floor` (the sliding window) or `surfaces` (the support surfaces of beds,
+    /// tables, desks, dressers, nightstands, sofas and counters: in training the annotated ones', in
+    /// detection those of the frame's detections of those categories; for pillows, lamps, monitors, TVs
+    /// and sinks).
+    #[arg(long, value_enum, default_value_t = SupportArg::Floor)]
+    pub support: SupportArg,
+    #[arg(value_parser = parse_grid)]
+    /// The base voxel grid `NXxNYxNZ` (width × depth × height; the paper: 5x5x5 for the large
+    /// categories, 3x3x3 for pillows and lamps, 3x1x3 for monitors and TVs).
+    #[arg(long, default_value = "5x5x5")]
+    pub grid: [u32; 3],
     /// Train with latent support surfaces (paper §4.1; a version-2 model): MODEL is the pre-trained cuboid
     /// model of the same category and features (e.g. assets/models/table.json), whose centre voxel layer
     /// initialises the surface weights.
@@ -165,6 +176,32 @@ pub struct Args {
     /// With --surfaces-from: full passes over the sliding windows allowed to each CCCP round after the first.
     #[arg(long, default_value_t = 2)]
     pub round_full_passes: usize,
+}
+
+/// `--support` values.
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum SupportArg {
+    Floor,
+    Surfaces,
+}
+
+impl From<SupportArg> for Support {
+    fn from(arg: SupportArg) -> Support {
+        match arg {
+            SupportArg::Floor => Support::Floor,
+            SupportArg::Surfaces => Support::Surfaces,
+        }
+    }
+}
+
+/// Parses `--grid` (`5x5x5`): three positive voxel counts.
+fn parse_grid(text: &str) -> Result<[u32; 3], String> {
+    let parts: Vec<&str> = text.split(['x', 'X']).collect();
+    let numbers: Vec<u32> = parts.iter().filter_map(|p| p.trim().parse().ok()).filter(|&n| n > 0).collect();
+    match numbers.as_slice() {
+        &[x, y, z] if parts.len() == 3 => Ok([x, y, z]),
+        _ => Err(format!("'{text}' is not a grid like 5x5x5 (three positive voxel counts)")),
+    }
 }
 
 /// `--surface-init` values.
@@ -324,7 +361,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     if !CATEGORIES.contains(&category.as_str()) {
         bail!("unknown category '{}'; the categories are: {}", args.category, CATEGORIES.join(", "));
     }
-    let layout = FeatureLayout::new([5, 5, 5], !args.no_expand, parse_groups(&args.groups)?)?;
+    let layout = FeatureLayout::new(args.grid, !args.no_expand, parse_groups(&args.groups)?)?;
     let pretrained =
         args.surfaces_from.as_deref().map(|path| pretrained_model(path, &category, &layout)).transpose()?;
     if pretrained.is_some() && args.features != PathArg::Fast {
@@ -370,10 +407,15 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         engine,
         target,
         yaw_anchor: args.yaw_anchor.into(),
+        support: args.support.into(),
         surfaces: pretrained.is_some(),
     };
-    let limits =
-        ExampleLimits { positives: args.positives, negatives: args.negatives, others: args.other_instances.into() };
+    let limits = ExampleLimits {
+        positives: args.positives,
+        negatives: args.negatives,
+        others: args.other_instances.into(),
+        support: args.support.into(),
+    };
     log::info!(
         "{category}: {} instances in {} frames; preparing up to {} positive and {} negative examples",
         truths.len(),
@@ -521,8 +563,12 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         },
         subdivisions: args.subdivisions.max(1),
     };
-    let window =
-        WindowSettings { step: args.detect_step, min_points: args.min_points, yaw_anchor: args.yaw_anchor.into() };
+    let window = WindowSettings {
+        step: args.detect_step,
+        min_points: args.min_points,
+        yaw_anchor: args.yaw_anchor.into(),
+        support: args.support.into(),
+    };
     let mut model = Model::new(&category, layout, sizes, window, features, weights, training)?;
     if latent.is_some() {
         model = model.with_surface(surface_weights(&all_weights[layout.dim()..]))?;

@@ -31,7 +31,7 @@ use serde::{Deserialize, Serialize};
 use super::preprocess::Preprocessed;
 use super::scene::{FeatureScene, YawGrid};
 use crate::error::{Error, Result};
-use crate::geometry::Cuboid;
+use crate::geometry::{polygon_contains, Cuboid};
 
 /// Width, depth and height quantile levels (paper §3.5).
 pub const WIDTH_QUANTILES: [f64; 5] = [0.1, 0.3, 0.5, 0.7, 0.9];
@@ -363,9 +363,11 @@ struct CountTable {
 }
 
 impl CountTable {
-    fn build(grid: &YawGrid, floor: f32) -> CountTable {
+    /// The table of `grid`'s points with z cells of side `z_cell` from `floor` up.
+    fn build(grid: &YawGrid, floor: f32, z_cell: f32) -> CountTable {
+        let inv_z_cell = 1.0 / z_cell;
         let max_z = grid.records.iter().fold(floor, |m, r| m.max(r.z_metres()));
-        let nz = (((max_z - floor) * grid.inv_step).floor() as usize + 1).max(1);
+        let nz = (((max_z - floor) * inv_z_cell).floor() as usize + 1).max(1);
         let dims = [grid.cells[0] as usize, grid.cells[1] as usize, nz];
         let (sx, sy) = (dims[0] + 1, dims[1] + 1);
         let mut sums = vec![0u32; sx * sy * (nz + 1)];
@@ -373,7 +375,7 @@ impl CountTable {
         for row in 0..grid.cells[1] {
             for col in 0..grid.cells[0] {
                 for r in &grid.records[grid.row_span(row, (col, col))] {
-                    let z = (((r.z_metres() - floor) * grid.inv_step).floor().max(0.0) as usize).min(nz - 1);
+                    let z = (((r.z_metres() - floor) * inv_z_cell).floor().max(0.0) as usize).min(nz - 1);
                     sums[at(col as usize + 1, row as usize + 1, z + 1)] += 1;
                 }
             }
@@ -415,6 +417,43 @@ impl CountTable {
     }
 }
 
+/// The range of cell indices whose centres `origin + (c + ½)·cell` lie in `[lo, hi]` (empty when the
+/// first exceeds the last).
+fn centred_cells(lo: f32, hi: f32, origin: f32, cell: f32) -> (i64, i64) {
+    (((lo - origin) / cell - 0.5).ceil() as i64, ((hi - origin) / cell - 0.5).floor() as i64)
+}
+
+/// Pushes onto `kept` the hypotheses of every size of `options` at `(yaw_index, centre, bottom)` (`centre`
+/// a lattice cell's centre in the yaw's rotated frame) that hold at least `options.min_points` points,
+/// counted by `table` over the ground cells whose centres lie inside the box and the z cells
+/// `z_cells(size)`; returns the number of sizes tried.
+fn push_sizes(
+    table: &CountTable,
+    grid: &YawGrid,
+    (yaw_index, centre, bottom): (usize, Vec2, f32),
+    options: &WindowOptions,
+    z_cells: impl Fn(Vec3) -> (i64, i64),
+    kept: &mut Vec<Hypothesis>,
+) -> usize {
+    for (size_index, &size) in options.sizes.iter().enumerate() {
+        let (s0, s1) = centred_cells(centre.x - 0.5 * size.x, centre.x + 0.5 * size.x, grid.origin[0], grid.step);
+        let (t0, t1) = centred_cells(centre.y - 0.5 * size.y, centre.y + 0.5 * size.y, grid.origin[1], grid.step);
+        let (z0, z1) = z_cells(size);
+        let inside = table.count([s0, t0, z0], [s1, t1, z1]);
+        if inside >= options.min_points {
+            kept.push(Hypothesis {
+                yaw_index: yaw_index as u16,
+                size_index: size_index as u16,
+                centre,
+                bottom,
+                size,
+                points_inside: inside,
+            });
+        }
+    }
+    options.sizes.len()
+}
+
 /// Enumerates the sliding window over every yaw of `scene` (see the module doc).
 pub fn sliding_window(scene: &FeatureScene, options: &WindowOptions) -> HypothesisSet {
     let floor = scene.pre.floor;
@@ -425,14 +464,10 @@ pub fn sliding_window(scene: &FeatureScene, options: &WindowOptions) -> Hypothes
             .par_iter()
             .enumerate()
             .map(|(yaw_index, grid)| {
-                let table = CountTable::build(grid, floor);
+                let table = CountTable::build(grid, floor, grid.step);
                 let mut generated = 0;
                 let mut kept = Vec::new();
                 let step = grid.step;
-                // Cell index range whose centres origin + (c + 0.5)·step lie in [lo, hi].
-                let centred = |lo: f32, hi: f32, origin: f32| -> (i64, i64) {
-                    (((lo - origin) / step - 0.5).ceil() as i64, ((hi - origin) / step - 0.5).floor() as i64)
-                };
                 for row in 0..grid.cells[1] {
                     for col in 0..grid.cells[0] {
                         if grid.row_span(row, (col, col)).is_empty() {
@@ -442,32 +477,142 @@ pub fn sliding_window(scene: &FeatureScene, options: &WindowOptions) -> Hypothes
                             grid.origin[0] + (col as f32 + 0.5) * step,
                             grid.origin[1] + (row as f32 + 0.5) * step,
                         );
-                        for (size_index, &size) in options.sizes.iter().enumerate() {
-                            generated += 1;
-                            let (s0, s1) = centred(centre.x - 0.5 * size.x, centre.x + 0.5 * size.x, grid.origin[0]);
-                            let (t0, t1) = centred(centre.y - 0.5 * size.y, centre.y + 0.5 * size.y, grid.origin[1]);
-                            // The floor slab (the lowest cell layer) is left out: every box on the floor
-                            // holds floor points, which say nothing about an object.
-                            let (_, z1) = centred(floor, floor + size.z, floor);
-                            let z0 = 1;
-                            let inside = table.count([s0, t0, z0], [s1, t1, z1]);
-                            if inside >= options.min_points {
-                                kept.push(Hypothesis {
-                                    yaw_index: yaw_index as u16,
-                                    size_index: size_index as u16,
-                                    centre,
-                                    bottom: floor,
-                                    size,
-                                    points_inside: inside,
-                                });
-                            }
-                        }
+                        // The floor slab (the lowest cell layer) is left out: every box on the floor holds
+                        // floor points, which say nothing about an object.
+                        let z_cells = |size: Vec3| (1, centred_cells(floor, floor + size.z, floor, step).1);
+                        let at = (yaw_index, centre, floor);
+                        generated += push_sizes(&table, grid, at, options, z_cells, &mut kept);
                     }
                 }
                 (generated, kept)
             })
             .collect()
     };
+    let mut set = HypothesisSet::default();
+    for (generated, kept) in per_yaw {
+        set.generated += generated;
+        set.hypotheses.extend(kept);
+    }
+    set
+}
+
+/// Where a window's boxes stand (a model file's `window.support`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Support {
+    /// On the floor: the sliding window of §3.5 ([`sliding_window`]), for objects that stand on it.
+    #[default]
+    Floor,
+    /// On the support surfaces of other objects (paper §4: small objects "searched only on predicted
+    /// surfaces"; [`surface_window`]).
+    Surfaces,
+}
+
+impl Support {
+    /// The support's name in model files and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Support::Floor => "floor",
+            Support::Surfaces => "surfaces",
+        }
+    }
+}
+
+/// How far (metres) beyond the footprint of the object that carries a surface a small object's centre
+/// may lie and still be searched on it: detected footprints are off by up to a step or so, and a pillow
+/// or a lamp often stands at the very edge of what carries it.
+pub const SURFACE_MARGIN_M: f32 = 0.1;
+/// Points less than this (metres) above a surface are the surface itself: the skipping test of
+/// [`surface_window`] leaves them out, as the sliding window leaves out the floor slab.
+pub const SURFACE_CLEARANCE_M: f32 = 0.05;
+/// Vertical cell of the surface window's point counts (metres): small objects are 0.1–0.6 m tall, so the
+/// step-sized cells of the floor window would be too coarse to tell the object from the surface.
+pub const SURFACE_COUNT_CELL_M: f32 = 0.05;
+
+/// A horizontal surface that small objects are searched on: the cuboid of the object that carries it (a
+/// detection at test time, an annotated object in training) and the surface's height (upright z).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SupportSurface {
+    pub object: Cuboid,
+    pub z: f32,
+}
+
+impl SupportSurface {
+    /// The footprint a small object's centre must lie in: the object's, grown by [`SURFACE_MARGIN_M`]
+    /// on every side.
+    pub fn search_footprint(&self) -> [Vec2; 4] {
+        let grown = Vec3::new(2.0 * SURFACE_MARGIN_M, 2.0 * SURFACE_MARGIN_M, 0.0);
+        Cuboid::new(self.object.centre, self.object.size + grown, self.object.yaw).footprint()
+    }
+
+    /// Whether a box whose centre lies at upright `(x, y)` = `centre` and whose bottom is at `bottom`
+    /// stands on this surface: the centre inside [`Self::search_footprint`] and the bottom within
+    /// `height_tolerance` of the surface.
+    pub fn holds(&self, centre: Vec2, bottom: f32, height_tolerance: f32) -> bool {
+        (bottom - self.z).abs() <= height_tolerance && polygon_contains(&self.search_footprint(), centre)
+    }
+}
+
+/// The window of a category searched on support surfaces (paper §4's small objects): for every yaw of
+/// `scene` and every surface, one centre at the middle of each lattice cell (the sliding window's cells,
+/// side `step`) that holds a point and lies inside the surface's [`SupportSurface::search_footprint`],
+/// every size of `options`, the bottom at the surface. A hypothesis is kept when at least
+/// `options.min_points` points lie inside its box and [`SURFACE_CLEARANCE_M`] or more above the surface
+/// (counted on ground cells × [`SURFACE_COUNT_CELL_M`] layers, like the sliding window's test). Two
+/// surfaces at the same height that share a cell give its hypotheses once (the first surface's).
+/// `generated` counts the hypotheses before the skipping test.
+pub fn surface_window(scene: &FeatureScene, options: &WindowOptions, surfaces: &[SupportSurface]) -> HypothesisSet {
+    use rayon::prelude::*;
+    if surfaces.is_empty() {
+        return HypothesisSet::default();
+    }
+    let floor = scene.pre.floor;
+    let per_yaw: Vec<(usize, Vec<Hypothesis>)> = scene
+        .yaws
+        .par_iter()
+        .enumerate()
+        .map(|(yaw_index, grid)| {
+            let table = CountTable::build(grid, floor, SURFACE_COUNT_CELL_M);
+            let step = grid.step;
+            let mut seen = std::collections::HashSet::new();
+            let (mut generated, mut kept) = (0, Vec::new());
+            for surface in surfaces {
+                let footprint = surface.search_footprint();
+                // The footprint in the yaw's rotated frame bounds the cells to look at.
+                let rotated =
+                    footprint.map(|p| Vec2::new(p.x * grid.cos + p.y * grid.sin, -p.x * grid.sin + p.y * grid.cos));
+                let lo = rotated.iter().fold(Vec2::splat(f32::INFINITY), |m, p| m.min(*p));
+                let hi = rotated.iter().fold(Vec2::splat(f32::NEG_INFINITY), |m, p| m.max(*p));
+                let (c0, c1) = centred_cells(lo.x, hi.x, grid.origin[0], step);
+                let (r0, r1) = centred_cells(lo.y, hi.y, grid.origin[1], step);
+                let (c0, c1) = (c0.max(0), c1.min(grid.cells[0] as i64 - 1));
+                let (r0, r1) = (r0.max(0), r1.min(grid.cells[1] as i64 - 1));
+                for row in r0..=r1 {
+                    for col in c0..=c1 {
+                        let (row, col) = (row as u32, col as u32);
+                        if grid.row_span(row, (col, col)).is_empty() {
+                            continue;
+                        }
+                        let centre = Vec2::new(
+                            grid.origin[0] + (col as f32 + 0.5) * step,
+                            grid.origin[1] + (row as f32 + 0.5) * step,
+                        );
+                        let upright = grid.to_upright(centre.extend(0.0)).truncate();
+                        if !polygon_contains(&footprint, upright) || !seen.insert((col, row, surface.z.to_bits())) {
+                            continue;
+                        }
+                        let z_cells = |size: Vec3| {
+                            let (lo, hi) = (surface.z + SURFACE_CLEARANCE_M, surface.z + size.z);
+                            centred_cells(lo, hi, floor, SURFACE_COUNT_CELL_M)
+                        };
+                        let at = (yaw_index, centre, surface.z);
+                        generated += push_sizes(&table, grid, at, options, z_cells, &mut kept);
+                    }
+                }
+            }
+            (generated, kept)
+        })
+        .collect();
     let mut set = HypothesisSet::default();
     for (generated, kept) in per_yaw {
         set.generated += generated;

@@ -29,7 +29,7 @@
 
 use super::fast::{FastEngine, FastOptions};
 use super::feature_layout::{FeatureLayout, Groups, PER_VOXEL};
-use super::hypotheses::Hypothesis;
+use super::hypotheses::{Hypothesis, SupportSurface};
 use super::preprocess::{normal_bin, Preprocessed};
 use super::scene::FeatureScene;
 use crate::error::{Error, Result};
@@ -182,6 +182,17 @@ pub fn measured_surface_height(pre: &Preprocessed, cuboid: &Cuboid) -> Option<f3
         return None;
     }
     upper_median(heights.into_iter().filter(|&z| bin_of(z).abs_diff(peak) <= 1).collect())
+}
+
+/// The support surfaces of a frame's annotated `objects` (training, and the window recall of
+/// `eval --diagnose`): one per object of [`crate::category::SURFACE_CATEGORIES`] whose surface
+/// [`measured_surface_height`] finds in `pre` — the measurement detection makes on a detected box.
+pub fn annotated_support_surfaces(pre: &Preprocessed, objects: &[crate::frame::Object]) -> Vec<SupportSurface> {
+    objects
+        .iter()
+        .filter(|o| crate::category::SURFACE_CATEGORIES.contains(&o.category.as_str()))
+        .filter_map(|o| measured_surface_height(pre, &o.cuboid).map(|z| SupportSurface { object: o.cuboid, z }))
+        .collect()
 }
 
 /// The slice of `cuboid` whose centre is `z` (the inverse of [`surface_height`], clamped to `0..SLICES`).

@@ -55,9 +55,12 @@ use crate::features::cpu;
 use crate::features::fast::{FastEngine, FastOptions};
 use crate::features::feature_layout::{NORMALS, PER_VOXEL};
 use crate::features::hypotheses::{
-    frame_wall_direction, nearest_yaw_index, sliding_window, yaws_under, HypothesisSet, WindowOptions, YawAnchor,
+    frame_wall_direction, nearest_yaw_index, sliding_window, surface_window, yaws_under, HypothesisSet, Support,
+    SupportSurface, WindowOptions, YawAnchor,
 };
-use crate::features::surface::{best_slice, SurfaceEngine, SurfaceWeights, SLICES, SLICE_DIM, SLICE_VOXELS};
+use crate::features::surface::{
+    annotated_support_surfaces, best_slice, SurfaceEngine, SurfaceWeights, SLICES, SLICE_DIM, SLICE_VOXELS,
+};
 use crate::features::{FeatureLayout, FeatureScene, Hypothesis, Preprocessed};
 use crate::geometry::{iou_3d, structured_loss, Cuboid};
 
@@ -88,6 +91,9 @@ pub struct TrainingSettings {
     pub target: PositiveTarget,
     /// Where the window's 16 yaws start (see [`crate::features::hypotheses`]).
     pub yaw_anchor: YawAnchor,
+    /// Where the window's boxes stand: on the floor (the sliding window) or on the example's
+    /// [`TrainingExample::surfaces`] ([`crate::features::hypotheses::surface_window`]).
+    pub support: Support,
     /// Latent support surfaces (paper §4.1, [`crate::features::surface`]): the joint feature vector is
     /// `[φ_cuboid, φ_surface(h), e_h]` ([`TrainingSettings::dim`]) and every answer maximises over the
     /// seven slices `h`; the fast path only.
@@ -156,6 +162,10 @@ pub struct TrainingExample {
     /// The whole frame's wall direction (as detection sees the frame, before the other instances' points
     /// are removed), which places the window's yaws under [`YawAnchor::Walls`].
     pub wall_direction: Option<f32>,
+    /// The frame's support surfaces, searched by a [`Support::Surfaces`] window: in training, those of the
+    /// annotated objects of [`crate::category::SURFACE_CATEGORIES`], measured from the whole frame's points
+    /// ([`annotated_support_surfaces`]); empty unless set with [`TrainingExample::on_surfaces`].
+    pub surfaces: Vec<SupportSurface>,
 }
 
 /// The parts of an example that do not depend on w, rebuilt by every full pass (see the module doc).
@@ -189,7 +199,13 @@ impl TrainingExample {
             OtherInstances::Removed => (without_points_in(pre, others), Vec::new()),
             OtherInstances::Ignored => (pre.clone(), others.to_vec()),
         };
-        TrainingExample { name, truth, pre, ignored, wall_direction }
+        TrainingExample { name, truth, pre, ignored, wall_direction, surfaces: Vec::new() }
+    }
+
+    /// The example with `surfaces` as its frame's support surfaces.
+    pub fn on_surfaces(mut self, surfaces: Vec<SupportSurface>) -> TrainingExample {
+        self.surfaces = surfaces;
+        self
     }
 
     /// The window's 16 yaws under `anchor`.
@@ -200,8 +216,11 @@ impl TrainingExample {
     /// The example's yaw grids, sliding window and losses under `settings`.
     pub fn window(&self, settings: &TrainingSettings) -> ExampleWindow {
         let scene = FeatureScene::new(self.pre.clone(), &self.yaws(settings.yaw_anchor), settings.step);
-        let mut hypotheses =
-            sliding_window(&scene, &WindowOptions { sizes: settings.sizes.clone(), min_points: settings.min_points });
+        let options = WindowOptions { sizes: settings.sizes.clone(), min_points: settings.min_points };
+        let mut hypotheses = match settings.support {
+            Support::Floor => sliding_window(&scene, &options),
+            Support::Surfaces => surface_window(&scene, &options, &self.surfaces),
+        };
         if !self.ignored.is_empty() {
             let detects_another = |h: &Hypothesis| {
                 let cuboid = h.cuboid(&scene);
@@ -979,6 +998,22 @@ pub struct ExampleLimits {
     pub negatives: usize,
     /// What a positive example does with the other instances in its frame.
     pub others: OtherInstances,
+    /// The window the examples are for. With [`Support::Surfaces`] every example gets its frame's
+    /// [`annotated_support_surfaces`], and an instance that stands on none of them (a floor lamp, a TV
+    /// on the wall: [`SupportSurface::holds`] with [`SURFACE_HEIGHT_TOLERANCE_M`]) is not a positive
+    /// example — the window can never output it. Negative frames are then taken among those with an
+    /// annotated object of a surface category (on the others the window is empty).
+    pub support: Support,
+}
+
+/// How far (metres) an annotated small object's bottom may lie from a measured surface and still stand
+/// on it (the measured height is the median of the surface's points; an annotation's bottom can sit a
+/// few centimetres above or below it).
+pub const SURFACE_HEIGHT_TOLERANCE_M: f32 = 0.1;
+
+/// Whether `cuboid` stands on one of `surfaces` (see [`ExampleLimits::support`]).
+pub fn stands_on_a_surface(cuboid: &Cuboid, surfaces: &[SupportSurface]) -> bool {
+    surfaces.iter().any(|s| s.holds(cuboid.centre.truncate(), cuboid.bottom(), SURFACE_HEIGHT_TOLERANCE_M))
 }
 
 /// The instances of `category` in a frame's annotations.
@@ -1007,7 +1042,10 @@ pub fn collect_examples(
     let mut negatives = Vec::new();
     for (f, objects) in annotations.iter().enumerate() {
         let instances = instances_of(objects, category);
-        if instances.is_empty() {
+        let has_supporter =
+            || objects.iter().any(|o| crate::category::SURFACE_CATEGORIES.contains(&o.category.as_str()));
+        // A surface window on a frame without supporting furniture is empty: such a frame teaches nothing.
+        if instances.is_empty() && (limits.support == Support::Floor || has_supporter()) {
             negatives.push(f);
         }
         positives.extend((0..instances.len()).map(|k| (f, k)));
@@ -1028,18 +1066,37 @@ pub fn collect_examples(
     // Every frame of `jobs` is in `needed`, so the search always succeeds.
     let pre_of = |f: usize| &preprocessed[preprocessed.binary_search_by_key(&f, |p| p.0).unwrap_or(0)].1;
     let name_of = |f: usize| frames[f].file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let surfaces_of = |f: usize| match limits.support {
+        Support::Floor => Vec::new(),
+        Support::Surfaces => annotated_support_surfaces(pre_of(f), &annotations[f]),
+    };
+    let surfaces: Vec<Vec<SupportSurface>> = (0..frames.len())
+        .into_par_iter()
+        .map(|f| if preprocessed.binary_search_by_key(&f, |p| p.0).is_ok() { surfaces_of(f) } else { Vec::new() })
+        .collect();
     let mut jobs: Vec<(String, usize, Option<Cuboid>, Vec<Cuboid>)> = Vec::new();
+    let mut off_surface = 0;
     for &(f, k) in &positives {
         let instances = instances_of(&annotations[f], category);
+        if limits.support == Support::Surfaces && !stands_on_a_surface(&instances[k], &surfaces[f]) {
+            off_surface += 1;
+            continue;
+        }
         let others: Vec<Cuboid> = instances.iter().enumerate().filter(|(j, _)| *j != k).map(|(_, c)| *c).collect();
         jobs.push((format!("{} #{k}", name_of(f)), f, Some(instances[k]), others));
+    }
+    if off_surface > 0 {
+        log::info!("{off_surface} instances of '{category}' stand on no annotated support surface; not trained on");
     }
     for &f in &negatives {
         jobs.push((format!("{} (no {category})", name_of(f)), f, None, Vec::new()));
     }
     Ok(jobs
         .into_par_iter()
-        .map(|(name, f, truth, others)| TrainingExample::with_others(name, pre_of(f), truth, &others, limits.others))
+        .map(|(name, f, truth, others)| {
+            TrainingExample::with_others(name, pre_of(f), truth, &others, limits.others)
+                .on_surfaces(surfaces[f].clone())
+        })
         .collect())
 }
 

@@ -1,0 +1,227 @@
+//! Small objects searched on support surfaces (paper §4, `features::hypotheses::surface_window`): a
+//! constructed pillow on a table top is found by the surface window and by no box of the floor window;
+//! every hypothesis stands on the surface inside its footprint; the table's own points do not keep a
+//! box; the surfaces detection searches are those of confident detections of the surface categories;
+//! a training example of a surface model answers on its surfaces only, its target on the pillow.
+
+use cog_gpu::detect::detected_surfaces;
+use cog_gpu::eval::Detection;
+use cog_gpu::features::hypotheses::{SURFACE_CLEARANCE_M, SURFACE_MARGIN_M};
+use cog_gpu::features::preprocess::Preprocessed;
+use cog_gpu::features::{
+    sliding_window, surface_window, FeatureLayout, FeatureScene, Groups, SizeQuantiles, Support, SupportSurface,
+    WindowOptions, YawAnchor,
+};
+use cog_gpu::geometry::{iou_3d, polygon_contains, Camera, Cuboid};
+use cog_gpu::model::{FeaturePath, FeatureSettings, Model, WindowSettings};
+use glam::{Mat3, Vec2, Vec3};
+
+const FLOOR: f32 = -1.2;
+/// The table top, 0.7 m above the floor.
+const TOP: f32 = FLOOR + 0.7;
+
+/// A table (1.2 × 0.8 m, turned by 22.5° — one of the camera anchor's 16 yaws — top 0.7 m above the floor) 3 m in front of the camera, the floor
+/// around it, and a pillow (0.4 × 0.3 × 0.15 m) lying on the table's right half: points on a 2 cm grid.
+fn scene_with_pillow() -> (FeatureScene, Cuboid, Cuboid) {
+    let table = Cuboid::new(Vec3::new(0.0, 3.0, FLOOR + 0.35), Vec3::new(1.2, 0.8, 0.7), 22.5f32.to_radians());
+    let pillow_local = Vec3::new(0.3, 0.0, 0.0);
+    let pillow_centre = table.from_local(pillow_local).truncate().extend(TOP + 0.075);
+    let pillow = Cuboid::new(pillow_centre, Vec3::new(0.4, 0.3, 0.15), table.yaw);
+    let mut points = Vec::new();
+    let mut normals = Vec::new();
+    for a in 0..60 {
+        for b in 0..40 {
+            let local = Vec3::new(-0.59 + 0.02 * a as f32, -0.39 + 0.02 * b as f32, 0.35);
+            let p = table.from_local(local);
+            if pillow.contains(p + Vec3::Z * 0.01) {
+                continue; // under the pillow: hidden
+            }
+            points.push(p);
+            normals.push(Vec3::Z);
+        }
+    }
+    // The pillow's top and its four sides.
+    for a in 0..20 {
+        for b in 0..15 {
+            points.push(pillow.from_local(Vec3::new(-0.19 + 0.02 * a as f32, -0.14 + 0.02 * b as f32, 0.075)));
+            normals.push(Vec3::Z);
+        }
+    }
+    for a in 0..20 {
+        for c in 0..7 {
+            let (s, u) = (-0.19 + 0.02 * a as f32, -0.06 + 0.02 * c as f32);
+            for side in [-0.15f32, 0.15] {
+                points.push(pillow.from_local(Vec3::new(s, side, u)));
+                normals.push(Vec3::Y * side.signum());
+            }
+        }
+    }
+    // The floor: a 4 × 3 m patch around the table, outside its footprint.
+    for a in 0..100 {
+        for b in 0..75 {
+            let p = Vec3::new(-2.0 + 0.04 * a as f32, 1.5 + 0.04 * b as f32, FLOOR);
+            if !table.contains(p + Vec3::Z * 0.01) {
+                points.push(p);
+                normals.push(Vec3::Z);
+            }
+        }
+    }
+    let gradients = vec![Vec2::ZERO; points.len()];
+    let camera = Camera::new([500.0, 500.0, 320.5, 240.5], Mat3::IDENTITY);
+    let pre = Preprocessed { camera, image_size: [640, 480], points, normals, gradients, floor: FLOOR };
+    let yaws: Vec<f32> = (0..4).map(|k| table.yaw + k as f32 * std::f32::consts::FRAC_PI_2).collect();
+    (FeatureScene::new(pre, &yaws, 0.1), table, pillow)
+}
+
+fn pillow_sizes(pillow: &Cuboid) -> Vec<Vec3> {
+    SizeQuantiles::from_cuboids(&[*pillow]).unwrap().sizes()[..1].to_vec()
+}
+
+#[test]
+fn a_pillow_on_a_table_is_found_on_the_surface_and_by_no_floor_box() {
+    let (scene, table, pillow) = scene_with_pillow();
+    let options = WindowOptions { sizes: pillow_sizes(&pillow), min_points: 20 };
+    let surface = SupportSurface { object: table, z: TOP };
+    let set = surface_window(&scene, &options, &[surface]);
+    assert!(!set.hypotheses.is_empty());
+    let best = set.hypotheses.iter().map(|h| iou_3d(&h.cuboid(&scene), &pillow)).fold(0.0f32, f32::max);
+    assert!(best >= 0.5, "best IoU with the pillow {best}");
+    // The floor window with the same sizes (every box kept, however empty) puts every box on the floor:
+    // none reaches the pillow.
+    let floor = sliding_window(&scene, &WindowOptions { min_points: 0, ..options.clone() });
+    assert!(!floor.hypotheses.is_empty());
+    assert!(floor.hypotheses.iter().all(|h| iou_3d(&h.cuboid(&scene), &pillow) == 0.0));
+    // No surface, no hypothesis.
+    let none = surface_window(&scene, &options, &[]);
+    assert_eq!((none.generated, none.hypotheses.len()), (0, 0));
+}
+
+#[test]
+fn every_surface_hypothesis_stands_on_the_surface_inside_the_grown_footprint() {
+    let (scene, table, pillow) = scene_with_pillow();
+    let options = WindowOptions { sizes: pillow_sizes(&pillow), min_points: 20 };
+    let surface = SupportSurface { object: table, z: TOP };
+    let set = surface_window(&scene, &options, &[surface]);
+    // The footprint grown by the margin, from the table's corners pushed out along its own axes.
+    let (c, s) = (table.yaw.cos(), table.yaw.sin());
+    let (hw, hd) = (0.6 + SURFACE_MARGIN_M, 0.4 + SURFACE_MARGIN_M);
+    let grown: Vec<Vec2> = [(-hw, -hd), (hw, -hd), (hw, hd), (-hw, hd)]
+        .iter()
+        .map(|&(u, v)| Vec2::new(u * c - v * s, u * s + v * c) + table.centre.truncate())
+        .collect();
+    let mut generated = 0;
+    for (k, grid) in scene.yaws.iter().enumerate() {
+        for row in 0..grid.cells[1] {
+            for col in 0..grid.cells[0] {
+                let centre = Vec2::new(
+                    grid.origin[0] + (col as f32 + 0.5) * grid.step,
+                    grid.origin[1] + (row as f32 + 0.5) * grid.step,
+                );
+                let upright = grid.to_upright(centre.extend(0.0)).truncate();
+                if !grid.row_span(row, (col, col)).is_empty() && polygon_contains(&grown, upright) {
+                    generated += options.sizes.len();
+                }
+            }
+        }
+        assert!(set.hypotheses.iter().filter(|h| h.yaw_index as usize == k).count() <= generated);
+    }
+    assert_eq!(set.generated, generated, "one hypothesis per size at every occupied cell of the footprint");
+    for h in &set.hypotheses {
+        assert_eq!(h.bottom, TOP);
+        let cuboid = h.cuboid(&scene);
+        assert!(polygon_contains(&grown, cuboid.centre.truncate()), "{cuboid:?} off the surface");
+        // The skipping count is of points above the surface's own: each kept box holds pillow points, up
+        // to the count's ground cells (a cell whose centre is inside the box counts whole: the box grown
+        // by one cell on each side holds every point counted).
+        let grown_box = Cuboid::new(cuboid.centre, cuboid.size + Vec3::new(0.2, 0.2, 0.0), cuboid.yaw);
+        let brute = scene.pre.points.iter().filter(|p| grown_box.contains(**p) && p.z > TOP + 0.01).count();
+        assert!(brute > 0 && h.points_inside >= options.min_points, "{h:?}: {brute} points above the top");
+    }
+    // Boxes over the bare left half of the table (centres within 0.1 m of a point 0.45 m from the pillow,
+    // so at least 0.05 m away from it) hold only the table's points: none is kept, though such boxes
+    // were generated (the table's points are at most SURFACE_CLEARANCE_M above the surface).
+    const { assert!(SURFACE_CLEARANCE_M > 0.0) };
+    let left = table.from_local(Vec3::new(-0.35, 0.0, 0.0)).truncate();
+    assert!(set.hypotheses.iter().all(|h| h.cuboid(&scene).centre.truncate().distance(left) > 0.1));
+    let everything = surface_window(&scene, &WindowOptions { min_points: 0, ..options.clone() }, &[surface]);
+    assert!(everything.hypotheses.iter().any(|h| h.cuboid(&scene).centre.truncate().distance(left) <= 0.1));
+}
+
+#[test]
+fn surfaces_come_from_confident_detections_of_surface_categories() {
+    let layout = FeatureLayout::new([3, 3, 3], false, Groups::GEOM).unwrap();
+    let sizes = SizeQuantiles {
+        widths: vec![0.5, 0.6, 0.7, 0.8, 0.9],
+        depths: vec![0.5, 0.6, 0.7],
+        heights: vec![0.7, 0.8, 0.9],
+    };
+    let model = |category: &str| {
+        Model::new(
+            category,
+            layout,
+            sizes.clone(),
+            WindowSettings { step: 0.2, min_points: 50, yaw_anchor: YawAnchor::Walls, support: Support::Floor },
+            FeatureSettings { path: FeaturePath::Fast, subdivisions: 2 },
+            vec![0.0; layout.dim()],
+            serde_json::json!({}),
+        )
+        .unwrap()
+    };
+    let models = vec![model("table"), model("chair"), model("bed")];
+    let table = Cuboid::new(Vec3::new(0.0, 3.0, -0.85), Vec3::new(1.0, 0.6, 0.7), 0.0);
+    let with_surface = |category: &str, score: f32, z: Option<f32>| {
+        let mut d = Detection::new(category, &table, score);
+        d.surface_z = z;
+        d
+    };
+    let detections = vec![
+        with_surface("table", 0.8, Some(-0.5)),  // kept
+        with_surface("table", 0.05, Some(-0.5)), // below the minimum score
+        with_surface("chair", 0.9, Some(-0.7)),  // not a surface category
+        with_surface("bed", 0.9, None),          // no surface measured
+        with_surface("sofa", 0.9, Some(-0.8)),   // no model: not searched
+    ];
+    let surfaces = detected_surfaces(&detections, &models, 0.1);
+    assert_eq!(surfaces.len(), 1);
+    assert_eq!(surfaces[0].z, -0.5);
+    assert_eq!(surfaces[0].object, detections[0].cuboid());
+    assert!(detected_surfaces(&detections, &models, 0.9).is_empty());
+}
+
+#[test]
+fn a_surface_models_training_example_answers_on_its_surfaces() {
+    use cog_gpu::features::fast::FastOptions;
+    use cog_gpu::learn::detector::{
+        stands_on_a_surface, FeatureEngine, PositiveTarget, TrainingExample, TrainingSettings,
+        SURFACE_HEIGHT_TOLERANCE_M,
+    };
+    let (scene, table, pillow) = scene_with_pillow();
+    let surface = SupportSurface { object: table, z: TOP };
+    assert!(stands_on_a_surface(&pillow, &[surface]));
+    // On the floor, or hovering above the top by more than the tolerance: on no surface.
+    let lowered = Cuboid::new(pillow.centre - Vec3::Z * 0.7, pillow.size, pillow.yaw);
+    let raised = Cuboid::new(pillow.centre + Vec3::Z * (SURFACE_HEIGHT_TOLERANCE_M + 0.01), pillow.size, pillow.yaw);
+    assert!(!stands_on_a_surface(&lowered, &[surface]) && !stands_on_a_surface(&raised, &[surface]));
+    let settings = TrainingSettings {
+        layout: FeatureLayout::new([3, 3, 3], true, Groups::ALL).unwrap(),
+        sizes: pillow_sizes(&pillow),
+        step: 0.1,
+        min_points: 20,
+        engine: FeatureEngine::Fast(FastOptions::default()),
+        target: PositiveTarget::BestWindow,
+        yaw_anchor: YawAnchor::Camera,
+        support: Support::Surfaces,
+        surfaces: false,
+    };
+    let example = TrainingExample::new("pillow".into(), &scene.pre, Some(pillow), &[]).on_surfaces(vec![surface]);
+    let window = example.window(&settings);
+    assert!(!window.hypotheses.hypotheses.is_empty());
+    assert!(window.hypotheses.hypotheses.iter().all(|h| h.bottom == TOP));
+    let target = window.target.expect("a surface box near the pillow");
+    assert_eq!(window.losses[target], 0.0);
+    let best = window.hypotheses.hypotheses[target].cuboid(&window.scene);
+    assert!(iou_3d(&best, &pillow) >= 0.5, "target IoU {}", iou_3d(&best, &pillow));
+    // Without surfaces the example has no box to answer with (only "no object").
+    let bare = TrainingExample::new("pillow".into(), &scene.pre, Some(pillow), &[]);
+    assert!(bare.window(&settings).hypotheses.hypotheses.is_empty());
+}
