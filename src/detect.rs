@@ -81,6 +81,12 @@ impl DetectOptions {
         if self.max_per_category == 0 || self.candidates == Some(0) {
             return Err(Error::Input("max detections per category and candidates must be at least 1".into()));
         }
+        if !(0.0..=1.0).contains(&self.support_min_score) {
+            return Err(Error::Input(format!(
+                "the support surfaces' minimum score must be a probability in [0, 1], got {}",
+                self.support_min_score
+            )));
+        }
         if self.min_score.is_some_and(|s| s.is_nan()) {
             return Err(Error::Input("the minimum score is not a number".into()));
         }

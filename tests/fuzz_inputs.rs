@@ -284,6 +284,11 @@ fn numeric_options_are_range_checked_naming_flag_value_and_range() {
         (vec!["calibrate", "--data", f, "--detections", f, "--iou", "2"], vec!["--iou", "'2'"]),
         (vec!["detect", f, "--step", "0.0001"], vec!["--step", "0.0001"]),
         (vec!["detect", f, "--max-per-category", "0"], vec!["--max-per-category", "'0'"]),
+        (vec!["detect", f, "--support-min-score", "NaN"], vec!["--support-min-score", "NaN"]),
+        (vec!["detect", f, "--support-min-score", "1.5"], vec!["--support-min-score", "1.5", "[0, 1]"]),
+        (vec!["train", "--data", f, "--category", "pillow", "--grid", "3x0x3"], vec!["--grid", "3x0x3"]),
+        (vec!["train", "--data", f, "--category", "pillow", "--grid", "3x3"], vec!["--grid", "'3x3'"]),
+        (vec!["train", "--data", f, "--category", "pillow", "--grid", "9x9x9"], vec!["too large"]),
         (vec!["detect", f, "--categories", "bed,"], vec!["--categories", "empty name"]),
         (
             vec!["eval", "--data", f, "--detections", f, "--categories", "bed,,chair"],

@@ -62,7 +62,7 @@ pub struct Args {
     pub min_score: Option<f32>,
     /// Small objects are searched on the support surfaces of the detections of bed, table, desk, dresser
     /// and nightstand whose (calibrated) score is at least this.
-    #[arg(long, default_value_t = DEFAULT_SUPPORT_MIN_SCORE)]
+    #[arg(long, default_value_t = DEFAULT_SUPPORT_MIN_SCORE, value_parser = options::probability)]
     pub support_min_score: f32,
     /// Overrides every model's sliding-window centre step (metres; the shipped models' own is 0.2): finer
     /// is slower (4× the hypotheses at 0.1) and places boxes more precisely.

@@ -40,6 +40,16 @@ pub fn iou(text: &str) -> Result<f32, String> {
     }
 }
 
+/// `detect --support-min-score`: a probability in [0, 1].
+pub fn probability(text: &str) -> Result<f32, String> {
+    let value = number(text)?;
+    if (0.0..=1.0).contains(&value) {
+        Ok(value as f32)
+    } else {
+        Err(format!("{value} is not a probability in [0, 1]"))
+    }
+}
+
 /// `train --c`: the regularisation constant, finite and > 0.
 pub fn positive(text: &str) -> Result<f64, String> {
     let value = number(text)?;
