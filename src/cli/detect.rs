@@ -46,8 +46,8 @@ pub struct Args {
     pub out: PathBuf,
     /// Only these categories (comma-separated); default: every model in --models. A category searched on
     /// support surfaces (a model with `"support": "surfaces"`: pillow, lamp, ...) brings the models of the
-    /// surface categories (bed, table, desk, dresser, nightstand) with it, whose detections carry the
-    /// surfaces; their detections are reported too.
+    /// surface categories (bed, table, desk, dresser, nightstand, sofa, counter) with it, whose detections
+    /// carry the surfaces; their detections are reported too.
     #[arg(long, value_delimiter = ',')]
     pub categories: Vec<String>,
     /// IoU above which 3D NMS suppresses a lower-scoring box of the same category.
@@ -60,8 +60,8 @@ pub struct Args {
     /// models' thresholds).
     #[arg(long, allow_hyphen_values = true)]
     pub min_score: Option<f32>,
-    /// Small objects are searched on the support surfaces of the detections of bed, table, desk, dresser
-    /// and nightstand whose (calibrated) score is at least this.
+    /// Small objects are searched on the support surfaces of the detections of the surface categories
+    /// (bed, table, desk, dresser, nightstand, sofa, counter) whose calibrated score is at least this.
     #[arg(long, default_value_t = DEFAULT_SUPPORT_MIN_SCORE, value_parser = options::probability)]
     pub support_min_score: f32,
     /// Overrides every model's sliding-window centre step (metres; the shipped models' own is 0.2): finer
@@ -154,7 +154,8 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     let models_dir =
         if args.models == Path::new("assets/models") { resolve_default(&args.models) } else { args.models.clone() };
     let mut models = read_models_dir(&models_dir, (!categories.is_empty()).then_some(categories.as_slice()))?;
-    if models.iter().any(|m| m.window.support == Support::Surfaces) && !categories.is_empty() {
+    let has_surface_models = models.iter().any(|m| m.window.support == Support::Surfaces);
+    if has_surface_models && !categories.is_empty() {
         // The surface models search the surfaces of these categories' detections.
         let missing: Vec<String> = SURFACE_CATEGORIES
             .iter()
@@ -166,9 +167,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
             models.extend(read_models_dir(&models_dir, Some(missing.as_slice()))?);
         }
     }
-    if models.iter().any(|m| m.window.support == Support::Surfaces)
-        && !models.iter().any(|m| SURFACE_CATEGORIES.contains(&m.category.as_str()))
-    {
+    if has_surface_models && !models.iter().any(|m| SURFACE_CATEGORIES.contains(&m.category.as_str())) {
         log::warn!(
             "{} has models searched on support surfaces but none of {}: they will find nothing",
             models_dir.display(),

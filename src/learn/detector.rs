@@ -1063,22 +1063,24 @@ pub fn collect_examples(
             Ok((f, Preprocessed::from_frame(&frame)?))
         })
         .collect::<Result<_>>()?;
-    // Every frame of `jobs` is in `needed`, so the search always succeeds.
-    let pre_of = |f: usize| &preprocessed[preprocessed.binary_search_by_key(&f, |p| p.0).unwrap_or(0)].1;
-    let name_of = |f: usize| frames[f].file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    let surfaces_of = |f: usize| match limits.support {
-        Support::Floor => Vec::new(),
-        Support::Surfaces => annotated_support_surfaces(pre_of(f), &annotations[f]),
-    };
-    let surfaces: Vec<Vec<SupportSurface>> = (0..frames.len())
-        .into_par_iter()
-        .map(|f| if preprocessed.binary_search_by_key(&f, |p| p.0).is_ok() { surfaces_of(f) } else { Vec::new() })
+    // The support surfaces of every preprocessed frame, in the same order.
+    let surfaces: Vec<Vec<SupportSurface>> = preprocessed
+        .par_iter()
+        .map(|(f, pre)| match limits.support {
+            Support::Floor => Vec::new(),
+            Support::Surfaces => annotated_support_surfaces(pre, &annotations[*f]),
+        })
         .collect();
+    // Every frame of `jobs` is in `needed`, so the search always succeeds.
+    let index_of = |f: usize| preprocessed.binary_search_by_key(&f, |p| p.0).unwrap_or(0);
+    let pre_of = |f: usize| &preprocessed[index_of(f)].1;
+    let surfaces_of = |f: usize| &surfaces[index_of(f)];
+    let name_of = |f: usize| frames[f].file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     let mut jobs: Vec<(String, usize, Option<Cuboid>, Vec<Cuboid>)> = Vec::new();
     let mut off_surface = 0;
     for &(f, k) in &positives {
         let instances = instances_of(&annotations[f], category);
-        if limits.support == Support::Surfaces && !stands_on_a_surface(&instances[k], &surfaces[f]) {
+        if limits.support == Support::Surfaces && !stands_on_a_surface(&instances[k], surfaces_of(f)) {
             off_surface += 1;
             continue;
         }
@@ -1095,7 +1097,7 @@ pub fn collect_examples(
         .into_par_iter()
         .map(|(name, f, truth, others)| {
             TrainingExample::with_others(name, pre_of(f), truth, &others, limits.others)
-                .on_surfaces(surfaces[f].clone())
+                .on_surfaces(surfaces_of(f).clone())
         })
         .collect())
 }
