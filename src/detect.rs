@@ -32,7 +32,8 @@ use crate::eval::{Detection, FrameDetections};
 use crate::features::budget;
 use crate::features::fast::FastEngine;
 use crate::features::hypotheses::{
-    sliding_window, surface_window, FrameYaws, HypothesisSet, Support, SupportSurface, WindowOptions, YawAnchor,
+    free_bottoms, free_window, sliding_window, surface_window, FrameYaws, HypothesisSet, Support, SupportSurface,
+    WindowOptions, YawAnchor,
 };
 use crate::features::surface::{
     best_slice, measured_surface_height, refined_surface_height, slice_at, surface_height, SurfaceEngine,
@@ -263,14 +264,19 @@ fn check_budget_with(pre: &Preprocessed, frame_yaws: &FrameYaws, models: &[Model
     let mut checked = Vec::new();
     for model in models {
         let anchor = model.window.yaw_anchor;
-        let key =
-            (model.window.step.to_bits(), anchor, model.sizes().len(), model.features.path, model.layout.grid()[2]);
+        // The free window holds the sizes at each of its bottoms: as many hypotheses as that many sizes.
+        let layers = match model.window.support {
+            Support::Free => free_bottoms(0.0, model.window.step).len(),
+            Support::Floor | Support::Surfaces => 1,
+        };
+        let sizes = model.sizes().len() * layers;
+        let key = (model.window.step.to_bits(), anchor, sizes, model.features.path, model.layout.grid()[2]);
         if checked.contains(&key) {
             continue;
         }
         checked.push(key);
         let yaws = frame_yaws.yaws(anchor);
-        budget::check_window(pre, &yaws, model.window.step, model.sizes().len())?;
+        budget::check_window(pre, &yaws, model.window.step, sizes)?;
         if model.features.path == FeaturePath::Fast {
             budget::check_fast(pre, &yaws, model.window.step, &model.layout, model.features.subdivisions)?;
         }
@@ -363,14 +369,18 @@ pub fn detect_preprocessed_timed(
     stages.yaw_grids_s += lap();
     let scene_of = |m: &Model| &scenes[&(m.window.step.to_bits(), m.window.yaw_anchor)];
     let mut engines = FastEngines::new();
-    // The floor models first; the surface models then search the surfaces of their detections.
+    // The floor (and free-window) models first; the surface models then search the surfaces of their
+    // detections.
     let (floor_models, surface_models): (Vec<&Model>, Vec<&Model>) =
-        models.iter().partition(|m| m.window.support == Support::Floor);
+        models.iter().partition(|m| m.window.support != Support::Surfaces);
     let windows: Vec<HypothesisSet> = floor_models
         .iter()
         .map(|model| {
             let options = WindowOptions { sizes: model.sizes(), min_points: model.window.min_points };
-            let window = sliding_window(scene_of(model), &options);
+            let window = match model.window.support {
+                Support::Free => free_window(scene_of(model), &options),
+                _ => sliding_window(scene_of(model), &options),
+            };
             stages.window_s += lap();
             window
         })

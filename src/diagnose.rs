@@ -33,7 +33,9 @@ use serde::Serialize;
 
 use crate::detect::overlay_selection;
 use crate::eval::{average_precision, category_truth, scored_boxes, Detection, PrecisionRecall, ScoredBox};
-use crate::features::hypotheses::{sliding_window, surface_window, FrameYaws, Support, WindowOptions, YawAnchor};
+use crate::features::hypotheses::{
+    free_window, sliding_window, surface_window, FrameYaws, Support, WindowOptions, YawAnchor,
+};
 use crate::features::surface::annotated_support_surfaces;
 use crate::features::{FeatureScene, Hypothesis, Preprocessed};
 use crate::frame::Object;
@@ -107,6 +109,7 @@ pub fn frame_window_best_ious(pre: &Preprocessed, models: &[Model], objects: &[O
             // The ceiling of the surface search given the true supporting furniture: the surfaces of the
             // annotated objects (detection searches those of its detections).
             Support::Surfaces => surface_window(scene, &options, &annotated_support_surfaces(pre, objects)),
+            Support::Free => free_window(scene, &options),
         };
         let truths = truths_of(&model.category);
         out.insert(model.category.clone(), best_window_ious(scene, &window.hypotheses, &truths));

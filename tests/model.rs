@@ -68,6 +68,10 @@ fn the_support_is_stored_and_old_files_mean_floor() {
     let text = std::fs::read_to_string(&path).unwrap();
     assert!(text.contains("\"support\":\"surfaces\""), "{text}");
     assert_eq!(Model::read(&path).unwrap().window.support, Support::Surfaces);
+    m.window.support = Support::Free;
+    m.write(&path).unwrap();
+    assert!(std::fs::read_to_string(&path).unwrap().contains("\"support\":\"free\""));
+    assert_eq!(Model::read(&path).unwrap().window.support, Support::Free);
     // A file written before the support existed: no field, a floor model.
     let mut value: serde_json::Value = serde_json::from_str(&text).unwrap();
     value["window"].as_object_mut().unwrap().remove("support");

@@ -77,6 +77,23 @@ fn pillow_sizes(pillow: &Cuboid) -> Vec<Vec3> {
     SizeQuantiles::from_cuboids(&[*pillow]).unwrap().sizes()[..1].to_vec()
 }
 
+/// Training settings of a pillow model (3x3x3, 0.1 m, the pillow's size) standing on `support`.
+fn pillow_training(pillow: &Cuboid, support: Support) -> cog_gpu::learn::detector::TrainingSettings {
+    use cog_gpu::features::fast::FastOptions;
+    use cog_gpu::learn::detector::{FeatureEngine, PositiveTarget, TrainingSettings};
+    TrainingSettings {
+        layout: FeatureLayout::new([3, 3, 3], true, Groups::ALL).unwrap(),
+        sizes: pillow_sizes(pillow),
+        step: 0.1,
+        min_points: 20,
+        engine: FeatureEngine::Fast(FastOptions::default()),
+        target: PositiveTarget::BestWindow,
+        yaw_anchor: YawAnchor::Camera,
+        support,
+        surfaces: false,
+    }
+}
+
 #[test]
 fn a_pillow_on_a_table_is_found_on_the_surface_and_by_no_floor_box() {
     let (scene, table, pillow) = scene_with_pillow();
@@ -190,11 +207,7 @@ fn surfaces_come_from_confident_detections_of_surface_categories() {
 
 #[test]
 fn a_surface_models_training_example_answers_on_its_surfaces() {
-    use cog_gpu::features::fast::FastOptions;
-    use cog_gpu::learn::detector::{
-        stands_on_a_surface, FeatureEngine, PositiveTarget, TrainingExample, TrainingSettings,
-        SURFACE_HEIGHT_TOLERANCE_M,
-    };
+    use cog_gpu::learn::detector::{stands_on_a_surface, TrainingExample, SURFACE_HEIGHT_TOLERANCE_M};
     let (scene, table, pillow) = scene_with_pillow();
     let surface = SupportSurface { object: table, z: TOP };
     assert!(stands_on_a_surface(&pillow, &[surface]));
@@ -202,17 +215,7 @@ fn a_surface_models_training_example_answers_on_its_surfaces() {
     let lowered = Cuboid::new(pillow.centre - Vec3::Z * 0.7, pillow.size, pillow.yaw);
     let raised = Cuboid::new(pillow.centre + Vec3::Z * (SURFACE_HEIGHT_TOLERANCE_M + 0.01), pillow.size, pillow.yaw);
     assert!(!stands_on_a_surface(&lowered, &[surface]) && !stands_on_a_surface(&raised, &[surface]));
-    let settings = TrainingSettings {
-        layout: FeatureLayout::new([3, 3, 3], true, Groups::ALL).unwrap(),
-        sizes: pillow_sizes(&pillow),
-        step: 0.1,
-        min_points: 20,
-        engine: FeatureEngine::Fast(FastOptions::default()),
-        target: PositiveTarget::BestWindow,
-        yaw_anchor: YawAnchor::Camera,
-        support: Support::Surfaces,
-        surfaces: false,
-    };
+    let settings = pillow_training(&pillow, Support::Surfaces);
     let example = TrainingExample::new("pillow".into(), &scene.pre, Some(pillow), &[]).on_surfaces(vec![surface]);
     let window = example.window(&settings);
     assert!(!window.hypotheses.hypotheses.is_empty());
@@ -224,4 +227,72 @@ fn a_surface_models_training_example_answers_on_its_surfaces() {
     // Without surfaces the example has no box to answer with (only "no object").
     let bare = TrainingExample::new("pillow".into(), &scene.pre, Some(pillow), &[]);
     assert!(bare.window(&settings).hypotheses.hypotheses.is_empty());
+}
+
+/// The free window (`Support::Free`, paper §4's comparison "with a free window"): bottoms at every
+/// step from the floor to `FREE_MAX_BOTTOM_M`, so it finds the pillow on the table without being told of
+/// the table; it enumerates every occupied cell at every bottom, and keeps a box only for points above
+/// its bottom's clearance.
+#[test]
+fn the_free_window_finds_the_pillow_at_its_height_without_a_surface() {
+    use cog_gpu::features::free_window;
+    use cog_gpu::features::hypotheses::{free_bottoms, FREE_MAX_BOTTOM_M};
+    // Bottoms by hand: 1.5 m at 0.1 m is 16 layers, at 0.2 m 8 (0 … 1.4), at 0.5 m 4.
+    assert_eq!(FREE_MAX_BOTTOM_M, 1.5);
+    for (step, count) in [(0.1f32, 16usize), (0.2, 8), (0.5, 4)] {
+        let bottoms = free_bottoms(FLOOR, step);
+        assert_eq!(bottoms.len(), count, "step {step}");
+        for (k, b) in bottoms.iter().enumerate() {
+            assert!((b - (FLOOR + k as f32 * step)).abs() < 1e-5);
+        }
+    }
+    let (scene, table, pillow) = scene_with_pillow();
+    let options = WindowOptions { sizes: pillow_sizes(&pillow), min_points: 20 };
+    let set = free_window(&scene, &options);
+    let best = set.hypotheses.iter().map(|h| iou_3d(&h.cuboid(&scene), &pillow)).fold(0.0f32, f32::max);
+    assert!(best >= 0.5, "best IoU with the pillow {best}");
+    // Generated: every occupied cell of every yaw, at each of the 16 bottoms, every size.
+    let occupied: usize = scene
+        .yaws
+        .iter()
+        .map(|grid| {
+            (0..grid.cells[1])
+                .flat_map(|row| (0..grid.cells[0]).map(move |col| (row, col)))
+                .filter(|&(row, col)| !grid.row_span(row, (col, col)).is_empty())
+                .count()
+        })
+        .sum();
+    assert_eq!(set.generated, occupied * 16 * options.sizes.len());
+    for h in &set.hypotheses {
+        let k = ((h.bottom - FLOOR) / 0.1).round();
+        assert!((0.0..=15.0).contains(&k) && (h.bottom - (FLOOR + k * 0.1)).abs() < 1e-5, "{h:?}");
+        // Every kept box holds points above its bottom's clearance (counted by ground cells: the box
+        // grown by a cell on each side holds all of them).
+        let cuboid = h.cuboid(&scene);
+        let grown_box = Cuboid::new(cuboid.centre, cuboid.size + Vec3::new(0.2, 0.2, 0.0), cuboid.yaw);
+        let above = |p: &&Vec3| p.z > h.bottom + SURFACE_CLEARANCE_M - 0.03;
+        let brute = scene.pre.points.iter().filter(|p| grown_box.contains(**p)).filter(above).count();
+        assert!(brute as u32 >= options.min_points, "{h:?}: {brute} points above its bottom");
+    }
+    // The floor and the bare table top keep no box: nothing stands on them but the pillow. A box whose
+    // bottom is on the table top and that does not reach the pillow (centre 0.45 m from it) holds only
+    // the top's own points.
+    let left = table.from_local(Vec3::new(-0.35, 0.0, 0.0)).truncate();
+    let on_top = |h: &&cog_gpu::features::Hypothesis| (h.bottom - TOP).abs() < 0.01;
+    assert!(set.hypotheses.iter().filter(on_top).all(|h| h.cuboid(&scene).centre.truncate().distance(left) > 0.1));
+}
+
+/// A free-window model's training example needs no surface: its window reaches the pillow on the table
+/// by itself, and its target is the pillow.
+#[test]
+fn a_free_models_training_example_answers_at_the_pillows_height() {
+    use cog_gpu::learn::detector::TrainingExample;
+    let (scene, _table, pillow) = scene_with_pillow();
+    let settings = pillow_training(&pillow, Support::Free);
+    let example = TrainingExample::new("pillow".into(), &scene.pre, Some(pillow), &[]);
+    let window = example.window(&settings);
+    let target = window.target.expect("a free-window box near the pillow");
+    let best = window.hypotheses.hypotheses[target].cuboid(&window.scene);
+    assert!(iou_3d(&best, &pillow) >= 0.5, "target IoU {}", iou_3d(&best, &pillow));
+    assert!((best.bottom() - TOP).abs() < 0.06, "target bottom {} against the top {TOP}", best.bottom());
 }

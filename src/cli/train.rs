@@ -150,7 +150,8 @@ pub struct Args {
     /// Where the boxes stand: `floor` (the sliding window) or `surfaces` (the support surfaces of beds,
     /// tables, desks, dressers, nightstands, sofas and counters: in training the annotated ones', in
     /// detection those of the frame's detections of those categories; for pillows, lamps, monitors, TVs
-    /// and sinks).
+    /// and sinks) or `free` (every bottom height from the floor to 1.5 m at the step: for what stands on
+    /// things no model detects, e.g. TVs on walls and cabinets).
     #[arg(long, value_enum, default_value_t = SupportArg::Floor)]
     pub support: SupportArg,
     #[arg(value_parser = parse_grid)]
@@ -183,6 +184,7 @@ pub struct Args {
 pub enum SupportArg {
     Floor,
     Surfaces,
+    Free,
 }
 
 impl From<SupportArg> for Support {
@@ -190,6 +192,7 @@ impl From<SupportArg> for Support {
         match arg {
             SupportArg::Floor => Support::Floor,
             SupportArg::Surfaces => Support::Surfaces,
+            SupportArg::Free => Support::Free,
         }
     }
 }

@@ -454,46 +454,56 @@ fn push_sizes(
     options.sizes.len()
 }
 
-/// Enumerates the sliding window over every yaw of `scene` (see the module doc).
-pub fn sliding_window(scene: &FeatureScene, options: &WindowOptions) -> HypothesisSet {
+/// Runs `visit(yaw_index, grid, table, kept)` for every yaw of `scene` in parallel — `table` the yaw's
+/// point counts with z cells of side `count_cell` (`None`: the window step) from the floor up, `visit`
+/// pushing its hypotheses onto `kept` and returning how many it generated — and gathers the yaws' sets in
+/// yaw order.
+fn each_yaw(
+    scene: &FeatureScene,
+    count_cell: Option<f32>,
+    visit: impl Fn(usize, &YawGrid, &CountTable, &mut Vec<Hypothesis>) -> usize + Sync,
+) -> HypothesisSet {
+    use rayon::prelude::*;
     let floor = scene.pre.floor;
-    let per_yaw: Vec<(usize, Vec<Hypothesis>)> = {
-        use rayon::prelude::*;
-        scene
-            .yaws
-            .par_iter()
-            .enumerate()
-            .map(|(yaw_index, grid)| {
-                let table = CountTable::build(grid, floor, grid.step);
-                let mut generated = 0;
-                let mut kept = Vec::new();
-                let step = grid.step;
-                for row in 0..grid.cells[1] {
-                    for col in 0..grid.cells[0] {
-                        if grid.row_span(row, (col, col)).is_empty() {
-                            continue;
-                        }
-                        let centre = Vec2::new(
-                            grid.origin[0] + (col as f32 + 0.5) * step,
-                            grid.origin[1] + (row as f32 + 0.5) * step,
-                        );
-                        // The floor slab (the lowest cell layer) is left out: every box on the floor holds
-                        // floor points, which say nothing about an object.
-                        let z_cells = |size: Vec3| (1, centred_cells(floor, floor + size.z, floor, step).1);
-                        let at = (yaw_index, centre, floor);
-                        generated += push_sizes(&table, grid, at, options, z_cells, &mut kept);
-                    }
-                }
-                (generated, kept)
-            })
-            .collect()
-    };
+    let per_yaw: Vec<(usize, Vec<Hypothesis>)> = scene
+        .yaws
+        .par_iter()
+        .enumerate()
+        .map(|(yaw_index, grid)| {
+            let table = CountTable::build(grid, floor, count_cell.unwrap_or(grid.step));
+            let mut kept = Vec::new();
+            let generated = visit(yaw_index, grid, &table, &mut kept);
+            (generated, kept)
+        })
+        .collect();
     let mut set = HypothesisSet::default();
     for (generated, kept) in per_yaw {
         set.generated += generated;
         set.hypotheses.extend(kept);
     }
     set
+}
+
+/// The centre (in the yaw's rotated frame) of every lattice cell of `grid` that holds a point.
+fn occupied_centres(grid: &YawGrid) -> impl Iterator<Item = Vec2> + '_ {
+    (0..grid.cells[1]).flat_map(move |row| {
+        (0..grid.cells[0]).filter(move |&col| !grid.row_span(row, (col, col)).is_empty()).map(move |col| {
+            Vec2::new(grid.origin[0] + (col as f32 + 0.5) * grid.step, grid.origin[1] + (row as f32 + 0.5) * grid.step)
+        })
+    })
+}
+
+/// Enumerates the sliding window over every yaw of `scene` (see the module doc).
+pub fn sliding_window(scene: &FeatureScene, options: &WindowOptions) -> HypothesisSet {
+    let floor = scene.pre.floor;
+    each_yaw(scene, None, |yaw_index, grid, table, kept| {
+        // The floor slab (the lowest cell layer) is left out: every box on the floor holds floor points,
+        // which say nothing about an object.
+        let z_cells = |size: Vec3| (1, centred_cells(floor, floor + size.z, floor, grid.step).1);
+        occupied_centres(grid)
+            .map(|centre| push_sizes(table, grid, (yaw_index, centre, floor), options, z_cells, kept))
+            .sum()
+    })
 }
 
 /// Where a window's boxes stand (a model file's `window.support`).
@@ -506,6 +516,10 @@ pub enum Support {
     /// On the support surfaces of other objects (paper §4: small objects "searched only on predicted
     /// surfaces"; [`surface_window`]).
     Surfaces,
+    /// Anywhere: the "free" sliding window the paper compares the surface search with, its bottom at
+    /// every height from the floor up to [`FREE_MAX_BOTTOM_M`] ([`free_window`]) — for what stands on
+    /// things no detector finds (a TV on the wall or on a cabinet, a box on a shelf).
+    Free,
 }
 
 impl Support {
@@ -514,6 +528,7 @@ impl Support {
         match self {
             Support::Floor => "floor",
             Support::Surfaces => "surfaces",
+            Support::Free => "free",
         }
     }
 }
@@ -562,63 +577,86 @@ impl SupportSurface {
 /// surfaces at the same height that share a cell give its hypotheses once (the first surface's).
 /// `generated` counts the hypotheses before the skipping test.
 pub fn surface_window(scene: &FeatureScene, options: &WindowOptions, surfaces: &[SupportSurface]) -> HypothesisSet {
-    use rayon::prelude::*;
     if surfaces.is_empty() {
         return HypothesisSet::default();
     }
     let floor = scene.pre.floor;
-    let per_yaw: Vec<(usize, Vec<Hypothesis>)> = scene
-        .yaws
-        .par_iter()
-        .enumerate()
-        .map(|(yaw_index, grid)| {
-            let table = CountTable::build(grid, floor, SURFACE_COUNT_CELL_M);
-            let step = grid.step;
-            let mut seen = std::collections::HashSet::new();
-            let (mut generated, mut kept) = (0, Vec::new());
-            for surface in surfaces {
-                let footprint = surface.search_footprint();
-                // The footprint in the yaw's rotated frame bounds the cells to look at.
-                let rotated =
-                    footprint.map(|p| Vec2::new(p.x * grid.cos + p.y * grid.sin, -p.x * grid.sin + p.y * grid.cos));
-                let lo = rotated.iter().fold(Vec2::splat(f32::INFINITY), |m, p| m.min(*p));
-                let hi = rotated.iter().fold(Vec2::splat(f32::NEG_INFINITY), |m, p| m.max(*p));
-                let (c0, c1) = centred_cells(lo.x, hi.x, grid.origin[0], step);
-                let (r0, r1) = centred_cells(lo.y, hi.y, grid.origin[1], step);
-                let (c0, c1) = (c0.max(0), c1.min(grid.cells[0] as i64 - 1));
-                let (r0, r1) = (r0.max(0), r1.min(grid.cells[1] as i64 - 1));
-                for row in r0..=r1 {
-                    for col in c0..=c1 {
-                        let (row, col) = (row as u32, col as u32);
-                        if grid.row_span(row, (col, col)).is_empty() {
-                            continue;
-                        }
-                        let centre = Vec2::new(
-                            grid.origin[0] + (col as f32 + 0.5) * step,
-                            grid.origin[1] + (row as f32 + 0.5) * step,
-                        );
-                        let upright = grid.to_upright(centre.extend(0.0)).truncate();
-                        if !polygon_contains(&footprint, upright) || !seen.insert((col, row, surface.z.to_bits())) {
-                            continue;
-                        }
-                        let z_cells = |size: Vec3| {
-                            let (lo, hi) = (surface.z + SURFACE_CLEARANCE_M, surface.z + size.z);
-                            centred_cells(lo, hi, floor, SURFACE_COUNT_CELL_M)
-                        };
-                        let at = (yaw_index, centre, surface.z);
-                        generated += push_sizes(&table, grid, at, options, z_cells, &mut kept);
+    each_yaw(scene, Some(SURFACE_COUNT_CELL_M), |yaw_index, grid, table, kept| {
+        let step = grid.step;
+        let mut seen = std::collections::HashSet::new();
+        let mut generated = 0;
+        for surface in surfaces {
+            let footprint = surface.search_footprint();
+            // The footprint in the yaw's rotated frame bounds the cells to look at.
+            let rotated =
+                footprint.map(|p| Vec2::new(p.x * grid.cos + p.y * grid.sin, -p.x * grid.sin + p.y * grid.cos));
+            let lo = rotated.iter().fold(Vec2::splat(f32::INFINITY), |m, p| m.min(*p));
+            let hi = rotated.iter().fold(Vec2::splat(f32::NEG_INFINITY), |m, p| m.max(*p));
+            let (c0, c1) = centred_cells(lo.x, hi.x, grid.origin[0], step);
+            let (r0, r1) = centred_cells(lo.y, hi.y, grid.origin[1], step);
+            let (c0, c1) = (c0.max(0), c1.min(grid.cells[0] as i64 - 1));
+            let (r0, r1) = (r0.max(0), r1.min(grid.cells[1] as i64 - 1));
+            for row in r0..=r1 {
+                for col in c0..=c1 {
+                    let (row, col) = (row as u32, col as u32);
+                    if grid.row_span(row, (col, col)).is_empty() {
+                        continue;
                     }
+                    let centre = Vec2::new(
+                        grid.origin[0] + (col as f32 + 0.5) * step,
+                        grid.origin[1] + (row as f32 + 0.5) * step,
+                    );
+                    let upright = grid.to_upright(centre.extend(0.0)).truncate();
+                    if !polygon_contains(&footprint, upright) || !seen.insert((col, row, surface.z.to_bits())) {
+                        continue;
+                    }
+                    let z_cells = |size: Vec3| {
+                        let (lo, hi) = (surface.z + SURFACE_CLEARANCE_M, surface.z + size.z);
+                        centred_cells(lo, hi, floor, SURFACE_COUNT_CELL_M)
+                    };
+                    generated += push_sizes(table, grid, (yaw_index, centre, surface.z), options, z_cells, kept);
                 }
             }
-            (generated, kept)
-        })
-        .collect();
-    let mut set = HypothesisSet::default();
-    for (generated, kept) in per_yaw {
-        set.generated += generated;
-        set.hypotheses.extend(kept);
-    }
-    set
+        }
+        generated
+    })
+}
+
+/// Highest bottom (metres above the floor) of the free window's boxes. Chosen to cover what the
+/// generator (and a real room) puts above the floor: furniture tops (≤ 1.2 m) and wall-mounted TVs
+/// (bottoms 0.9–1.4 m); a box on a bookshelf's top shelf (up to 2 m) is left out — each 0.1 m more costs
+/// a whole layer of boxes.
+pub const FREE_MAX_BOTTOM_M: f32 = 1.5;
+
+/// The bottoms of the free window: `floor + k·step` for k = 0, 1, … up to [`FREE_MAX_BOTTOM_M`] (the
+/// vertical step is the window's ground step, so a box is never more than half a step off vertically).
+pub fn free_bottoms(floor: f32, step: f32) -> Vec<f32> {
+    // The small slack keeps 1.5 at step 0.1 or 0.5 despite rounding.
+    let layers = (FREE_MAX_BOTTOM_M / step + 1e-3).floor() as usize;
+    (0..=layers).map(|k| floor + k as f32 * step).collect()
+}
+
+/// The free window (see [`Support::Free`]): for every yaw of `scene`, every bottom of [`free_bottoms`]
+/// and the centre of every lattice cell that holds a point, every size of `options`. A hypothesis is kept
+/// when at least `options.min_points` points lie inside its box and [`SURFACE_CLEARANCE_M`] or more
+/// above its bottom — as in [`surface_window`]: whatever a box stands on (floor, shelf, cabinet top) is
+/// not the object — counted on ground cells × [`SURFACE_COUNT_CELL_M`] layers. `generated` counts the
+/// hypotheses before the skipping test.
+pub fn free_window(scene: &FeatureScene, options: &WindowOptions) -> HypothesisSet {
+    let floor = scene.pre.floor;
+    each_yaw(scene, Some(SURFACE_COUNT_CELL_M), |yaw_index, grid, table, kept| {
+        let mut generated = 0;
+        for bottom in free_bottoms(floor, grid.step) {
+            let z_cells = |size: Vec3| {
+                let (lo, hi) = (bottom + SURFACE_CLEARANCE_M, bottom + size.z);
+                centred_cells(lo, hi, floor, SURFACE_COUNT_CELL_M)
+            };
+            for centre in occupied_centres(grid) {
+                generated += push_sizes(table, grid, (yaw_index, centre, bottom), options, z_cells, kept);
+            }
+        }
+        generated
+    })
 }
 
 impl Hypothesis {

@@ -55,8 +55,8 @@ use crate::features::cpu;
 use crate::features::fast::{FastEngine, FastOptions};
 use crate::features::feature_layout::{NORMALS, PER_VOXEL};
 use crate::features::hypotheses::{
-    frame_wall_direction, nearest_yaw_index, sliding_window, surface_window, yaws_under, HypothesisSet, Support,
-    SupportSurface, WindowOptions, YawAnchor,
+    frame_wall_direction, free_window, nearest_yaw_index, sliding_window, surface_window, yaws_under, HypothesisSet,
+    Support, SupportSurface, WindowOptions, YawAnchor,
 };
 use crate::features::surface::{
     annotated_support_surfaces, best_slice, SurfaceEngine, SurfaceWeights, SLICES, SLICE_DIM, SLICE_VOXELS,
@@ -220,6 +220,7 @@ impl TrainingExample {
         let mut hypotheses = match settings.support {
             Support::Floor => sliding_window(&scene, &options),
             Support::Surfaces => surface_window(&scene, &options, &self.surfaces),
+            Support::Free => free_window(&scene, &options),
         };
         if !self.ignored.is_empty() {
             let detects_another = |h: &Hypothesis| {
@@ -1045,7 +1046,7 @@ pub fn collect_examples(
         let has_supporter =
             || objects.iter().any(|o| crate::category::SURFACE_CATEGORIES.contains(&o.category.as_str()));
         // A surface window on a frame without supporting furniture is empty: such a frame teaches nothing.
-        if instances.is_empty() && (limits.support == Support::Floor || has_supporter()) {
+        if instances.is_empty() && (limits.support != Support::Surfaces || has_supporter()) {
             negatives.push(f);
         }
         positives.extend((0..instances.len()).map(|k| (f, k)));
@@ -1067,7 +1068,7 @@ pub fn collect_examples(
     let surfaces: Vec<Vec<SupportSurface>> = preprocessed
         .par_iter()
         .map(|(f, pre)| match limits.support {
-            Support::Floor => Vec::new(),
+            Support::Floor | Support::Free => Vec::new(),
             Support::Surfaces => annotated_support_surfaces(pre, &annotations[*f]),
         })
         .collect();
