@@ -12,8 +12,9 @@
 //! reported; models with a calibration report calibrated probabilities ([`calibrate`]), and all
 //! detections are sorted by score over all categories.
 //!
-//! Models whose window stands on support surfaces ([`Support::Surfaces`]: the small categories) run after
-//! the others: their hypotheses stand on the surfaces of the frame's detections of
+//! Models whose window stands on support surfaces ([`Support::Surfaces`]: small categories) run after
+//! the others (floor and [`Support::Free`] models): their hypotheses stand on the surfaces of the frame's
+//! detections of
 //! [`SURFACE_CATEGORIES`] whose calibrated score is at least [`DetectOptions::support_min_score`]
 //! ([`detected_surfaces`], [`surface_window`]), scored, selected and suppressed the same way.
 

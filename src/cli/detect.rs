@@ -45,7 +45,7 @@ pub struct Args {
     #[arg(long, default_value = "detections")]
     pub out: PathBuf,
     /// Only these categories (comma-separated); default: every model in --models. A category searched on
-    /// support surfaces (a model with `"support": "surfaces"`: pillow, lamp, ...) brings the models of the
+    /// support surfaces (a model with `"support": "surfaces"`: pillow, monitor, sink) brings the models of the
     /// surface categories (bed, table, desk, dresser, nightstand, sofa, counter) with it, whose detections
     /// carry the surfaces; their detections are reported too.
     #[arg(long, value_delimiter = ',')]
