@@ -33,8 +33,7 @@ use crate::eval::{Detection, FrameDetections};
 use crate::features::budget;
 use crate::features::fast::FastEngine;
 use crate::features::hypotheses::{
-    free_bottoms, free_window, sliding_window, surface_window, FrameYaws, HypothesisSet, Support, SupportSurface,
-    WindowOptions, YawAnchor,
+    free_bottoms, window, FrameYaws, HypothesisSet, Support, SupportSurface, WindowOptions, YawAnchor,
 };
 use crate::features::surface::{
     best_slice, measured_surface_height, refined_surface_height, slice_at, surface_height, SurfaceEngine,
@@ -374,32 +373,25 @@ pub fn detect_preprocessed_timed(
     // detections.
     let (floor_models, surface_models): (Vec<&Model>, Vec<&Model>) =
         models.iter().partition(|m| m.window.support != Support::Surfaces);
-    let windows: Vec<HypothesisSet> = floor_models
-        .iter()
-        .map(|model| {
-            let options = WindowOptions { sizes: model.sizes(), min_points: model.window.min_points };
-            let window = match model.window.support {
-                Support::Free => free_window(scene_of(model), &options),
-                _ => sliding_window(scene_of(model), &options),
-            };
-            stages.window_s += lap();
-            window
-        })
-        .collect();
+    // Each model's window (the surface models' on `surfaces`).
+    let windows_of = |models: &[&Model], surfaces: &[SupportSurface]| -> Vec<HypothesisSet> {
+        models
+            .iter()
+            .map(|model| {
+                let options = WindowOptions { sizes: model.sizes(), min_points: model.window.min_points };
+                window(model.window.support, scene_of(model), &options, surfaces)
+            })
+            .collect()
+    };
+    let windows = windows_of(&floor_models, &[]);
+    stages.window_s += lap();
     let mut detections =
         detect_windows(name, &pre, &floor_models, &windows, scene_of, backend, options, &mut engines, stages)?;
     lap(); // detect_windows timed its own stages
     if !surface_models.is_empty() {
         let surfaces = detected_surfaces(&detections, models, options.support_min_score);
-        let windows: Vec<HypothesisSet> = surface_models
-            .iter()
-            .map(|model| {
-                let options = WindowOptions { sizes: model.sizes(), min_points: model.window.min_points };
-                let window = surface_window(scene_of(model), &options, &surfaces);
-                stages.window_s += lap();
-                window
-            })
-            .collect();
+        let windows = windows_of(&surface_models, &surfaces);
+        stages.window_s += lap();
         detections.extend(detect_windows(
             name,
             &pre,

@@ -33,9 +33,7 @@ use serde::Serialize;
 
 use crate::detect::overlay_selection;
 use crate::eval::{average_precision, category_truth, scored_boxes, Detection, PrecisionRecall, ScoredBox};
-use crate::features::hypotheses::{
-    free_window, sliding_window, surface_window, FrameYaws, Support, WindowOptions, YawAnchor,
-};
+use crate::features::hypotheses::{window, FrameYaws, Support, WindowOptions, YawAnchor};
 use crate::features::surface::annotated_support_surfaces;
 use crate::features::{FeatureScene, Hypothesis, Preprocessed};
 use crate::frame::Object;
@@ -104,13 +102,13 @@ pub fn frame_window_best_ious(pre: &Preprocessed, models: &[Model], objects: &[O
     for model in wanted {
         let scene = &scenes[&(model.window.step.to_bits(), model.window.yaw_anchor)];
         let options = WindowOptions { sizes: model.sizes(), min_points: model.window.min_points };
-        let window = match model.window.support {
-            Support::Floor => sliding_window(scene, &options),
-            // The ceiling of the surface search given the true supporting furniture: the surfaces of the
-            // annotated objects (detection searches those of its detections).
-            Support::Surfaces => surface_window(scene, &options, &annotated_support_surfaces(pre, objects)),
-            Support::Free => free_window(scene, &options),
+        // The ceiling of the surface search given the true supporting furniture: the surfaces of the
+        // annotated objects (detection searches those of its detections).
+        let surfaces = match model.window.support {
+            Support::Surfaces => annotated_support_surfaces(pre, objects),
+            Support::Floor | Support::Free => Vec::new(),
         };
+        let window = window(model.window.support, scene, &options, &surfaces);
         let truths = truths_of(&model.category);
         out.insert(model.category.clone(), best_window_ious(scene, &window.hypotheses, &truths));
     }

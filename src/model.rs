@@ -101,9 +101,10 @@ pub struct WindowSettings {
     /// before the anchor existed, which were trained with `"camera"`.
     #[serde(default)]
     pub yaw_anchor: YawAnchor,
-    /// Where the boxes stand ([`Support`]): `"floor"` (the sliding window) or `"surfaces"` (the support
+    /// Where the boxes stand ([`Support`]): `"floor"` (the sliding window), `"surfaces"` (the support
     /// surfaces of the frame's detections of [`crate::category::SURFACE_CATEGORIES`], searched after
-    /// them; the small categories). Absent in files written before it existed, which are floor models.
+    /// them) or `"free"` (every bottom from the floor to 1.5 m). Absent in files written before it
+    /// existed, which are floor models.
     #[serde(default)]
     pub support: Support,
 }

@@ -29,7 +29,7 @@ use glam::{Vec2, Vec3};
 use serde::{Deserialize, Serialize};
 
 use super::preprocess::Preprocessed;
-use super::scene::{FeatureScene, YawGrid};
+use super::scene::{extent, rotate, FeatureScene, YawGrid};
 use crate::error::{Error, Result};
 use crate::geometry::{polygon_contains, Cuboid};
 
@@ -484,13 +484,24 @@ fn each_yaw(
     set
 }
 
+/// The centre of lattice cell `(col, row)` of `grid`, in the yaw's rotated frame.
+fn cell_centre(grid: &YawGrid, col: u32, row: u32) -> Vec2 {
+    Vec2::new(grid.origin[0] + (col as f32 + 0.5) * grid.step, grid.origin[1] + (row as f32 + 0.5) * grid.step)
+}
+
 /// The centre (in the yaw's rotated frame) of every lattice cell of `grid` that holds a point.
 fn occupied_centres(grid: &YawGrid) -> impl Iterator<Item = Vec2> + '_ {
     (0..grid.cells[1]).flat_map(move |row| {
-        (0..grid.cells[0]).filter(move |&col| !grid.row_span(row, (col, col)).is_empty()).map(move |col| {
-            Vec2::new(grid.origin[0] + (col as f32 + 0.5) * grid.step, grid.origin[1] + (row as f32 + 0.5) * grid.step)
-        })
+        (0..grid.cells[0])
+            .filter(move |&col| !grid.row_span(row, (col, col)).is_empty())
+            .map(move |col| cell_centre(grid, col, row))
     })
+}
+
+/// The count-table z cells (of [`SURFACE_COUNT_CELL_M`] from `floor`) of a box of height `size.z`
+/// standing at `bottom`, without the [`SURFACE_CLEARANCE_M`] above the bottom (what it stands on).
+fn cells_above(bottom: f32, floor: f32) -> impl Fn(Vec3) -> (i64, i64) {
+    move |size| centred_cells(bottom + SURFACE_CLEARANCE_M, bottom + size.z, floor, SURFACE_COUNT_CELL_M)
 }
 
 /// Enumerates the sliding window over every yaw of `scene` (see the module doc).
@@ -588,12 +599,9 @@ pub fn surface_window(scene: &FeatureScene, options: &WindowOptions, surfaces: &
         for surface in surfaces {
             let footprint = surface.search_footprint();
             // The footprint in the yaw's rotated frame bounds the cells to look at.
-            let rotated =
-                footprint.map(|p| Vec2::new(p.x * grid.cos + p.y * grid.sin, -p.x * grid.sin + p.y * grid.cos));
-            let lo = rotated.iter().fold(Vec2::splat(f32::INFINITY), |m, p| m.min(*p));
-            let hi = rotated.iter().fold(Vec2::splat(f32::NEG_INFINITY), |m, p| m.max(*p));
-            let (c0, c1) = centred_cells(lo.x, hi.x, grid.origin[0], step);
-            let (r0, r1) = centred_cells(lo.y, hi.y, grid.origin[1], step);
+            let (lo, hi) = extent(&footprint.map(|p| rotate(&p.extend(0.0), grid.sin, grid.cos)));
+            let (c0, c1) = centred_cells(lo[0], hi[0], grid.origin[0], step);
+            let (r0, r1) = centred_cells(lo[1], hi[1], grid.origin[1], step);
             let (c0, c1) = (c0.max(0), c1.min(grid.cells[0] as i64 - 1));
             let (r0, r1) = (r0.max(0), r1.min(grid.cells[1] as i64 - 1));
             for row in r0..=r1 {
@@ -602,19 +610,13 @@ pub fn surface_window(scene: &FeatureScene, options: &WindowOptions, surfaces: &
                     if grid.row_span(row, (col, col)).is_empty() {
                         continue;
                     }
-                    let centre = Vec2::new(
-                        grid.origin[0] + (col as f32 + 0.5) * step,
-                        grid.origin[1] + (row as f32 + 0.5) * step,
-                    );
+                    let centre = cell_centre(grid, col, row);
                     let upright = grid.to_upright(centre.extend(0.0)).truncate();
                     if !polygon_contains(&footprint, upright) || !seen.insert((col, row, surface.z.to_bits())) {
                         continue;
                     }
-                    let z_cells = |size: Vec3| {
-                        let (lo, hi) = (surface.z + SURFACE_CLEARANCE_M, surface.z + size.z);
-                        centred_cells(lo, hi, floor, SURFACE_COUNT_CELL_M)
-                    };
-                    generated += push_sizes(table, grid, (yaw_index, centre, surface.z), options, z_cells, kept);
+                    let at = (yaw_index, centre, surface.z);
+                    generated += push_sizes(table, grid, at, options, cells_above(surface.z, floor), kept);
                 }
             }
         }
@@ -647,16 +649,28 @@ pub fn free_window(scene: &FeatureScene, options: &WindowOptions) -> HypothesisS
     each_yaw(scene, Some(SURFACE_COUNT_CELL_M), |yaw_index, grid, table, kept| {
         let mut generated = 0;
         for bottom in free_bottoms(floor, grid.step) {
-            let z_cells = |size: Vec3| {
-                let (lo, hi) = (bottom + SURFACE_CLEARANCE_M, bottom + size.z);
-                centred_cells(lo, hi, floor, SURFACE_COUNT_CELL_M)
-            };
+            let z_cells = cells_above(bottom, floor);
             for centre in occupied_centres(grid) {
-                generated += push_sizes(table, grid, (yaw_index, centre, bottom), options, z_cells, kept);
+                generated += push_sizes(table, grid, (yaw_index, centre, bottom), options, &z_cells, kept);
             }
         }
         generated
     })
+}
+
+/// The window of `support` on `scene` with `options`: [`sliding_window`], [`surface_window`] on
+/// `surfaces` (read only for [`Support::Surfaces`]) or [`free_window`].
+pub fn window(
+    support: Support,
+    scene: &FeatureScene,
+    options: &WindowOptions,
+    surfaces: &[SupportSurface],
+) -> HypothesisSet {
+    match support {
+        Support::Floor => sliding_window(scene, options),
+        Support::Surfaces => surface_window(scene, options, surfaces),
+        Support::Free => free_window(scene, options),
+    }
 }
 
 impl Hypothesis {
@@ -668,7 +682,7 @@ impl Hypothesis {
         Hypothesis {
             yaw_index: yaw_index as u16,
             size_index: 0,
-            centre: Vec2::new(c.x * grid.cos + c.y * grid.sin, -c.x * grid.sin + c.y * grid.cos),
+            centre: Vec2::from(rotate(&c, grid.sin, grid.cos)),
             bottom: cuboid.bottom(),
             size: cuboid.size,
             points_inside: 0,

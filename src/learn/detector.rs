@@ -55,8 +55,8 @@ use crate::features::cpu;
 use crate::features::fast::{FastEngine, FastOptions};
 use crate::features::feature_layout::{NORMALS, PER_VOXEL};
 use crate::features::hypotheses::{
-    frame_wall_direction, free_window, nearest_yaw_index, sliding_window, surface_window, yaws_under, HypothesisSet,
-    Support, SupportSurface, WindowOptions, YawAnchor,
+    self, frame_wall_direction, nearest_yaw_index, yaws_under, HypothesisSet, Support, SupportSurface, WindowOptions,
+    YawAnchor,
 };
 use crate::features::surface::{
     annotated_support_surfaces, best_slice, SurfaceEngine, SurfaceWeights, SLICES, SLICE_DIM, SLICE_VOXELS,
@@ -217,11 +217,7 @@ impl TrainingExample {
     pub fn window(&self, settings: &TrainingSettings) -> ExampleWindow {
         let scene = FeatureScene::new(self.pre.clone(), &self.yaws(settings.yaw_anchor), settings.step);
         let options = WindowOptions { sizes: settings.sizes.clone(), min_points: settings.min_points };
-        let mut hypotheses = match settings.support {
-            Support::Floor => sliding_window(&scene, &options),
-            Support::Surfaces => surface_window(&scene, &options, &self.surfaces),
-            Support::Free => free_window(&scene, &options),
-        };
+        let mut hypotheses = hypotheses::window(settings.support, &scene, &options, &self.surfaces);
         if !self.ignored.is_empty() {
             let detects_another = |h: &Hypothesis| {
                 let cuboid = h.cuboid(&scene);
