@@ -33,7 +33,7 @@ use crate::eval::{Detection, FrameDetections};
 use crate::features::budget;
 use crate::features::fast::FastEngine;
 use crate::features::hypotheses::{
-    free_bottoms, window, FrameYaws, HypothesisSet, Support, SupportSurface, WindowOptions, YawAnchor,
+    free_bottoms, window, FrameYaws, HypothesisSet, Support, SupportSurface, WindowOptions,
 };
 use crate::features::surface::{
     best_slice, measured_surface_height, refined_surface_height, slice_at, surface_height, SurfaceEngine,
@@ -41,7 +41,7 @@ use crate::features::surface::{
 use crate::features::{FeatureScene, Hypothesis, Preprocessed};
 use crate::frame::Frame;
 use crate::geometry::Camera;
-use crate::model::{FeaturePath, Model};
+use crate::model::{FeaturePath, Model, SceneKey};
 use crate::nms::{nms_detections, NmsOptions, DEFAULT_NMS_IOU};
 
 /// Settings of [`detect_frame`].
@@ -359,15 +359,15 @@ pub fn detect_preprocessed_timed(
     let frame_yaws = FrameYaws::new(&pre);
     check_budget_with(&pre, &frame_yaws, models)?;
     // One scene per distinct window step and yaw anchor (the yaw grids' cell is the step).
-    let mut scenes: BTreeMap<(u32, YawAnchor), FeatureScene> = BTreeMap::new();
+    let mut scenes: BTreeMap<SceneKey, FeatureScene> = BTreeMap::new();
     for model in models {
-        let (step, anchor) = (model.window.step, model.window.yaw_anchor);
+        let (step, anchor, lattice) = (model.window.step, model.window.yaw_anchor, model.window.lattice);
         scenes
-            .entry((step.to_bits(), anchor))
-            .or_insert_with(|| FeatureScene::new(pre.clone(), &frame_yaws.yaws(anchor), step));
+            .entry(model.window.scene_key())
+            .or_insert_with(|| FeatureScene::with_lattice(pre.clone(), &frame_yaws.yaws(anchor), step, lattice));
     }
     stages.yaw_grids_s += lap();
-    let scene_of = |m: &Model| &scenes[&(m.window.step.to_bits(), m.window.yaw_anchor)];
+    let scene_of = |m: &Model| &scenes[&m.window.scene_key()];
     let mut engines = FastEngines::new();
     // The floor (and free-window) models first; the surface models then search the surfaces of their
     // detections.

@@ -33,12 +33,12 @@ use serde::Serialize;
 
 use crate::detect::overlay_selection;
 use crate::eval::{average_precision, category_truth, scored_boxes, Detection, PrecisionRecall, ScoredBox};
-use crate::features::hypotheses::{window, FrameYaws, Support, WindowOptions, YawAnchor};
+use crate::features::hypotheses::{window, FrameYaws, Support, WindowOptions};
 use crate::features::surface::annotated_support_surfaces;
 use crate::features::{FeatureScene, Hypothesis, Preprocessed};
 use crate::frame::Object;
 use crate::geometry::{iou_3d, Cuboid};
-use crate::model::Model;
+use crate::model::{Model, SceneKey};
 
 // ---------------------------------------------------------------------------------------------------------
 // 1. Window recall ceiling
@@ -91,16 +91,16 @@ pub fn frame_window_best_ious(pre: &Preprocessed, models: &[Model], objects: &[O
     };
     let wanted: Vec<&Model> = models.iter().filter(|m| objects.iter().any(|o| o.category == m.category)).collect();
     let frame_yaws = FrameYaws::new(pre);
-    let mut scenes: BTreeMap<(u32, YawAnchor), FeatureScene> = BTreeMap::new();
+    let mut scenes: BTreeMap<SceneKey, FeatureScene> = BTreeMap::new();
     for model in &wanted {
-        let (step, anchor) = (model.window.step, model.window.yaw_anchor);
+        let (step, anchor, lattice) = (model.window.step, model.window.yaw_anchor, model.window.lattice);
         scenes
-            .entry((step.to_bits(), anchor))
-            .or_insert_with(|| FeatureScene::new(pre.clone(), &frame_yaws.yaws(anchor), step));
+            .entry(model.window.scene_key())
+            .or_insert_with(|| FeatureScene::with_lattice(pre.clone(), &frame_yaws.yaws(anchor), step, lattice));
     }
     let mut out = BTreeMap::new();
     for model in wanted {
-        let scene = &scenes[&(model.window.step.to_bits(), model.window.yaw_anchor)];
+        let scene = &scenes[&model.window.scene_key()];
         let options = WindowOptions { sizes: model.sizes(), min_points: model.window.min_points };
         // The ceiling of the surface search given the true supporting furniture: the surfaces of the
         // annotated objects (detection searches those of its detections).

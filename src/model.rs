@@ -7,7 +7,7 @@
 //!   "layout": {"base_grid": [5, 5, 5], "expanded": true,
 //!              "groups": {"density": true, "normals": true, "cog": true, "view": true}},
 //!   "sizes": {"widths": [5 numbers], "depths": [3], "heights": [3]},
-//!   "window": {"step": 0.1, "min_points": 50, "yaw_anchor": "walls", "support": "floor"},
+//!   "window": {"step": 0.1, "min_points": 50, "yaw_anchor": "walls", "support": "floor", "lattice": "camera"},
 //!   "features": {"path": "fast", "subdivisions": 2},
 //!   "bias": 0.0, "threshold": 0.0,
 //!   "weights": [layout.dim() numbers, in the order of `features::feature_layout`],
@@ -47,6 +47,7 @@ use crate::category::{normalise_name, CATEGORIES};
 use crate::error::{Error, Result};
 use crate::features::fast::FastOptions;
 use crate::features::hypotheses::{Support, YawAnchor};
+use crate::features::scene::LatticePhase;
 use crate::features::surface::SurfaceWeights;
 /// The weight bounds live with the weight vectors' definition ([`crate::features::weights`]).
 pub use crate::features::weights::{check_weight_magnitudes, MAX_WEIGHT};
@@ -107,6 +108,22 @@ pub struct WindowSettings {
     /// existed, which are floor models.
     #[serde(default)]
     pub support: Support,
+    /// Where each yaw's lattice of centres starts ([`LatticePhase`]): `"camera"` (multiples of the step
+    /// from the camera) or `"walls"` (a row of centres on the walls seen in the yaw's frame). Absent in
+    /// files written before it existed, which were trained with `"camera"`.
+    #[serde(default)]
+    pub lattice: LatticePhase,
+}
+
+/// What decides a frame's yaw grids: the window step (its bits), the yaw anchor and the lattice phase.
+/// Models with equal keys share one [`crate::features::FeatureScene`] per frame.
+pub type SceneKey = (u32, YawAnchor, LatticePhase);
+
+impl WindowSettings {
+    /// The key of the yaw grids this window searches ([`SceneKey`]).
+    pub fn scene_key(&self) -> SceneKey {
+        (self.step.to_bits(), self.yaw_anchor, self.lattice)
+    }
 }
 
 /// One category's detector.

@@ -4,6 +4,7 @@
 use cog_gpu::calibration::{fit_logistic, label_detections, Calibration, MIN_SLOPE};
 use cog_gpu::detect::{calibrate, overlay_selection};
 use cog_gpu::eval::Detection;
+use cog_gpu::features::LatticePhase;
 use cog_gpu::features::Support;
 use cog_gpu::features::YawAnchor;
 use cog_gpu::features::{FeatureLayout, SizeQuantiles};
@@ -123,7 +124,13 @@ fn tiny_model(category: &str) -> Model {
         category,
         layout,
         SizeQuantiles::from_cuboids(&boxes).unwrap(),
-        WindowSettings { step: 0.2, min_points: 50, yaw_anchor: YawAnchor::Walls, support: Support::Floor },
+        WindowSettings {
+            step: 0.2,
+            min_points: 50,
+            yaw_anchor: YawAnchor::Walls,
+            support: Support::Floor,
+            lattice: LatticePhase::Camera,
+        },
         FeatureSettings { path: FeaturePath::Fast, subdivisions: 2 },
         vec![0.0; layout.dim()],
         serde_json::json!({}),

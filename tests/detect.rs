@@ -7,6 +7,7 @@ use std::process::Command;
 use cog_gpu::backend::Backend;
 use cog_gpu::detect::{detect_frame, overlay, DetectOptions};
 use cog_gpu::eval::FrameDetections;
+use cog_gpu::features::LatticePhase;
 use cog_gpu::features::YawAnchor;
 use cog_gpu::features::{FeatureLayout, Groups, Preprocessed, SizeQuantiles};
 use cog_gpu::frame::{DepthSource, Frame};
@@ -28,7 +29,13 @@ fn density_model(path: FeaturePath, step: f32) -> Model {
         "bed",
         layout,
         bed_sizes(),
-        WindowSettings { step, min_points: 500, yaw_anchor: YawAnchor::Walls, support: Support::Floor },
+        WindowSettings {
+            step,
+            min_points: 500,
+            yaw_anchor: YawAnchor::Walls,
+            support: Support::Floor,
+            lattice: LatticePhase::Camera,
+        },
         FeatureSettings { path, subdivisions: 2 },
         weights,
         serde_json::Value::Null,

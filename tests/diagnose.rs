@@ -12,6 +12,7 @@ use cog_gpu::diagnose::{
 };
 use cog_gpu::eval::{Detection, FrameDetections};
 use cog_gpu::features::hypotheses::{sliding_window, window_yaws, WindowOptions};
+use cog_gpu::features::LatticePhase;
 use cog_gpu::features::YawAnchor;
 use cog_gpu::features::{FeatureLayout, FeatureScene, Groups, Preprocessed, SizeQuantiles};
 use cog_gpu::frame::{Frame, Object};
@@ -240,7 +241,13 @@ fn window_recall_on_a_synthetic_frame() {
         &category,
         layout,
         sizes,
-        WindowSettings { step, min_points, yaw_anchor: YawAnchor::Walls, support: Support::Floor },
+        WindowSettings {
+            step,
+            min_points,
+            yaw_anchor: YawAnchor::Walls,
+            support: Support::Floor,
+            lattice: LatticePhase::Camera,
+        },
         FeatureSettings { path: FeaturePath::Fast, subdivisions: 2 },
         vec![0.0; layout.dim()],
         serde_json::Value::Null,
@@ -355,7 +362,13 @@ fn cli_window_recall_with_models() {
             depths: vec![0.5, 1.0, 2.0],
             heights: vec![0.4, 0.8, 1.6],
         },
-        WindowSettings { step: 0.1, min_points: 20, yaw_anchor: YawAnchor::Walls, support: Support::Floor },
+        WindowSettings {
+            step: 0.1,
+            min_points: 20,
+            yaw_anchor: YawAnchor::Walls,
+            support: Support::Floor,
+            lattice: LatticePhase::Camera,
+        },
         FeatureSettings { path: FeaturePath::Fast, subdivisions: 2 },
         vec![0.0; layout.dim()],
         serde_json::Value::Null,

@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
+use cog_gpu::features::LatticePhase;
 use cog_gpu::features::YawAnchor;
 use cog_gpu::features::{FeatureLayout, Groups, SizeQuantiles};
 use cog_gpu::frame::{Frame, Object, RoomLayout};
@@ -114,7 +115,13 @@ fn model(category: &str) -> Model {
         category,
         layout,
         sizes,
-        WindowSettings { step: 0.2, min_points: 5, yaw_anchor: YawAnchor::Walls, support: Support::Floor },
+        WindowSettings {
+            step: 0.2,
+            min_points: 5,
+            yaw_anchor: YawAnchor::Walls,
+            support: Support::Floor,
+            lattice: LatticePhase::Camera,
+        },
         FeatureSettings { path: FeaturePath::Fast, subdivisions: 2 },
         weights,
         Value::Null,

@@ -3,6 +3,7 @@
 use cog_gpu::features::Support;
 use std::path::Path;
 
+use cog_gpu::features::LatticePhase;
 use cog_gpu::features::YawAnchor;
 use cog_gpu::features::{FeatureLayout, Groups, SizeQuantiles};
 use cog_gpu::model::{read_models_dir, FeaturePath, FeatureSettings, Model, WindowSettings};
@@ -19,7 +20,13 @@ fn model(category: &str) -> Model {
         category,
         layout,
         sizes(),
-        WindowSettings { step: 0.1, min_points: 50, yaw_anchor: YawAnchor::Walls, support: Support::Floor },
+        WindowSettings {
+            step: 0.1,
+            min_points: 50,
+            yaw_anchor: YawAnchor::Walls,
+            support: Support::Floor,
+            lattice: LatticePhase::Camera,
+        },
         FeatureSettings { path: FeaturePath::Fast, subdivisions: 2 },
         weights,
         serde_json::json!({"note": "test"}),
@@ -80,6 +87,28 @@ fn the_support_is_stored_and_old_files_mean_floor() {
     value["window"]["support"] = "ceiling".into();
     std::fs::write(&path, serde_json::to_string(&value).unwrap()).unwrap();
     assert!(Model::read(&path).unwrap_err().to_string().contains("pillow.json"));
+}
+
+#[test]
+fn the_lattice_is_stored_and_old_files_mean_camera() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("door.json");
+    let mut m = model("door");
+    m.window.lattice = LatticePhase::Walls;
+    m.write(&path).unwrap();
+    let text = std::fs::read_to_string(&path).unwrap();
+    assert!(text.contains("\"lattice\":\"walls\""), "{text}");
+    assert_eq!(Model::read(&path).unwrap().window.lattice, LatticePhase::Walls);
+    // Models that differ only in the lattice search different yaw grids.
+    assert_ne!(m.window.scene_key(), model("door").window.scene_key());
+    // A file written before the lattice existed: no field, the camera's lattice.
+    let mut value: serde_json::Value = serde_json::from_str(&text).unwrap();
+    value["window"].as_object_mut().unwrap().remove("lattice");
+    std::fs::write(&path, serde_json::to_string(&value).unwrap()).unwrap();
+    assert_eq!(Model::read(&path).unwrap().window.lattice, LatticePhase::Camera);
+    value["window"]["lattice"] = "floor".into();
+    std::fs::write(&path, serde_json::to_string(&value).unwrap()).unwrap();
+    assert!(Model::read(&path).unwrap_err().to_string().contains("door.json"));
 }
 
 /// Writes `m` as JSON, applies `edit` to the JSON value, and returns the read error message.

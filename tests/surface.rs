@@ -9,6 +9,7 @@ use cog_gpu::features::surface::{
     best_slice, centre_slice_weights, refined_surface_height, surface_height, SurfaceEngine, SurfaceWeights, SLICES,
     SLICE_DIM, SLICE_VOXELS,
 };
+use cog_gpu::features::LatticePhase;
 use cog_gpu::features::Support;
 use cog_gpu::features::{FeatureScene, Hypothesis};
 use cog_gpu::geometry::{Camera, Cuboid};
@@ -163,13 +164,20 @@ fn centre_slice_weights_copy_the_middle_layer_of_the_base_grid() {
 fn detection_reports_the_inferred_surface_of_a_constructed_table() {
     use cog_gpu::backend::Backend;
     use cog_gpu::detect::{detect_preprocessed, DetectOptions};
+    use cog_gpu::features::LatticePhase;
     use cog_gpu::features::{SizeQuantiles, YawAnchor};
     use cog_gpu::model::{FeaturePath, FeatureSettings, Model, WindowSettings};
     let top = 0.55f32;
     let scene = table_scene(top);
     let layout = FeatureLayout::new([5, 5, 5], false, Groups::ALL).unwrap();
     let sizes = SizeQuantiles { widths: vec![0.8; 5], depths: vec![0.8; 3], heights: vec![0.7; 3] };
-    let window = WindowSettings { step: 0.1, min_points: 50, yaw_anchor: YawAnchor::Camera, support: Support::Floor };
+    let window = WindowSettings {
+        step: 0.1,
+        min_points: 50,
+        yaw_anchor: YawAnchor::Camera,
+        support: Support::Floor,
+        lattice: LatticePhase::Camera,
+    };
     let features = FeatureSettings { path: FeaturePath::Fast, subdivisions: 2 };
     let up = NORMALS + normal_bin(Vec3::Z) as usize;
     let mut slice = vec![0.0f32; SLICE_DIM];
@@ -231,6 +239,7 @@ fn the_initial_slice_is_the_one_with_the_most_upward_points() {
             engine: FeatureEngine::Fast(FastOptions::default()),
             target: PositiveTarget::Exact,
             yaw_anchor: YawAnchor::Camera,
+            lattice: LatticePhase::Camera,
             support: Support::Floor,
             surfaces: true,
         };

@@ -8,6 +8,7 @@ use cog_gpu::detect::detected_surfaces;
 use cog_gpu::eval::Detection;
 use cog_gpu::features::hypotheses::{SURFACE_CLEARANCE_M, SURFACE_MARGIN_M};
 use cog_gpu::features::preprocess::Preprocessed;
+use cog_gpu::features::LatticePhase;
 use cog_gpu::features::{
     sliding_window, surface_window, FeatureLayout, FeatureScene, Groups, SizeQuantiles, Support, SupportSurface,
     WindowOptions, YawAnchor,
@@ -89,6 +90,7 @@ fn pillow_training(pillow: &Cuboid, support: Support) -> cog_gpu::learn::detecto
         engine: FeatureEngine::Fast(FastOptions::default()),
         target: PositiveTarget::BestWindow,
         yaw_anchor: YawAnchor::Camera,
+        lattice: LatticePhase::Camera,
         support,
         surfaces: false,
     }
@@ -177,7 +179,13 @@ fn surfaces_come_from_confident_detections_of_surface_categories() {
             category,
             layout,
             sizes.clone(),
-            WindowSettings { step: 0.2, min_points: 50, yaw_anchor: YawAnchor::Walls, support: Support::Floor },
+            WindowSettings {
+                step: 0.2,
+                min_points: 50,
+                yaw_anchor: YawAnchor::Walls,
+                support: Support::Floor,
+                lattice: LatticePhase::Camera,
+            },
             FeatureSettings { path: FeaturePath::Fast, subdivisions: 2 },
             vec![0.0; layout.dim()],
             serde_json::json!({}),

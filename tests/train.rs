@@ -2,6 +2,7 @@
 //! construction, and `cog-gpu train` end to end on a tiny synthetic dataset (model, checkpoint, resume,
 //! errors).
 
+use cog_gpu::features::LatticePhase;
 use cog_gpu::features::Support;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -121,6 +122,7 @@ fn small_settings(instances: &[Cuboid], target: PositiveTarget, surfaces: bool) 
         engine: FeatureEngine::Fast(FastOptions::default()),
         target,
         yaw_anchor: YawAnchor::Walls,
+        lattice: LatticePhase::Camera,
         support: Support::Floor,
         surfaces,
     }

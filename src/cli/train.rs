@@ -43,7 +43,7 @@ use cog_gpu::category::{normalise_name, CATEGORIES};
 use cog_gpu::features::fast::{FastOptions, DEFAULT_SUBDIVISIONS};
 use cog_gpu::features::hypotheses::DEFAULT_MIN_POINTS;
 use cog_gpu::features::surface::{SLICES, SLICE_DIM};
-use cog_gpu::features::{budget, FeatureLayout, Groups, SizeQuantiles, Support, YawAnchor};
+use cog_gpu::features::{budget, FeatureLayout, Groups, LatticePhase, SizeQuantiles, Support, YawAnchor};
 use cog_gpu::frame::Dataset;
 use cog_gpu::learn::detector::{
     cached_rows_per_example, collect_examples, instances_of, read_all_annotations, train_detector, DetectorOracle,
@@ -147,6 +147,11 @@ pub struct Args {
     /// (camera, `2πk/16`).
     #[arg(long, value_enum, default_value_t = AnchorArg::Walls)]
     pub yaw_anchor: AnchorArg,
+    /// Where each yaw's lattice of centres starts: `camera` (multiples of the step from the camera) or
+    /// `walls` (a row of centres on the walls seen in the yaw's frame, so that things against a wall are
+    /// on the lattice; see README "Hypotheses").
+    #[arg(long, value_enum, default_value_t = LatticeArg::Camera)]
+    pub lattice: LatticeArg,
     /// Where the boxes stand: `floor` (the sliding window) or `surfaces` (the support surfaces of beds,
     /// tables, desks, dressers, nightstands, sofas and counters: in training the annotated ones', in
     /// detection those of the frame's detections of those categories; for pillows, lamps, monitors, TVs
@@ -226,6 +231,22 @@ impl From<AnchorArg> for YawAnchor {
         match arg {
             AnchorArg::Walls => YawAnchor::Walls,
             AnchorArg::Camera => YawAnchor::Camera,
+        }
+    }
+}
+
+/// `--lattice` values.
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum LatticeArg {
+    Camera,
+    Walls,
+}
+
+impl From<LatticeArg> for LatticePhase {
+    fn from(arg: LatticeArg) -> LatticePhase {
+        match arg {
+            LatticeArg::Camera => LatticePhase::Camera,
+            LatticeArg::Walls => LatticePhase::Walls,
         }
     }
 }
@@ -410,6 +431,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         engine,
         target,
         yaw_anchor: args.yaw_anchor.into(),
+        lattice: args.lattice.into(),
         support: args.support.into(),
         surfaces: pretrained.is_some(),
     };
@@ -571,6 +593,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         min_points: args.min_points,
         yaw_anchor: args.yaw_anchor.into(),
         support: args.support.into(),
+        lattice: args.lattice.into(),
     };
     let mut model = Model::new(&category, layout, sizes, window, features, weights, training)?;
     if latent.is_some() {

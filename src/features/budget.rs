@@ -30,7 +30,8 @@ struct YawSize {
 }
 
 /// Per-yaw grid sizes of `pre` at centre step `step` for the window's `yaws`, as `YawGrid::build` and the
-/// count table compute them.
+/// count table compute them at the camera's lattice phase (the walls' phase,
+/// [`super::scene::LatticePhase::Walls`], can add one cell per axis: well inside the limits' margins).
 fn yaw_sizes(pre: &Preprocessed, yaws: &[f32], step: f32) -> Vec<YawSize> {
     let top = pre.points.iter().fold(pre.floor, |m, p| m.max(p.z));
     let layers = (((top - pre.floor) / step).floor() as f64 + 1.0).max(1.0);

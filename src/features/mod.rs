@@ -21,7 +21,7 @@ pub use hypotheses::{
     HypothesisSet, SizeQuantiles, Support, SupportSurface, WindowOptions, YawAnchor,
 };
 pub use preprocess::{ImageGradients, Preprocessed};
-pub use scene::{FeatureScene, PointRecord, YawGrid};
+pub use scene::{FeatureScene, LatticePhase, PointRecord, YawGrid};
 pub mod weights;
 pub mod window;
 

@@ -9,6 +9,21 @@
 //! ([`YawGrid::records`], [`YawGrid::cell_start`]): the points of the cells `s0..=s1` of one row are one
 //! contiguous range. Within a cell the points keep the point cloud's order, so the layout is deterministic.
 //!
+//! # Where the lattice starts ([`LatticePhase`])
+//! Hypothesis centres sit at `origin + (c + ½)·step` along s and t. With [`LatticePhase::Camera`] (what every
+//! model file without a `"lattice"` was trained with) the origin is a multiple of the step from the camera,
+//! so a wall falls anywhere between two centres. Things stand against walls — doors in them, bookshelves,
+//! dressers, beds and nightstands flush with them — and a centre up to half a step off a thin object's
+//! plane misses it: a 9 cm door is hit at IoU ≥ 0.25 only when a centre lies within about 4 cm of its
+//! plane, which a 0.2 m step gives for under half of the doors. With [`LatticePhase::Walls`] each yaw puts a
+//! row of centres on a wall seen in its frame ([`wall_phase`]): along t (the depth axis; a box's front faces
+//! −t) on the wall that would stand *behind* a box of this yaw — the strongest plane of points whose normal
+//! faces −t —, along s on the strongest plane of points facing ±s (a side wall). A flush box of depth `d`
+//! then has its centre `d/2` from a centre row, exact for `d` a multiple of twice the step, and a slab in
+//! the wall (a door) is on a row. Yaws that see no such plane keep the camera phase along that axis. The
+//! window's cells, the surface window's and free window's centres and the fast path's lattice all follow
+//! `origin`, so they move together.
+//!
 //! The CPU computes all of this once per yaw (rotations, normal codes as integers, magnitudes) and both the
 //! CPU and the GPU feature paths read the same records — which is what makes their integer counts equal.
 
@@ -75,14 +90,112 @@ impl PointRecord {
     }
 }
 
+/// Where the per-yaw lattice of hypothesis centres starts (see the module doc).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LatticePhase {
+    /// Multiples of the step from the camera. What model files without a `"lattice"` were trained with.
+    #[default]
+    Camera,
+    /// A row of centres on the walls seen in each yaw's frame ([`wall_phase`]).
+    Walls,
+}
+
+impl LatticePhase {
+    /// The phase's name in model files and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            LatticePhase::Camera => "camera",
+            LatticePhase::Walls => "walls",
+        }
+    }
+}
+
+/// `cos 30°`: a normal within 30° of an axis faces along it (as the room layout's normal classes).
+pub const WALL_NORMAL_COS: f32 = 0.866_025_4;
+/// Histogram bin of [`wall_phase`] (metres); a plane is the best window of three bins.
+pub const WALL_BIN_M: f32 = 0.01;
+/// Fewest points in a plane's three bins, as a fraction of the frame's points, for [`wall_phase`] to
+/// follow it (0.5 %: a wall strip seen in a 320×240 frame holds thousands; the side of a piece of furniture
+/// a few hundred).
+pub const WALL_MIN_FRACTION: f32 = 0.005;
+
+/// The plane of [`LatticePhase::Walls`] along each rotated axis of one yaw, `[s, t]` (metres, `None` where
+/// none is seen): along t the points whose rotated normal has `n_t ≤ −cos 30°` (surfaces facing the front
+/// of a box of this yaw: the wall behind it), along s those with `|n_s| ≥ cos 30°`. Per axis the points'
+/// coordinates are counted in [`WALL_BIN_M`] bins; the plane is the three adjacent bins with the most
+/// points (the first such window on ties) if they hold at least [`WALL_MIN_FRACTION`] of the points, at
+/// the mean coordinate of their points (summed in f64 in point order: the same every run).
+pub fn wall_planes(pre: &Preprocessed, rotated: &[[f32; 2]], sin: f32, cos: f32) -> [Option<f32>; 2] {
+    let min_count = ((WALL_MIN_FRACTION * pre.points.len() as f32).ceil() as usize).max(1);
+    let faces = |axis: usize, n: &Vec3| -> bool {
+        let local = [n.x * cos + n.y * sin, -n.x * sin + n.y * cos];
+        match axis {
+            0 => local[0].abs() >= WALL_NORMAL_COS,
+            _ => local[1] <= -WALL_NORMAL_COS,
+        }
+    };
+    [0, 1].map(|axis| {
+        let coords: Vec<f64> =
+            rotated.iter().zip(&pre.normals).filter(|(_, n)| faces(axis, n)).map(|(r, _)| r[axis] as f64).collect();
+        if coords.len() < min_count {
+            return None;
+        }
+        let bin_of = |c: f64| (c / WALL_BIN_M as f64).floor() as i64;
+        let first = coords.iter().map(|&c| bin_of(c)).min()?;
+        let last = coords.iter().map(|&c| bin_of(c)).max()?;
+        let mut counts = vec![0usize; (last - first + 1) as usize];
+        for &c in &coords {
+            counts[(bin_of(c) - first) as usize] += 1;
+        }
+        // The window of bins `i-1..=i+1` with the most points (bins outside count 0).
+        let window =
+            |i: usize| counts[i] + if i > 0 { counts[i - 1] } else { 0 } + counts.get(i + 1).copied().unwrap_or(0);
+        let best = (0..counts.len()).fold(0, |best, i| if window(i) > window(best) { i } else { best });
+        if window(best) < min_count {
+            return None;
+        }
+        let (lo, hi) = (first + best as i64 - 1, first + best as i64 + 1);
+        let inside: Vec<f64> = coords.iter().copied().filter(|&c| (lo..=hi).contains(&bin_of(c))).collect();
+        Some((inside.iter().sum::<f64>() / inside.len() as f64) as f32)
+    })
+}
+
+/// The lattice phase `[s, t]` of one yaw (metres in `[0, step)`; see [`grid_cells`]): 0 under
+/// [`LatticePhase::Camera`]; under [`LatticePhase::Walls`] the phase that puts a centre row on each of
+/// the yaw's [`wall_planes`] (centres at `phase + (k + ½)·step`), 0 along an axis without one.
+pub fn wall_phase(
+    pre: &Preprocessed,
+    rotated: &[[f32; 2]],
+    sin: f32,
+    cos: f32,
+    step: f32,
+    lattice: LatticePhase,
+) -> [f32; 2] {
+    match lattice {
+        LatticePhase::Camera => [0.0; 2],
+        LatticePhase::Walls => wall_planes(pre, rotated, sin, cos).map(|plane| match plane {
+            Some(w) => (w - 0.5 * step).rem_euclid(step),
+            None => 0.0,
+        }),
+    }
+}
+
 impl YawGrid {
-    /// Rotates, codes and buckets the points for yaw `yaw` with ground cells of side `step`.
+    /// Rotates, codes and buckets the points for yaw `yaw` with ground cells of side `step`, the lattice
+    /// at the camera's phase.
     pub fn build(pre: &Preprocessed, yaw: f32, step: f32) -> YawGrid {
+        Self::build_with(pre, yaw, step, LatticePhase::Camera)
+    }
+
+    /// [`YawGrid::build`] with the lattice at `lattice`'s phase (see the module doc).
+    pub fn build_with(pre: &Preprocessed, yaw: f32, step: f32, lattice: LatticePhase) -> YawGrid {
         let (sin64, cos64) = (yaw as f64).sin_cos();
         let (sin, cos) = (sin64 as f32, cos64 as f32);
         let inv_step = 1.0 / step;
         let rotated: Vec<[f32; 2]> = pre.points.par_iter().map(|p| rotate(p, sin, cos)).collect();
-        let (origin, cells) = grid_cells(extent(&rotated), step);
+        let phase = wall_phase(pre, &rotated, sin, cos, step, lattice);
+        let (origin, cells) = grid_cells_at(extent(&rotated), step, phase);
         // `cells` fit in u32 for any scene that passed `features::budget` (whose limit is far below 2³²
         // cells); index arithmetic is in usize so that no product can wrap.
         let cells = cells.map(|c| c.min(u32::MAX as f64) as u32);
@@ -180,9 +293,16 @@ pub fn extent(coordinates: &[[f32; 2]]) -> ([f32; 2], [f32; 2]) {
 
 /// The origin and the number of cells along s and t of a bucket grid of side `step` over the extent
 /// `(lo, hi)`. The counts are floats so that an absurd extent cannot overflow before it is checked.
-pub fn grid_cells((lo, hi): ([f32; 2], [f32; 2]), step: f32) -> ([f32; 2], [f64; 2]) {
+pub fn grid_cells(extent: ([f32; 2], [f32; 2]), step: f32) -> ([f32; 2], [f64; 2]) {
+    grid_cells_at(extent, step, [0.0; 2])
+}
+
+/// [`grid_cells`] with the origin at `phase` (metres, per axis, in `[0, step)`) plus a multiple of the
+/// step: the largest such origin at or below the extent's low corner. A phase of 0 is [`grid_cells`]
+/// exactly; another adds at most one cell per axis.
+pub fn grid_cells_at((lo, hi): ([f32; 2], [f32; 2]), step: f32, phase: [f32; 2]) -> ([f32; 2], [f64; 2]) {
     let inv_step = 1.0 / step;
-    let origin = lo.map(|v| (v * inv_step).floor() * step);
+    let origin = [0, 1].map(|a| ((lo[a] - phase[a]) * inv_step).floor() * step + phase[a]);
     let cells = [0, 1].map(|a| (((hi[a] - origin[a]) * inv_step).floor() as f64 + 1.0).max(1.0));
     (origin, cells)
 }
@@ -204,9 +324,15 @@ pub struct FeatureScene {
 }
 
 impl FeatureScene {
-    /// Builds the yaw grids for `yaws` with ground cells of side `step` (metres).
+    /// Builds the yaw grids for `yaws` with ground cells of side `step` (metres), the lattice at the
+    /// camera's phase.
     pub fn new(pre: Preprocessed, yaws: &[f32], step: f32) -> FeatureScene {
-        let grids = yaws.iter().map(|&yaw| YawGrid::build(&pre, yaw, step)).collect();
+        Self::with_lattice(pre, yaws, step, LatticePhase::Camera)
+    }
+
+    /// [`FeatureScene::new`] with the lattice at `lattice`'s phase.
+    pub fn with_lattice(pre: Preprocessed, yaws: &[f32], step: f32, lattice: LatticePhase) -> FeatureScene {
+        let grids = yaws.iter().map(|&yaw| YawGrid::build_with(&pre, yaw, step, lattice)).collect();
         FeatureScene { pre, yaws: grids }
     }
 

@@ -58,6 +58,7 @@ use crate::features::hypotheses::{
     self, frame_wall_direction, nearest_yaw_index, yaws_under, HypothesisSet, Support, SupportSurface, WindowOptions,
     YawAnchor,
 };
+use crate::features::scene::LatticePhase;
 use crate::features::surface::{
     annotated_support_surfaces, best_slice, SurfaceEngine, SurfaceWeights, SLICES, SLICE_DIM, SLICE_VOXELS,
 };
@@ -91,6 +92,8 @@ pub struct TrainingSettings {
     pub target: PositiveTarget,
     /// Where the window's 16 yaws start (see [`crate::features::hypotheses`]).
     pub yaw_anchor: YawAnchor,
+    /// Where each yaw's lattice of centres starts (see [`crate::features::scene`]).
+    pub lattice: LatticePhase,
     /// Where the window's boxes stand: on the floor (the sliding window) or on the example's
     /// [`TrainingExample::surfaces`] ([`crate::features::hypotheses::surface_window`]).
     pub support: Support,
@@ -215,7 +218,12 @@ impl TrainingExample {
 
     /// The example's yaw grids, sliding window and losses under `settings`.
     pub fn window(&self, settings: &TrainingSettings) -> ExampleWindow {
-        let scene = FeatureScene::new(self.pre.clone(), &self.yaws(settings.yaw_anchor), settings.step);
+        let scene = FeatureScene::with_lattice(
+            self.pre.clone(),
+            &self.yaws(settings.yaw_anchor),
+            settings.step,
+            settings.lattice,
+        );
         let options = WindowOptions { sizes: settings.sizes.clone(), min_points: settings.min_points };
         let mut hypotheses = hypotheses::window(settings.support, &scene, &options, &self.surfaces);
         if !self.ignored.is_empty() {
@@ -481,7 +489,7 @@ impl DetectorOracle {
                 }
                 Some(truth) => {
                     let yaws = ex.yaws(settings.yaw_anchor);
-                    let scene = FeatureScene::new(ex.pre.clone(), &yaws, settings.step);
+                    let scene = FeatureScene::with_lattice(ex.pre.clone(), &yaws, settings.step, settings.lattice);
                     let hypothesis = Hypothesis::from_cuboid(&scene, nearest_yaw_index(&yaws, truth.yaw), truth);
                     ExampleScorer::new(&settings, &scene).features(&[hypothesis])
                 }
