@@ -201,6 +201,30 @@ impl Model {
         self.sizes.sizes()
     }
 
+    /// Why detecting with this model's window step may not match its training (`None` when it does): the
+    /// fast path snaps voxel faces to a lattice of side `step / subdivisions`, so a model whose thinnest
+    /// size (the smallest width or depth quantile) is below that cell at its training step or at its
+    /// detection step — a door's 9 cm at 0.2 m — sees different features when the two steps differ (the
+    /// faces that coincided in training come apart, or the reverse). Models trained before the training
+    /// step was recorded, and the exact path, are not judged.
+    pub fn step_mismatch(&self) -> Option<String> {
+        let trained = self.training.get("training_step")?.as_f64()? as f32;
+        let detected = self.window.step;
+        if self.features.path != FeaturePath::Fast || (trained - detected).abs() <= 1e-6 * trained.max(detected) {
+            return None;
+        }
+        let cell = trained.max(detected) / self.features.subdivisions.max(1) as f32;
+        let thinnest = self.sizes.widths.iter().chain(&self.sizes.depths).copied().fold(f32::INFINITY, f32::min);
+        (thinnest < cell).then(|| {
+            format!(
+                "{}: detecting at step {detected} m, trained at {trained} m, and its thinnest size ({thinnest:.3} m) is \
+                 below the fast path's lattice cell ({cell:.3} m): its features will not match its training; detect \
+                 at the training step or retrain with --step {detected}",
+                self.category
+            )
+        })
+    }
+
     /// Everything reading checks (see the module doc).
     pub fn check(&self) -> std::result::Result<(), String> {
         if self.format != MODEL_FORMAT {

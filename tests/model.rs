@@ -111,6 +111,29 @@ fn the_lattice_is_stored_and_old_files_mean_camera() {
     assert!(Model::read(&path).unwrap_err().to_string().contains("door.json"));
 }
 
+/// A model detected at another step than it was trained at is flagged when its thinnest size is below the
+/// coarser of the two steps' lattice cells (step / subdivisions): by hand, a 0.09 m deep door trained at
+/// 0.2 m (cell 0.1 m) and detected at 0.1 m is; the same door at its training step, a 0.5 m deep model at
+/// either step, and a model without a recorded training step are not.
+#[test]
+fn a_thin_model_detected_at_another_step_is_flagged() {
+    let mut door = model("door");
+    door.training = serde_json::json!({"training_step": 0.2});
+    door.window.step = 0.2;
+    assert_eq!(door.step_mismatch(), None, "same step");
+    door.window.step = 0.1;
+    assert_eq!(door.step_mismatch(), None, "0.5 m deep: thicker than the 0.1 m cell");
+    door.sizes.depths = vec![0.09, 0.095, 0.1];
+    let warning = door.step_mismatch().expect("a 0.09 m door below the 0.1 m cell");
+    assert!(warning.contains("door") && warning.contains("0.090") && warning.contains("0.100"), "{warning}");
+    // Three subdivisions: the cell is 0.2 / 3 = 0.067 m, below the door's 0.09 m.
+    door.features.subdivisions = 3;
+    assert_eq!(door.step_mismatch(), None);
+    door.features.subdivisions = 2;
+    door.training = serde_json::json!({"note": "no step recorded"});
+    assert_eq!(door.step_mismatch(), None);
+}
+
 /// Writes `m` as JSON, applies `edit` to the JSON value, and returns the read error message.
 fn read_error(dir: &Path, edit: impl Fn(&mut serde_json::Value)) -> String {
     let path = dir.join("chair.json");

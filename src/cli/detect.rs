@@ -179,6 +179,9 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
             model.window.step = step;
         }
     }
+    for warning in models.iter().filter_map(|m| m.step_mismatch()) {
+        log::warn!("{warning}");
+    }
     let cascade = cascade_for(&models_dir, &models, args.no_cascade)?;
     // The room layout comes with the detections when the models directory holds a layout model.
     let layout_model = super::layout::model_in_dir(&models_dir)?;
