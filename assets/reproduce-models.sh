@@ -195,9 +195,9 @@ case "$mode" in
     small)
         # The nine other categories of the paper's Table 2, after `models` (whose ten calibrated models
         # carry the support surfaces): box, door, counter and garbage bin with the floor window (train's
-        # defaults; doors with the lattice of centres on the walls, `--lattice walls`); pillows, lamps and TVs
-        # with the free window (`--support free`: every bottom from the floor to 1.5 m); monitor and sink
-        # searched on the support surfaces of the detections of bed,
+        # defaults; doors with the lattice of centres on the walls, `--lattice walls`; boxes 3x3x3 at
+        # 0.1 m); pillows, lamps and TVs with the free window (`--support free`: every bottom from the
+        # floor to 1.5 m); monitor and sink searched on the support surfaces of the detections of bed,
         # table, desk, dresser, nightstand, sofa and counter (`--support surfaces`); the paper's grids
         # (3x3x3 pillows and lamps, 3x1x3 monitors and TVs; 3x3x3 sinks). The floor and free ones are
         # calibrated first, so that the counters' calibrated scores choose the surfaces the sinks are
@@ -211,8 +211,10 @@ case "$mode" in
         for category in ${large//,/ }; do cp "$WORK/models/models/$category.json" "$dir/models/"; done
         # Windows (README, "Small objects on support surfaces", "The free window" and "Hypotheses"): pillows,
         # lamps and monitors detect with a 0.1 m centre step (trained at 0.2 m), chosen on the calibration
-        # set, as the pillows', lamps' and TVs' free window and the doors' lattice; TVs and sinks with 0.2 m.
+        # set, as the pillows', lamps' and TVs' free window, the doors' lattice and the boxes' 3x3x3 grid
+        # trained and detected at 0.1 m; TVs and sinks with 0.2 m.
         declare -A WINDOW=([pillow]="--support free --grid 3x3x3 --detect-step 0.1" [door]="--lattice walls"
+            [box]="--grid 3x3x3 --step 0.1 --detect-step 0.1"
             [lamp]="--support free --grid 3x3x3 --detect-step 0.1"
             [monitor]="--support surfaces --grid 3x1x3 --detect-step 0.1" [tv]="--support free --grid 3x1x3"
             [sink]="--support surfaces --grid 3x3x3")

@@ -14,8 +14,8 @@ use cog_gpu::model::{read_models_dir, FeaturePath};
 const MODELS: &str = "assets/models";
 const SAMPLE: &str = "assets/sample/synth-bedroom-s52";
 
-/// All 19 categories ship: the ten large ones and box, door, counter, garbage bin with the floor window
-/// and the full 5×5×5 (expanded) layout; monitor and sink searched on support surfaces, pillow, lamp and
+/// All 19 categories ship: the ten large ones and door, counter, garbage bin with the floor window and the
+/// full 5×5×5 (expanded) layout, box with the floor window and 3×3×3; monitor and sink searched on support surfaces, pillow, lamp and
 /// TV with the free window, with the paper's smaller grids (README, "Small objects on support surfaces").
 #[test]
 fn the_nineteen_shipped_models_load_with_this_builds_layout() {
@@ -33,6 +33,7 @@ fn the_nineteen_shipped_models_load_with_this_builds_layout() {
             "sink" => ([3, 3, 3], Support::Surfaces),
             "monitor" => ([3, 1, 3], Support::Surfaces),
             "pillow" | "lamp" => ([3, 3, 3], Support::Free),
+            "box" => ([3, 3, 3], Support::Floor),
             "tv" => ([3, 1, 3], Support::Free),
             _ => (full.base_grid, Support::Floor),
         };
