@@ -125,6 +125,9 @@ case "$mode" in
         # model is trained as the others and detects with the finer window: README, "The shipped models").
         CATEGORY_ARGS[chair]="--positives 320 --negatives 200"
         CATEGORY_ARGS[nightstand]="--detect-step 0.1"
+        # The bathtub on the lattice of centres aligned with the walls (README, "The bathtub on the walls
+        # lattice").
+        CATEGORY_ARGS[bathtub]="--lattice walls"
         # The shipped layout model (assets/reproduce-layout.sh) sits beside them, so that every detections
         # file carries the frame's room, which the cascade's layout features read.
         mkdir -p "$WORK/models/models"
