@@ -17,7 +17,9 @@
 //!   gives `a ≤ a_min` (`10⁻³`), `a` is set to `a_min` and only `b` is fitted, so a higher raw score never
 //!   gets a lower probability and the within-category order (hence the AP) is unchanged.
 //! * At least one true and one false positive are needed; otherwise the fit is an error naming the
-//!   category.
+//!   category. With fewer than [`MIN_RELIABLE_TRUE_POSITIVES`] true positives the fit is made but
+//!   flagged ([`Calibration::shortage`]; `calibrate` warns): two parameters from a handful of positives
+//!   give probabilities that say little (the shipped TV's, from one, puts a raw score of 0 at 0.70).
 
 use serde::{Deserialize, Serialize};
 
@@ -27,6 +29,9 @@ use crate::frame::Object;
 
 /// Smallest slope: keeps `p` strictly increasing in the raw score.
 pub const MIN_SLOPE: f64 = 1e-3;
+/// Fewest true positives for a calibration that `calibrate` does not warn about (our choice: about ten
+/// events per fitted parameter is where a logistic fit's probabilities start to mean something).
+pub const MIN_RELIABLE_TRUE_POSITIVES: usize = 20;
 /// Weight of the Gaussian prior on `(a, b)`.
 const PRIOR: f64 = 1e-3;
 
@@ -52,6 +57,18 @@ impl Calibration {
     /// The calibrated probability of a raw score.
     pub fn probability(&self, raw: f32) -> f32 {
         sigmoid(self.a * f64::from(raw) + self.b) as f32
+    }
+
+    /// Why this calibration's probabilities are not to be trusted, when it was fitted on fewer than
+    /// [`MIN_RELIABLE_TRUE_POSITIVES`] true positives (`None` otherwise).
+    pub fn shortage(&self) -> Option<String> {
+        (self.true_positives < MIN_RELIABLE_TRUE_POSITIVES).then(|| {
+            format!(
+                "fitted on {} true positive(s) among {} detections (fewer than {MIN_RELIABLE_TRUE_POSITIVES}): its \
+                 probabilities are unreliable; calibrate on held-out frames that hold more of the category",
+                self.true_positives, self.detections
+            )
+        })
     }
 
     /// Checks the stored numbers (finite, slope positive).

@@ -79,6 +79,28 @@ fn calibration_is_monotone_even_on_inverted_data() {
     assert!((mean - 0.05).abs() < 2e-3, "mean probability {mean}");
 }
 
+/// Fewer than `MIN_RELIABLE_TRUE_POSITIVES` (20) true positives: flagged, with the counts; 20: not.
+#[test]
+fn a_calibration_on_few_true_positives_is_flagged() {
+    use cog_gpu::calibration::{Calibration, MIN_RELIABLE_TRUE_POSITIVES};
+    assert_eq!(MIN_RELIABLE_TRUE_POSITIVES, 20);
+    let mut c = Calibration {
+        a: 9.4,
+        b: 0.87,
+        detections: 4400,
+        true_positives: 1,
+        iou: 0.25,
+        data: String::new(),
+        frames: 220,
+    };
+    let why = c.shortage().expect("one true positive");
+    assert!(why.contains("1 true positive") && why.contains("4400 detections"), "{why}");
+    c.true_positives = 19;
+    assert!(c.shortage().is_some());
+    c.true_positives = 20;
+    assert_eq!(c.shortage(), None);
+}
+
 #[test]
 fn calibration_needs_both_outcomes() {
     let all_true: Vec<(f32, bool)> = (0..10).map(|k| (k as f32, true)).collect();

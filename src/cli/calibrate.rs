@@ -109,6 +109,9 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
             calibration.probability(0.0),
             calibration.probability(1.0)
         );
+        if let Some(shortage) = calibration.shortage() {
+            log::warn!("{}: calibration {shortage}", model.category);
+        }
         let path = out_dir.join(format!("{}.json", model.category));
         model.write(&path)?;
     }
