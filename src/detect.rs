@@ -18,7 +18,6 @@
 //! [`SURFACE_CATEGORIES`] whose calibrated score is at least [`DetectOptions::support_min_score`]
 //! ([`detected_surfaces`], [`surface_window`]), scored, selected and suppressed the same way.
 
-use std::collections::BTreeMap;
 use std::time::Instant;
 
 use glam::Vec3;
@@ -41,7 +40,7 @@ use crate::features::surface::{
 use crate::features::{FeatureScene, Hypothesis, Preprocessed};
 use crate::frame::Frame;
 use crate::geometry::Camera;
-use crate::model::{FeaturePath, Model, SceneKey};
+use crate::model::{window_scenes, FeaturePath, Model};
 use crate::nms::{nms_detections, NmsOptions, DEFAULT_NMS_IOU};
 
 /// Settings of [`detect_frame`].
@@ -358,14 +357,8 @@ pub fn detect_preprocessed_timed(
     let mut lap = || clock.lap();
     let frame_yaws = FrameYaws::new(&pre);
     check_budget_with(&pre, &frame_yaws, models)?;
-    // One scene per distinct window step and yaw anchor (the yaw grids' cell is the step).
-    let mut scenes: BTreeMap<SceneKey, FeatureScene> = BTreeMap::new();
-    for model in models {
-        let (step, anchor, lattice) = (model.window.step, model.window.yaw_anchor, model.window.lattice);
-        scenes
-            .entry(model.window.scene_key())
-            .or_insert_with(|| FeatureScene::with_lattice(pre.clone(), &frame_yaws.yaws(anchor), step, lattice));
-    }
+    // One scene per distinct window step, yaw anchor and lattice (the yaw grids' cell is the step).
+    let scenes = window_scenes(&pre, &frame_yaws, models);
     stages.yaw_grids_s += lap();
     let scene_of = |m: &Model| &scenes[&m.window.scene_key()];
     let mut engines = FastEngines::new();

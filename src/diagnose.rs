@@ -38,7 +38,7 @@ use crate::features::surface::annotated_support_surfaces;
 use crate::features::{FeatureScene, Hypothesis, Preprocessed};
 use crate::frame::Object;
 use crate::geometry::{iou_3d, Cuboid};
-use crate::model::{Model, SceneKey};
+use crate::model::{window_scenes, Model};
 
 // ---------------------------------------------------------------------------------------------------------
 // 1. Window recall ceiling
@@ -91,13 +91,7 @@ pub fn frame_window_best_ious(pre: &Preprocessed, models: &[Model], objects: &[O
     };
     let wanted: Vec<&Model> = models.iter().filter(|m| objects.iter().any(|o| o.category == m.category)).collect();
     let frame_yaws = FrameYaws::new(pre);
-    let mut scenes: BTreeMap<SceneKey, FeatureScene> = BTreeMap::new();
-    for model in &wanted {
-        let (step, anchor, lattice) = (model.window.step, model.window.yaw_anchor, model.window.lattice);
-        scenes
-            .entry(model.window.scene_key())
-            .or_insert_with(|| FeatureScene::with_lattice(pre.clone(), &frame_yaws.yaws(anchor), step, lattice));
-    }
+    let scenes = window_scenes(pre, &frame_yaws, wanted.iter().copied());
     let mut out = BTreeMap::new();
     for model in wanted {
         let scene = &scenes[&model.window.scene_key()];

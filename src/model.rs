@@ -37,6 +37,7 @@
 //! finiteness, zero weights on switched-off groups, the sizes (5/3/3 positive), the window step and the
 //! category.
 
+use std::collections::BTreeMap;
 use std::path::Path;
 
 use glam::Vec3;
@@ -46,12 +47,13 @@ use crate::calibration::Calibration;
 use crate::category::{normalise_name, CATEGORIES};
 use crate::error::{Error, Result};
 use crate::features::fast::FastOptions;
-use crate::features::hypotheses::{Support, YawAnchor};
+use crate::features::hypotheses::{FrameYaws, Support, YawAnchor};
 use crate::features::scene::LatticePhase;
 use crate::features::surface::SurfaceWeights;
 /// The weight bounds live with the weight vectors' definition ([`crate::features::weights`]).
 pub use crate::features::weights::{check_weight_magnitudes, MAX_WEIGHT};
 use crate::features::{FeatureLayout, SizeQuantiles};
+use crate::features::{FeatureScene, Preprocessed};
 use crate::limits::{check_step, check_subdivisions, MAX_OBJECT_SIZE_M, MIN_OBJECT_SIZE_M};
 
 pub const MODEL_FORMAT: &str = "cog-gpu-model";
@@ -124,6 +126,23 @@ impl WindowSettings {
     pub fn scene_key(&self) -> SceneKey {
         (self.step.to_bits(), self.yaw_anchor, self.lattice)
     }
+}
+
+/// The yaw grids the windows of `models` search on one frame: one [`FeatureScene`] per distinct
+/// [`SceneKey`], shared by the models that agree (detection and the diagnosis's window recall).
+pub fn window_scenes<'m>(
+    pre: &Preprocessed,
+    frame_yaws: &FrameYaws,
+    models: impl IntoIterator<Item = &'m Model>,
+) -> BTreeMap<SceneKey, FeatureScene> {
+    let mut scenes = BTreeMap::new();
+    for model in models {
+        let WindowSettings { step, yaw_anchor, lattice, .. } = model.window;
+        scenes
+            .entry(model.window.scene_key())
+            .or_insert_with(|| FeatureScene::with_lattice(pre.clone(), &frame_yaws.yaws(yaw_anchor), step, lattice));
+    }
+    scenes
 }
 
 /// One category's detector.

@@ -101,16 +101,6 @@ pub enum LatticePhase {
     Walls,
 }
 
-impl LatticePhase {
-    /// The phase's name in model files and on the command line.
-    pub fn name(self) -> &'static str {
-        match self {
-            LatticePhase::Camera => "camera",
-            LatticePhase::Walls => "walls",
-        }
-    }
-}
-
 /// `cos 30°`: a normal within 30° of an axis faces along it (as the room layout's normal classes).
 pub const WALL_NORMAL_COS: f32 = 0.866_025_4;
 /// Histogram bin of [`wall_phase`] (metres); a plane is the best window of three bins.
@@ -128,25 +118,23 @@ pub const WALL_MIN_FRACTION: f32 = 0.005;
 /// the mean coordinate of their points (summed in f64 in point order: the same every run).
 pub fn wall_planes(pre: &Preprocessed, rotated: &[[f32; 2]], sin: f32, cos: f32) -> [Option<f32>; 2] {
     let min_count = ((WALL_MIN_FRACTION * pre.points.len() as f32).ceil() as usize).max(1);
-    let faces = |axis: usize, n: &Vec3| -> bool {
-        let local = [n.x * cos + n.y * sin, -n.x * sin + n.y * cos];
-        match axis {
-            0 => local[0].abs() >= WALL_NORMAL_COS,
-            _ => local[1] <= -WALL_NORMAL_COS,
-        }
+    // The normals in the yaw's rotated frame (as the points: `rotate`).
+    let local_normals: Vec<[f32; 2]> = pre.normals.iter().map(|n| rotate(n, sin, cos)).collect();
+    let faces = |axis: usize, n: &[f32; 2]| match axis {
+        0 => n[0].abs() >= WALL_NORMAL_COS,
+        _ => n[1] <= -WALL_NORMAL_COS,
     };
     [0, 1].map(|axis| {
         let coords: Vec<f64> =
-            rotated.iter().zip(&pre.normals).filter(|(_, n)| faces(axis, n)).map(|(r, _)| r[axis] as f64).collect();
+            rotated.iter().zip(&local_normals).filter(|(_, n)| faces(axis, n)).map(|(r, _)| r[axis] as f64).collect();
         if coords.len() < min_count {
             return None;
         }
-        let bin_of = |c: f64| (c / WALL_BIN_M as f64).floor() as i64;
-        let first = coords.iter().map(|&c| bin_of(c)).min()?;
-        let last = coords.iter().map(|&c| bin_of(c)).max()?;
-        let mut counts = vec![0usize; (last - first + 1) as usize];
-        for &c in &coords {
-            counts[(bin_of(c) - first) as usize] += 1;
+        let bins: Vec<i64> = coords.iter().map(|&c| (c / WALL_BIN_M as f64).floor() as i64).collect();
+        let first = *bins.iter().min()?;
+        let mut counts = vec![0usize; (*bins.iter().max()? - first + 1) as usize];
+        for &b in &bins {
+            counts[(b - first) as usize] += 1;
         }
         // The window of bins `i-1..=i+1` with the most points (bins outside count 0).
         let window =
@@ -155,8 +143,9 @@ pub fn wall_planes(pre: &Preprocessed, rotated: &[[f32; 2]], sin: f32, cos: f32)
         if window(best) < min_count {
             return None;
         }
-        let (lo, hi) = (first + best as i64 - 1, first + best as i64 + 1);
-        let inside: Vec<f64> = coords.iter().copied().filter(|&c| (lo..=hi).contains(&bin_of(c))).collect();
+        let window_bins = first + best as i64 - 1..=first + best as i64 + 1;
+        let inside: Vec<f64> =
+            coords.iter().zip(&bins).filter(|(_, b)| window_bins.contains(b)).map(|(&c, _)| c).collect();
         Some((inside.iter().sum::<f64>() / inside.len() as f64) as f32)
     })
 }
