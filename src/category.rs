@@ -35,6 +35,65 @@ pub const LARGE_CATEGORIES: &[&str] = CATEGORIES.split_at(10).0;
 /// sink) are searched on those surfaces (`crate::features::hypotheses::surface_window`).
 pub const SURFACE_CATEGORIES: [&str; 7] = ["bed", "table", "desk", "dresser", "nightstand", "sofa", "counter"];
 
+/// A set of [`SURFACE_CATEGORIES`] (bit `k` for category `k`): the supporters whose surfaces a model's
+/// surface window searches (a model file's `window.supporters`, a list of names; absent: all of them).
+/// `train` stores the categories whose annotated surfaces held at least one of its training positives —
+/// the generator's sinks stand on counters only, and a basin searched on a bed is the size of a pillow.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(try_from = "Vec<String>", into = "Vec<String>")]
+pub struct SurfaceCategories(u8);
+
+impl SurfaceCategories {
+    /// Every surface category.
+    pub const ALL: SurfaceCategories = SurfaceCategories((1 << SURFACE_CATEGORIES.len()) - 1);
+    /// None.
+    pub const NONE: SurfaceCategories = SurfaceCategories(0);
+
+    /// Whether the set holds every surface category (what a file without the field means).
+    pub fn is_all(&self) -> bool {
+        *self == SurfaceCategories::ALL
+    }
+
+    /// Whether `category` is in the set (never, for a category that carries no surface).
+    pub fn contains(self, category: &str) -> bool {
+        SURFACE_CATEGORIES.iter().position(|c| *c == category).is_some_and(|k| self.0 & (1 << k) != 0)
+    }
+
+    /// The set with `category` added; `None` when it is not a surface category.
+    pub fn with(self, category: &str) -> Option<SurfaceCategories> {
+        let k = SURFACE_CATEGORIES.iter().position(|c| *c == category)?;
+        Some(SurfaceCategories(self.0 | (1 << k)))
+    }
+
+    /// The names in the set, in [`SURFACE_CATEGORIES`] order.
+    pub fn names(self) -> Vec<&'static str> {
+        SURFACE_CATEGORIES.iter().enumerate().filter(|(k, _)| self.0 & (1 << k) != 0).map(|(_, c)| *c).collect()
+    }
+}
+
+impl Default for SurfaceCategories {
+    fn default() -> Self {
+        SurfaceCategories::ALL
+    }
+}
+
+impl TryFrom<Vec<String>> for SurfaceCategories {
+    type Error = String;
+    fn try_from(names: Vec<String>) -> Result<Self, String> {
+        names.iter().try_fold(SurfaceCategories::NONE, |set, name| {
+            set.with(name).ok_or_else(|| {
+                format!("'{name}' is not a category with a support surface (one of {})", SURFACE_CATEGORIES.join(", "))
+            })
+        })
+    }
+}
+
+impl From<SurfaceCategories> for Vec<String> {
+    fn from(set: SurfaceCategories) -> Vec<String> {
+        set.names().into_iter().map(String::from).collect()
+    }
+}
+
 /// Annotation names that are room structure, not objects; the frame reader skips them.
 pub const STRUCTURE_NAMES: [&str; 4] = ["wall", "floor", "ceiling", "room"];
 

@@ -12,7 +12,8 @@
 //! reported; models with a calibration report calibrated probabilities ([`calibrate`]), and all
 //! detections are sorted by score over all categories.
 //!
-//! Models whose window stands on support surfaces ([`Support::Surfaces`]: small categories) run after
+//! Models whose window stands on support surfaces ([`Support::Surfaces`]: small categories;
+//! [`Support::FloorAndSurfaces`]: sinks, on the floor as well) run after
 //! the others (floor and [`Support::Free`] models): their hypotheses stand on the surfaces of the frame's
 //! detections of
 //! [`SURFACE_CATEGORIES`] whose calibrated score is at least [`DetectOptions::support_min_score`]
@@ -25,7 +26,7 @@ use image::RgbImage;
 use rayon::prelude::*;
 
 use crate::backend::{Backend, FastJob};
-use crate::category::SURFACE_CATEGORIES;
+use crate::category::{SurfaceCategories, SURFACE_CATEGORIES};
 use crate::draw::{category_colour, contrasting, draw_cuboid_with, draw_label, shade_convex_polygon};
 use crate::error::{Error, Result};
 use crate::eval::{Detection, FrameDetections};
@@ -267,6 +268,8 @@ fn check_budget_with(pre: &Preprocessed, frame_yaws: &FrameYaws, models: &[Model
         let layers = match model.window.support {
             Support::Free => free_bottoms(0.0, model.window.step).len(),
             Support::Floor | Support::Surfaces => 1,
+            // The floor's layer and, bounding the surfaces' (small footprints), one more.
+            Support::FloorAndSurfaces => 2,
         };
         let sizes = model.sizes().len() * layers;
         let key = (model.window.step.to_bits(), anchor, sizes, model.features.path, model.layout.grid()[2]);
@@ -365,25 +368,27 @@ pub fn detect_preprocessed_timed(
     // The floor (and free-window) models first; the surface models then search the surfaces of their
     // detections.
     let (floor_models, surface_models): (Vec<&Model>, Vec<&Model>) =
-        models.iter().partition(|m| m.window.support != Support::Surfaces);
-    // Each model's window (the surface models' on `surfaces`).
-    let windows_of = |models: &[&Model], surfaces: &[SupportSurface]| -> Vec<HypothesisSet> {
+        models.iter().partition(|m| !m.window.support.uses_surfaces());
+    // Each model's window (the surface models' on the surfaces `surfaces_of` gives them).
+    let windows_of = |models: &[&Model], surfaces_of: &dyn Fn(&Model) -> Vec<SupportSurface>| -> Vec<HypothesisSet> {
         models
             .iter()
             .map(|model| {
                 let options = WindowOptions { sizes: model.sizes(), min_points: model.window.min_points };
-                window(model.window.support, scene_of(model), &options, surfaces)
+                window(model.window.support, scene_of(model), &options, &surfaces_of(model))
             })
             .collect()
     };
-    let windows = windows_of(&floor_models, &[]);
+    let windows = windows_of(&floor_models, &|_| Vec::new());
     stages.window_s += lap();
     let mut detections =
         detect_windows(name, &pre, &floor_models, &windows, scene_of, backend, options, &mut engines, stages)?;
     lap(); // detect_windows timed its own stages
     if !surface_models.is_empty() {
-        let surfaces = detected_surfaces(&detections, models, options.support_min_score);
-        let windows = windows_of(&surface_models, &surfaces);
+        // Each surface model searches the surfaces of its own supporters' detections.
+        let surfaces_of =
+            |model: &Model| detected_surfaces(&detections, models, options.support_min_score, model.window.supporters);
+        let windows = windows_of(&surface_models, &surfaces_of);
         stages.window_s += lap();
         detections.extend(detect_windows(
             name,
@@ -407,13 +412,19 @@ pub fn detect_preprocessed_timed(
 /// Default of [`DetectOptions::support_min_score`].
 pub const DEFAULT_SUPPORT_MIN_SCORE: f32 = 0.1;
 
-/// The support surfaces that the surface models search: those of the `detections` of
-/// [`SURFACE_CATEGORIES`] with a surface height whose calibrated probability (its model's calibration;
-/// the raw score for a model without one) is at least `min_score`.
-pub fn detected_surfaces(detections: &[Detection], models: &[Model], min_score: f32) -> Vec<SupportSurface> {
+/// The support surfaces that a surface model searches: those of the `detections` of its `supporters`
+/// (a set of [`SURFACE_CATEGORIES`], the model's `window.supporters`) with a surface height whose
+/// calibrated probability (its model's calibration; the raw score for a model without one) is at least
+/// `min_score`.
+pub fn detected_surfaces(
+    detections: &[Detection],
+    models: &[Model],
+    min_score: f32,
+    supporters: SurfaceCategories,
+) -> Vec<SupportSurface> {
     detections
         .iter()
-        .filter(|d| SURFACE_CATEGORIES.contains(&d.category.as_str()))
+        .filter(|d| supporters.contains(&d.category))
         .filter_map(|d| {
             let model = models.iter().find(|m| m.category == d.category)?;
             let score = model.calibration.as_ref().map_or(d.score, |c| c.probability(d.score));

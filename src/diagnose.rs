@@ -34,7 +34,7 @@ use serde::Serialize;
 use crate::detect::overlay_selection;
 use crate::eval::{average_precision, category_truth, scored_boxes, Detection, PrecisionRecall, ScoredBox};
 use crate::features::hypotheses::{window, FrameYaws, Support, WindowOptions};
-use crate::features::surface::annotated_support_surfaces;
+use crate::features::surface::annotated_surfaces_by_category;
 use crate::features::{FeatureScene, Hypothesis, Preprocessed};
 use crate::frame::Object;
 use crate::geometry::{iou_3d, Cuboid};
@@ -80,9 +80,9 @@ pub fn best_window_ious(scene: &FeatureScene, hypotheses: &[Hypothesis], truths:
 /// The window is the one [`crate::detect::detect_preprocessed`] enumerates: one [`FeatureScene`] per
 /// distinct `(model.window.step, model.window.yaw_anchor)` (shared by the models with both) with the
 /// frame's [`FrameYaws`], and [`sliding_window`] with the model's sizes and `min_points` — for a model
-/// searched on support surfaces, [`surface_window`] on the surfaces of the frame's **annotated** objects
-/// of the surface categories (`annotated_support_surfaces`: the window's ceiling given perfect large-object
-/// detections; detection searches the surfaces of its own detections). Categories
+/// searched on support surfaces, its window on the surfaces of the frame's **annotated** objects of its
+/// supporters (`window.supporters`; `annotated_surfaces_by_category`: the window's ceiling given perfect
+/// large-object detections; detection searches the surfaces of its own detections). Categories
 /// without a model, or without ground truth in the frame, are absent from the result; no scene is built
 /// when no model has ground truth.
 pub fn frame_window_best_ious(pre: &Preprocessed, models: &[Model], objects: &[Object]) -> BTreeMap<String, Vec<f32>> {
@@ -99,7 +99,11 @@ pub fn frame_window_best_ious(pre: &Preprocessed, models: &[Model], objects: &[O
         // The ceiling of the surface search given the true supporting furniture: the surfaces of the
         // annotated objects (detection searches those of its detections).
         let surfaces = match model.window.support {
-            Support::Surfaces => annotated_support_surfaces(pre, objects),
+            Support::Surfaces | Support::FloorAndSurfaces => annotated_surfaces_by_category(pre, objects)
+                .into_iter()
+                .filter(|(c, _)| model.window.supporters.contains(c))
+                .map(|(_, s)| s)
+                .collect(),
             Support::Floor | Support::Free => Vec::new(),
         };
         let window = window(model.window.support, scene, &options, &surfaces);

@@ -44,7 +44,7 @@ use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
 use crate::calibration::Calibration;
-use crate::category::{normalise_name, CATEGORIES};
+use crate::category::{normalise_name, SurfaceCategories, CATEGORIES};
 use crate::error::{Error, Result};
 use crate::features::fast::FastOptions;
 use crate::features::hypotheses::{FrameYaws, Support, YawAnchor};
@@ -105,9 +105,9 @@ pub struct WindowSettings {
     #[serde(default)]
     pub yaw_anchor: YawAnchor,
     /// Where the boxes stand ([`Support`]): `"floor"` (the sliding window), `"surfaces"` (the support
-    /// surfaces of the frame's detections of [`crate::category::SURFACE_CATEGORIES`], searched after
-    /// them) or `"free"` (every bottom from the floor to 1.5 m). Absent in files written before it
-    /// existed, which are floor models.
+    /// surfaces of the frame's detections of [`Self::supporters`], searched after them), `"free"` (every
+    /// bottom from the floor to 1.5 m) or `"floor+surfaces"` (both the floor's and the surfaces'). Absent
+    /// in files written before it existed, which are floor models.
     #[serde(default)]
     pub support: Support,
     /// Where each yaw's lattice of centres starts ([`LatticePhase`]): `"camera"` (multiples of the step
@@ -115,6 +115,12 @@ pub struct WindowSettings {
     /// files written before it existed, which were trained with `"camera"`.
     #[serde(default)]
     pub lattice: LatticePhase,
+    /// The categories whose detections' surfaces a window with surfaces ([`Support::uses_surfaces`])
+    /// searches ([`SurfaceCategories`]; written by `train`: those whose annotated surfaces held a training
+    /// positive). Absent (files written before it existed, and models without surfaces): every surface
+    /// category.
+    #[serde(default, skip_serializing_if = "SurfaceCategories::is_all")]
+    pub supporters: SurfaceCategories,
 }
 
 /// What decides a frame's yaw grids: the window step (its bits), the yaw anchor and the lattice phase.

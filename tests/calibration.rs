@@ -152,6 +152,7 @@ fn tiny_model(category: &str) -> Model {
             yaw_anchor: YawAnchor::Walls,
             support: Support::Floor,
             lattice: LatticePhase::Camera,
+            supporters: cog_gpu::category::SurfaceCategories::ALL,
         },
         FeatureSettings { path: FeaturePath::Fast, subdivisions: 2 },
         vec![0.0; layout.dim()],

@@ -35,6 +35,7 @@ fn density_model(path: FeaturePath, step: f32) -> Model {
             yaw_anchor: YawAnchor::Walls,
             support: Support::Floor,
             lattice: LatticePhase::Camera,
+            supporters: cog_gpu::category::SurfaceCategories::ALL,
         },
         FeatureSettings { path, subdivisions: 2 },
         weights,

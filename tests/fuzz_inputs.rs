@@ -121,6 +121,7 @@ fn model(category: &str) -> Model {
             yaw_anchor: YawAnchor::Walls,
             support: Support::Floor,
             lattice: LatticePhase::Camera,
+            supporters: cog_gpu::category::SurfaceCategories::ALL,
         },
         FeatureSettings { path: FeaturePath::Fast, subdivisions: 2 },
         weights,

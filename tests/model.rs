@@ -26,6 +26,7 @@ fn model(category: &str) -> Model {
             yaw_anchor: YawAnchor::Walls,
             support: Support::Floor,
             lattice: LatticePhase::Camera,
+            supporters: cog_gpu::category::SurfaceCategories::ALL,
         },
         FeatureSettings { path: FeaturePath::Fast, subdivisions: 2 },
         weights,
@@ -79,6 +80,27 @@ fn the_support_is_stored_and_old_files_mean_floor() {
     m.write(&path).unwrap();
     assert!(std::fs::read_to_string(&path).unwrap().contains("\"support\":\"free\""));
     assert_eq!(Model::read(&path).unwrap().window.support, Support::Free);
+    m.window.support = Support::FloorAndSurfaces;
+    m.write(&path).unwrap();
+    assert!(std::fs::read_to_string(&path).unwrap().contains("\"support\":\"floor+surfaces\""));
+    assert_eq!(Model::read(&path).unwrap().window.support, Support::FloorAndSurfaces);
+    // The supporters: written when not all seven, read back; absent means all; a name without a surface
+    // is refused with the file named.
+    assert!(!std::fs::read_to_string(&path).unwrap().contains("supporters"));
+    assert!(Model::read(&path).unwrap().window.supporters.is_all());
+    m.window.supporters = cog_gpu::category::SurfaceCategories::NONE.with("counter").unwrap();
+    m.write(&path).unwrap();
+    assert!(std::fs::read_to_string(&path).unwrap().contains("\"supporters\":[\"counter\"]"));
+    assert_eq!(Model::read(&path).unwrap().window.supporters, m.window.supporters);
+    let mut value: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    value["window"]["supporters"] = serde_json::json!(["counter", "lamp"]);
+    std::fs::write(&path, value.to_string()).unwrap();
+    let error = Model::read(&path).unwrap_err().to_string();
+    assert!(
+        error.contains("pillow.json") && error.contains("'lamp' is not a category with a support surface"),
+        "{error}"
+    );
+    m.window.supporters = cog_gpu::category::SurfaceCategories::ALL;
     // A file written before the support existed: no field, a floor model.
     let mut value: serde_json::Value = serde_json::from_str(&text).unwrap();
     value["window"].as_object_mut().unwrap().remove("support");

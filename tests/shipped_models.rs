@@ -30,7 +30,7 @@ fn the_nineteen_shipped_models_load_with_this_builds_layout() {
     let full = FeatureLayout::default();
     for model in &models {
         let (grid, support) = match model.category.as_str() {
-            "sink" => ([3, 3, 3], Support::Surfaces),
+            "sink" => ([3, 3, 3], Support::FloorAndSurfaces),
             "monitor" => ([3, 1, 3], Support::Surfaces),
             "pillow" | "lamp" => ([3, 3, 3], Support::Free),
             "box" => ([3, 3, 3], Support::Floor),
@@ -40,6 +40,13 @@ fn the_nineteen_shipped_models_load_with_this_builds_layout() {
         let layout = FeatureLayout::new(grid, true, Groups::ALL).unwrap();
         assert_eq!(model.layout.id(), layout.id(), "{}: the shipped models use the full feature set", model.category);
         assert_eq!(model.window.support, support, "{}", model.category);
+        // The surface models search the surfaces their training positives stood on (`train` wrote them).
+        let supporters = match model.category.as_str() {
+            "sink" => vec!["counter"],
+            "monitor" => vec!["desk"],
+            _ => cog_gpu::category::SURFACE_CATEGORIES.to_vec(),
+        };
+        assert_eq!(model.window.supporters.names(), supporters, "{}", model.category);
         assert_eq!(model.features.path, FeaturePath::Fast, "{}", model.category);
         assert!(model.calibration.is_some(), "{}: not calibrated", model.category);
         // A trained model: weights on every feature group, not a zero vector.

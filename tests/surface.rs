@@ -177,6 +177,7 @@ fn detection_reports_the_inferred_surface_of_a_constructed_table() {
         yaw_anchor: YawAnchor::Camera,
         support: Support::Floor,
         lattice: LatticePhase::Camera,
+        supporters: cog_gpu::category::SurfaceCategories::ALL,
     };
     let features = FeatureSettings { path: FeaturePath::Fast, subdivisions: 2 };
     let up = NORMALS + normal_bin(Vec3::Z) as usize;

@@ -4,6 +4,7 @@
 //! box; the surfaces detection searches are those of confident detections of the surface categories;
 //! a training example of a surface model answers on its surfaces only, its target on the pillow.
 
+use cog_gpu::category::SurfaceCategories;
 use cog_gpu::detect::detected_surfaces;
 use cog_gpu::eval::Detection;
 use cog_gpu::features::hypotheses::{SURFACE_CLEARANCE_M, SURFACE_MARGIN_M};
@@ -185,6 +186,7 @@ fn surfaces_come_from_confident_detections_of_surface_categories() {
                 yaw_anchor: YawAnchor::Walls,
                 support: Support::Floor,
                 lattice: LatticePhase::Camera,
+                supporters: SurfaceCategories::ALL,
             },
             FeatureSettings { path: FeaturePath::Fast, subdivisions: 2 },
             vec![0.0; layout.dim()],
@@ -206,11 +208,33 @@ fn surfaces_come_from_confident_detections_of_surface_categories() {
         with_surface("bed", 0.9, None),          // no surface measured
         with_surface("sofa", 0.9, Some(-0.8)),   // no model: not searched
     ];
-    let surfaces = detected_surfaces(&detections, &models, 0.1);
+    let surfaces = detected_surfaces(&detections, &models, 0.1, SurfaceCategories::ALL);
     assert_eq!(surfaces.len(), 1);
     assert_eq!(surfaces[0].z, -0.5);
     assert_eq!(surfaces[0].object, detections[0].cuboid());
-    assert!(detected_surfaces(&detections, &models, 0.9).is_empty());
+    assert!(detected_surfaces(&detections, &models, 0.9, SurfaceCategories::ALL).is_empty());
+    // A model's supporters choose among them: the table's surface only for a set that holds tables.
+    let beds_and_counters = SurfaceCategories::NONE.with("bed").and_then(|s| s.with("counter")).unwrap();
+    assert!(detected_surfaces(&detections, &models, 0.1, beds_and_counters).is_empty());
+    let tables = SurfaceCategories::NONE.with("table").unwrap();
+    assert_eq!(detected_surfaces(&detections, &models, 0.1, tables), surfaces);
+}
+
+/// The supporters' set: membership, names in `SURFACE_CATEGORIES` order, the list a model file holds
+/// (absent = all), and a name that carries no surface refused with a message naming it.
+#[test]
+fn supporter_sets_hold_surface_categories_only() {
+    use cog_gpu::category::SURFACE_CATEGORIES;
+    let set = SurfaceCategories::NONE.with("counter").and_then(|s| s.with("bed")).unwrap();
+    assert_eq!(set.names(), vec!["bed", "counter"]);
+    assert!(set.contains("counter") && set.contains("bed") && !set.contains("table") && !set.contains("chair"));
+    assert!(SurfaceCategories::NONE.with("chair").is_none());
+    assert_eq!(SurfaceCategories::ALL.names(), SURFACE_CATEGORIES.to_vec());
+    assert!(SurfaceCategories::ALL.is_all() && !set.is_all() && SurfaceCategories::default().is_all());
+    assert_eq!(serde_json::to_string(&set).unwrap(), r#"["bed","counter"]"#);
+    assert_eq!(serde_json::from_str::<SurfaceCategories>(r#"["counter","bed"]"#).unwrap(), set);
+    let error = serde_json::from_str::<SurfaceCategories>(r#"["counter","chair"]"#).unwrap_err().to_string();
+    assert!(error.contains("'chair' is not a category with a support surface"), "{error}");
 }
 
 #[test]
@@ -303,4 +327,79 @@ fn a_free_models_training_example_answers_at_the_pillows_height() {
     let best = window.hypotheses.hypotheses[target].cuboid(&window.scene);
     assert!(iou_3d(&best, &pillow) >= 0.5, "target IoU {}", iou_3d(&best, &pillow));
     assert!((best.bottom() - TOP).abs() < 0.06, "target bottom {} against the top {TOP}", best.bottom());
+}
+
+/// The floor-and-surfaces window (`Support::FloorAndSurfaces`, for sinks: pedestals on the floor, basins
+/// on counters) is exactly the floor window's hypotheses and the surface window's, each yaw's together in
+/// yaw order, with the two counts of generated boxes summed; it finds the pillow on the table as the
+/// surface window does, and keeps every floor box. A surface at the floor's own height repeats floor
+/// boxes: they are scored once.
+#[test]
+fn the_floor_and_surface_window_is_the_union_of_the_two_without_repeats() {
+    use cog_gpu::features::hypotheses::floor_and_surface_window;
+    use cog_gpu::features::Hypothesis;
+    let (scene, table, pillow) = scene_with_pillow();
+    // min_points 0 keeps every floor box, so the floor window is not empty with the pillow's sizes.
+    let options = WindowOptions { sizes: pillow_sizes(&pillow), min_points: 0 };
+    let surface = SupportSurface { object: table, z: TOP };
+    let floor = sliding_window(&scene, &options);
+    let on_top = surface_window(&scene, &options, &[surface]);
+    let both = floor_and_surface_window(&scene, &options, &[surface]);
+    assert!(!floor.hypotheses.is_empty() && !on_top.hypotheses.is_empty());
+    assert_eq!(both.generated, floor.generated + on_top.generated);
+    // Per yaw: the floor's boxes, then the surface's, each in its own order.
+    let of_yaw = |set: &[Hypothesis], k: usize| -> Vec<Hypothesis> {
+        set.iter().filter(|h| h.yaw_index as usize == k).copied().collect()
+    };
+    for k in 0..scene.yaws.len() {
+        let mut expected = of_yaw(&floor.hypotheses, k);
+        expected.extend(of_yaw(&on_top.hypotheses, k));
+        assert_eq!(of_yaw(&both.hypotheses, k), expected, "yaw {k}");
+    }
+    assert!(both.hypotheses.windows(2).all(|w| w[0].yaw_index <= w[1].yaw_index), "not in yaw order");
+    let best = both.hypotheses.iter().map(|h| iou_3d(&h.cuboid(&scene), &pillow)).fold(0.0f32, f32::max);
+    assert!(best >= 0.5, "best IoU with the pillow {best}");
+    // A "surface" on the floor itself (a detection's surface at the floor's height) gives boxes the floor
+    // window has too: the union holds each once.
+    let low = SupportSurface { object: table, z: FLOOR };
+    let repeats = surface_window(&scene, &options, &[low]);
+    let union = floor_and_surface_window(&scene, &options, &[low]);
+    let same = |a: &Hypothesis, b: &Hypothesis| {
+        (a.yaw_index, a.size_index, a.centre, a.bottom) == (b.yaw_index, b.size_index, b.centre, b.bottom)
+    };
+    let repeated = repeats.hypotheses.iter().filter(|r| floor.hypotheses.iter().any(|f| same(f, r))).count();
+    assert!(repeated > 0, "the floor-height surface repeats no floor box: the case is not tested");
+    assert_eq!(union.hypotheses.len(), floor.hypotheses.len() + repeats.hypotheses.len() - repeated);
+    for (i, a) in union.hypotheses.iter().enumerate() {
+        assert!(!union.hypotheses[i + 1..].iter().any(|b| same(a, b)), "{a:?} twice");
+    }
+}
+
+/// A floor-and-surfaces model's training example answers on its surfaces (the pillow on the table is its
+/// target) and on the floor; without surfaces it still has the floor's boxes (a surface model's has none).
+#[test]
+fn a_floor_and_surfaces_training_example_answers_on_the_surface_and_keeps_the_floor() {
+    use cog_gpu::learn::detector::TrainingExample;
+    let (scene, table, pillow) = scene_with_pillow();
+    assert!(Support::FloorAndSurfaces.uses_surfaces() && Support::Surfaces.uses_surfaces());
+    assert!(!Support::Floor.uses_surfaces() && !Support::Free.uses_surfaces());
+    assert_eq!(Support::FloorAndSurfaces.name(), "floor+surfaces");
+    // Every box kept (min_points 0): nothing stands on the constructed floor, whose boxes would else be
+    // skipped as empty.
+    let settings = cog_gpu::learn::detector::TrainingSettings {
+        min_points: 0,
+        ..pillow_training(&pillow, Support::FloorAndSurfaces)
+    };
+    let surface = SupportSurface { object: table, z: TOP };
+    let example = TrainingExample::new("pillow".into(), &scene.pre, Some(pillow), &[]).on_surfaces(vec![surface]);
+    let window = example.window(&settings);
+    let target = window.target.expect("a surface box near the pillow");
+    let best = window.hypotheses.hypotheses[target].cuboid(&window.scene);
+    assert!(iou_3d(&best, &pillow) >= 0.5, "target IoU {}", iou_3d(&best, &pillow));
+    let bottoms = |w: &cog_gpu::learn::detector::ExampleWindow, z: f32| {
+        w.hypotheses.hypotheses.iter().filter(|h| (h.bottom - z).abs() < 1e-6).count()
+    };
+    assert!(bottoms(&window, TOP) > 0 && bottoms(&window, FLOOR) > 0, "boxes on the top and on the floor");
+    let bare = TrainingExample::new("pillow".into(), &scene.pre, Some(pillow), &[]).window(&settings);
+    assert!(bottoms(&bare, FLOOR) > 0 && bottoms(&bare, TOP) == 0);
 }

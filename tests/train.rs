@@ -547,3 +547,55 @@ fn surface_inference_maximises_over_hypotheses_and_slices() {
     assert_eq!(truth, LatentOracle::ground_truth_features(&oracle, positive, 5).unwrap());
     assert!(oracle.set_latents(&[7, 0]).is_err(), "slice 7 does not exist");
 }
+
+/// A window on surfaces learns its supporters from the training positives: on synthetic kitchens and
+/// bathrooms (basins on counters, pedestal sinks on the floor) the sink's are exactly the categories that
+/// the generator's support files name as the chosen sinks' supporters (read here only, never by
+/// training); the examples keep the surfaces of every annotated surface object (other furniture's are
+/// negatives to learn from); a floor window keeps every surface category (and builds no surfaces).
+#[test]
+fn a_surface_window_learns_its_supporters_from_the_positives() {
+    use cog_gpu::category::SurfaceCategories;
+    use cog_gpu::learn::detector::{collect_examples, read_all_annotations, ExampleLimits};
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let args = ["--frames", "8", "--seed", "5", "--width", "320", "--height", "240", "--rooms", "kitchen,bathroom"];
+    let out = run(&[&["synth", "--out", data.to_str().unwrap()][..], &args[..]].concat());
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let mut frames: Vec<PathBuf> = std::fs::read_dir(&data).unwrap().map(|e| e.unwrap().path()).collect();
+    frames.retain(|p| p.join("synth_support.json").is_file());
+    frames.sort();
+    // The supporters' categories of every sink, from the support files (all sinks are chosen: 100 ≥ their count).
+    let mut expected = SurfaceCategories::NONE;
+    let mut sinks = 0;
+    for frame in &frames {
+        let support: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(frame.join("synth_support.json")).unwrap()).unwrap();
+        let objects = support["objects"].as_array().unwrap();
+        for o in objects.iter().filter(|o| o["category"] == "sink") {
+            sinks += 1;
+            if let Some(parent) = o["supported_by"]["annotation_index"].as_u64() {
+                let parent = objects.iter().find(|p| p["annotation_index"].as_u64() == Some(parent)).unwrap();
+                expected = expected.with(parent["category"].as_str().unwrap()).unwrap();
+            }
+        }
+    }
+    assert!(sinks > 0 && expected != SurfaceCategories::NONE, "seed 5 must give sinks on counters");
+    let limits = |support| ExampleLimits { positives: 100, negatives: 2, others: OtherInstances::Removed, support };
+    let collected = collect_examples(&frames, "sink", limits(Support::FloorAndSurfaces)).unwrap();
+    assert_eq!(collected.supporters, expected);
+    let annotations = read_all_annotations(&frames).unwrap();
+    let surface_boxes: Vec<Cuboid> = annotations
+        .iter()
+        .flatten()
+        .filter(|o| SurfaceCategories::ALL.contains(&o.category))
+        .map(|o| o.cuboid)
+        .collect();
+    assert!(collected.examples.iter().any(|e| !e.surfaces.is_empty()));
+    for example in &collected.examples {
+        assert!(example.surfaces.iter().all(|s| surface_boxes.contains(&s.object)), "{}", example.name);
+    }
+    let floor = collect_examples(&frames, "sink", limits(Support::Floor)).unwrap();
+    assert!(floor.supporters.is_all());
+    assert!(floor.examples.iter().all(|e| e.surfaces.is_empty()));
+}

@@ -22,7 +22,6 @@ use cog_gpu::category::{normalise_name, SURFACE_CATEGORIES};
 use cog_gpu::detect::{detect_frame, overlay, overlay_selection, DetectOptions, DEFAULT_SUPPORT_MIN_SCORE};
 use cog_gpu::draw::category_colour;
 use cog_gpu::eval::FrameDetections;
-use cog_gpu::features::Support;
 use cog_gpu::frame::RoomLayout;
 use cog_gpu::frame::{is_frame_dir, DepthSource, Frame};
 use cog_gpu::model::read_models_dir;
@@ -154,10 +153,15 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     let models_dir =
         if args.models == Path::new("assets/models") { resolve_default(&args.models) } else { args.models.clone() };
     let mut models = read_models_dir(&models_dir, (!categories.is_empty()).then_some(categories.as_slice()))?;
-    let has_surface_models = models.iter().any(|m| m.window.support == Support::Surfaces);
+    let has_surface_models = models.iter().any(|m| m.window.support.uses_surfaces());
+    // The surface models search the surfaces of their supporters' detections.
+    let supporters: Vec<&str> = SURFACE_CATEGORIES
+        .iter()
+        .copied()
+        .filter(|c| models.iter().any(|m| m.window.support.uses_surfaces() && m.window.supporters.contains(c)))
+        .collect();
     if has_surface_models && !categories.is_empty() {
-        // The surface models search the surfaces of these categories' detections.
-        let missing: Vec<String> = SURFACE_CATEGORIES
+        let missing: Vec<String> = supporters
             .iter()
             .filter(|c| !models.iter().any(|m| m.category == **c) && models_dir.join(format!("{c}.json")).is_file())
             .map(|c| c.to_string())
@@ -167,11 +171,11 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
             models.extend(read_models_dir(&models_dir, Some(missing.as_slice()))?);
         }
     }
-    if has_surface_models && !models.iter().any(|m| SURFACE_CATEGORIES.contains(&m.category.as_str())) {
+    if has_surface_models && !models.iter().any(|m| supporters.contains(&m.category.as_str())) {
         log::warn!(
-            "{} has models searched on support surfaces but none of {}: they will find nothing",
+            "{} has models searched on support surfaces but none of {}: they will find nothing on surfaces",
             models_dir.display(),
-            SURFACE_CATEGORIES.join(", ")
+            supporters.join(", ")
         );
     }
     if let Some(step) = args.step {

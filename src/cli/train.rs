@@ -155,8 +155,9 @@ pub struct Args {
     /// Where the boxes stand: `floor` (the sliding window) or `surfaces` (the support surfaces of beds,
     /// tables, desks, dressers, nightstands, sofas and counters: in training the annotated ones', in
     /// detection those of the frame's detections of those categories; for pillows, lamps, monitors, TVs
-    /// and sinks) or `free` (every bottom height from the floor to 1.5 m at the step: for what stands on
-    /// things no model detects, e.g. TVs on walls and cabinets).
+    /// and sinks), `free` (every bottom height from the floor to 1.5 m at the step: for what stands on
+    /// things no model detects, e.g. TVs on walls and cabinets) or `floor+surfaces` (both the floor's
+    /// window and the surfaces': for what stands on either, e.g. pedestal sinks and basins on counters).
     #[arg(long, value_enum, default_value_t = SupportArg::Floor)]
     pub support: SupportArg,
     #[arg(value_parser = parse_grid)]
@@ -190,6 +191,8 @@ pub enum SupportArg {
     Floor,
     Surfaces,
     Free,
+    #[value(name = "floor+surfaces")]
+    FloorAndSurfaces,
 }
 
 impl From<SupportArg> for Support {
@@ -198,6 +201,7 @@ impl From<SupportArg> for Support {
             SupportArg::Floor => Support::Floor,
             SupportArg::Surfaces => Support::Surfaces,
             SupportArg::Free => Support::Free,
+            SupportArg::FloorAndSurfaces => Support::FloorAndSurfaces,
         }
     }
 }
@@ -448,7 +452,9 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         args.positives,
         args.negatives
     );
-    let mut examples = collect_examples(&dataset.frames, &category, limits)?;
+    let collected = collect_examples(&dataset.frames, &category, limits)?;
+    let supporters = collected.supporters;
+    let mut examples = collected.examples;
     check_examples(&mut examples, &settings, args.candidates)?;
     let positives = examples.iter().filter(|e| e.truth.is_some()).count();
     log::info!(
@@ -594,6 +600,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         yaw_anchor: args.yaw_anchor.into(),
         support: args.support.into(),
         lattice: args.lattice.into(),
+        supporters,
     };
     let mut model = Model::new(&category, layout, sizes, window, features, weights, training)?;
     if latent.is_some() {

@@ -531,6 +531,13 @@ pub enum Support {
     /// every height from the floor up to [`FREE_MAX_BOTTOM_M`] ([`free_window`]) — for what stands on
     /// things no detector finds (a TV on the wall or on a cabinet, a box on a shelf).
     Free,
+    /// On the floor and on the support surfaces ([`floor_and_surface_window`]): the union of the
+    /// floor's sliding window and the surface window, for a category that stands on either — a sink is
+    /// a pedestal on the floor or a basin on a counter (half of the generator's sinks each), which the
+    /// surface window alone can never reach in the first case nor the floor window in the second.
+    /// Searched after the floor models, like [`Support::Surfaces`].
+    #[serde(rename = "floor+surfaces")]
+    FloorAndSurfaces,
 }
 
 impl Support {
@@ -540,7 +547,14 @@ impl Support {
             Support::Floor => "floor",
             Support::Surfaces => "surfaces",
             Support::Free => "free",
+            Support::FloorAndSurfaces => "floor+surfaces",
         }
+    }
+
+    /// Whether the window searches the support surfaces of other objects (so that its model runs
+    /// after the models whose detections carry them, and trains with the annotated ones).
+    pub fn uses_surfaces(self) -> bool {
+        matches!(self, Support::Surfaces | Support::FloorAndSurfaces)
     }
 }
 
@@ -658,8 +672,39 @@ pub fn free_window(scene: &FeatureScene, options: &WindowOptions) -> HypothesisS
     })
 }
 
+/// The window of [`Support::FloorAndSurfaces`]: the hypotheses of [`sliding_window`] and then those of
+/// [`surface_window`] on `surfaces`, each yaw's together and in yaw order (as every window's); `generated`
+/// is the sum of the two. A surface hypothesis that repeats a floor one (a surface at the floor's height)
+/// is left out, so no box is scored twice.
+pub fn floor_and_surface_window(
+    scene: &FeatureScene,
+    options: &WindowOptions,
+    surfaces: &[SupportSurface],
+) -> HypothesisSet {
+    let floor = sliding_window(scene, options);
+    let on_surfaces = surface_window(scene, options, surfaces);
+    let generated = floor.generated + on_surfaces.generated;
+    let mut hypotheses = floor.hypotheses;
+    let on_floor: std::collections::HashSet<HypothesisKey> = hypotheses.iter().map(HypothesisKey::of).collect();
+    hypotheses.extend(on_surfaces.hypotheses.into_iter().filter(|h| !on_floor.contains(&HypothesisKey::of(h))));
+    // Stable: within a yaw the floor's hypotheses stay first, each window's in its own order.
+    hypotheses.sort_by_key(|h| h.yaw_index);
+    HypothesisSet { hypotheses, generated }
+}
+
+/// What makes two hypotheses the same box: yaw, size and the bit patterns of centre and bottom.
+#[derive(PartialEq, Eq, Hash)]
+struct HypothesisKey([u32; 3], u16, u16);
+
+impl HypothesisKey {
+    fn of(h: &Hypothesis) -> HypothesisKey {
+        HypothesisKey([h.centre.x.to_bits(), h.centre.y.to_bits(), h.bottom.to_bits()], h.yaw_index, h.size_index)
+    }
+}
+
 /// The window of `support` on `scene` with `options`: [`sliding_window`], [`surface_window`] on
-/// `surfaces` (read only for [`Support::Surfaces`]) or [`free_window`].
+/// `surfaces` (read only when [`Support::uses_surfaces`]), [`free_window`] or
+/// [`floor_and_surface_window`].
 pub fn window(
     support: Support,
     scene: &FeatureScene,
@@ -670,6 +715,7 @@ pub fn window(
         Support::Floor => sliding_window(scene, options),
         Support::Surfaces => surface_window(scene, options, surfaces),
         Support::Free => free_window(scene, options),
+        Support::FloorAndSurfaces => floor_and_surface_window(scene, options, surfaces),
     }
 }
 

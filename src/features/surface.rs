@@ -185,13 +185,20 @@ pub fn measured_surface_height(pre: &Preprocessed, cuboid: &Cuboid) -> Option<f3
 }
 
 /// The support surfaces of a frame's annotated `objects` (training, and the window recall of
-/// `eval --diagnose`): one per object of [`crate::category::SURFACE_CATEGORIES`] whose surface
-/// [`measured_surface_height`] finds in `pre` — the measurement detection makes on a detected box.
-pub fn annotated_support_surfaces(pre: &Preprocessed, objects: &[crate::frame::Object]) -> Vec<SupportSurface> {
+/// `eval --diagnose`), each with the category of the object that carries it: one per object of
+/// [`crate::category::SURFACE_CATEGORIES`] whose surface [`measured_surface_height`] finds in `pre` —
+/// the measurement detection makes on a detected box.
+pub fn annotated_surfaces_by_category<'o>(
+    pre: &Preprocessed,
+    objects: &'o [crate::frame::Object],
+) -> Vec<(&'o str, SupportSurface)> {
     objects
         .iter()
         .filter(|o| crate::category::SURFACE_CATEGORIES.contains(&o.category.as_str()))
-        .filter_map(|o| measured_surface_height(pre, &o.cuboid).map(|z| SupportSurface { object: o.cuboid, z }))
+        .filter_map(|o| {
+            measured_surface_height(pre, &o.cuboid)
+                .map(|z| (o.category.as_str(), SupportSurface { object: o.cuboid, z }))
+        })
         .collect()
 }
 

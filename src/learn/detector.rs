@@ -50,6 +50,7 @@ use rayon::prelude::*;
 use super::latent::{impute, CccpRound, LatentOracle};
 use super::one_slack::{OneSlack, PassSummary};
 use super::{Constraint, CuttingPlane, SeparationOracle, Solution, SsvmOptions};
+use crate::category::SurfaceCategories;
 use crate::error::{Error, Result};
 use crate::features::cpu;
 use crate::features::fast::{FastEngine, FastOptions};
@@ -60,7 +61,7 @@ use crate::features::hypotheses::{
 };
 use crate::features::scene::LatticePhase;
 use crate::features::surface::{
-    annotated_support_surfaces, best_slice, SurfaceEngine, SurfaceWeights, SLICES, SLICE_DIM, SLICE_VOXELS,
+    annotated_surfaces_by_category, best_slice, SurfaceEngine, SurfaceWeights, SLICES, SLICE_DIM, SLICE_VOXELS,
 };
 use crate::features::{FeatureLayout, FeatureScene, Hypothesis, Preprocessed};
 use crate::geometry::{iou_3d, structured_loss, Cuboid};
@@ -167,7 +168,7 @@ pub struct TrainingExample {
     pub wall_direction: Option<f32>,
     /// The frame's support surfaces, searched by a [`Support::Surfaces`] window: in training, those of the
     /// annotated objects of [`crate::category::SURFACE_CATEGORIES`], measured from the whole frame's points
-    /// ([`annotated_support_surfaces`]); empty unless set with [`TrainingExample::on_surfaces`].
+    /// ([`annotated_surfaces_by_category`]); empty unless set with [`TrainingExample::on_surfaces`].
     pub surfaces: Vec<SupportSurface>,
 }
 
@@ -1004,10 +1005,12 @@ pub struct ExampleLimits {
     /// What a positive example does with the other instances in its frame.
     pub others: OtherInstances,
     /// The window the examples are for. With [`Support::Surfaces`] every example gets its frame's
-    /// [`annotated_support_surfaces`], and an instance that stands on none of them (a floor lamp, a TV
+    /// [`annotated_surfaces_by_category`], and an instance that stands on none of them (a floor lamp, a TV
     /// on the wall: [`SupportSurface::holds`] with [`SURFACE_HEIGHT_TOLERANCE_M`]) is not a positive
     /// example — the window can never output it. Negative frames are then taken among those with an
-    /// annotated object of a surface category (on the others the window is empty).
+    /// annotated object of a surface category (on the others the window is empty). With
+    /// [`Support::FloorAndSurfaces`] every example gets its surfaces too, but every instance is a positive
+    /// and every frame without one a negative, as with the floor window.
     pub support: Support,
 }
 
@@ -1034,14 +1037,26 @@ pub fn spread(total: usize, count: usize) -> Vec<usize> {
     (0..count).map(|k| k * total / count).collect()
 }
 
+/// What [`collect_examples`] gathers.
+pub struct CollectedExamples {
+    pub examples: Vec<TrainingExample>,
+    /// With a window that uses surfaces ([`Support::uses_surfaces`]): the categories whose annotated
+    /// surfaces hold at least one chosen positive ([`stands_on_a_surface`]) — the only surfaces the
+    /// model's detection searches (`window.supporters`). Otherwise every surface category. The examples
+    /// keep the surfaces of every surface category: a box on another category's surface (a basin-sized
+    /// box on a bed's pillows) is a negative worth learning from, and costs nothing at detection.
+    pub supporters: SurfaceCategories,
+}
+
 /// The training examples of `category` from frame directories: reads the annotations of every frame,
 /// picks the instances and negative frames ([`ExampleLimits`]), preprocesses the frames they come from
-/// (in parallel) and builds the examples.
+/// (in parallel) and builds the examples; with a window on surfaces, also the supporters (see
+/// [`CollectedExamples::supporters`]).
 pub fn collect_examples(
     frames: &[std::path::PathBuf],
     category: &str,
     limits: ExampleLimits,
-) -> Result<Vec<TrainingExample>> {
+) -> Result<CollectedExamples> {
     let annotations = read_all_annotations(frames)?;
     let mut positives = Vec::new(); // (frame, instance)
     let mut negatives = Vec::new();
@@ -1068,17 +1083,36 @@ pub fn collect_examples(
             Ok((f, Preprocessed::from_frame(&frame)?))
         })
         .collect::<Result<_>>()?;
-    // The support surfaces of every preprocessed frame, in the same order.
-    let surfaces: Vec<Vec<SupportSurface>> = preprocessed
+    // The support surfaces of every preprocessed frame, in the same order, with their categories (which
+    // choose the supporters).
+    let all_surfaces: Vec<Vec<(&str, SupportSurface)>> = preprocessed
         .par_iter()
-        .map(|(f, pre)| match limits.support {
-            Support::Floor | Support::Free => Vec::new(),
-            Support::Surfaces => annotated_support_surfaces(pre, &annotations[*f]),
+        .map(|(f, pre)| {
+            if limits.support.uses_surfaces() {
+                annotated_surfaces_by_category(pre, &annotations[*f])
+            } else {
+                Vec::new()
+            }
         })
         .collect();
     // Every frame of `jobs` is in `needed`, so the search always succeeds.
     let index_of = |f: usize| preprocessed.binary_search_by_key(&f, |p| p.0).unwrap_or(0);
     let pre_of = |f: usize| &preprocessed[index_of(f)].1;
+    let supporters = if limits.support.uses_surfaces() {
+        let held = positives.iter().fold(SurfaceCategories::NONE, |set, &(f, k)| {
+            let instance = instances_of(&annotations[f], category)[k];
+            all_surfaces[index_of(f)]
+                .iter()
+                .filter(|(_, s)| stands_on_a_surface(&instance, std::slice::from_ref(s)))
+                .fold(set, |set, (c, _)| set.with(c).unwrap_or(set))
+        });
+        log::info!("{category}: searched on the surfaces of {}", held.names().join(", "));
+        held
+    } else {
+        SurfaceCategories::ALL
+    };
+    let surfaces: Vec<Vec<SupportSurface>> =
+        all_surfaces.iter().map(|frame| frame.iter().map(|(_, s)| *s).collect()).collect();
     let surfaces_of = |f: usize| &surfaces[index_of(f)];
     let name_of = |f: usize| frames[f].file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     let mut jobs: Vec<(String, usize, Option<Cuboid>, Vec<Cuboid>)> = Vec::new();
@@ -1098,13 +1132,14 @@ pub fn collect_examples(
     for &f in &negatives {
         jobs.push((format!("{} (no {category})", name_of(f)), f, None, Vec::new()));
     }
-    Ok(jobs
+    let examples = jobs
         .into_par_iter()
         .map(|(name, f, truth, others)| {
             TrainingExample::with_others(name, pre_of(f), truth, &others, limits.others)
                 .on_surfaces(surfaces_of(f).clone())
         })
-        .collect())
+        .collect();
+    Ok(CollectedExamples { examples, supporters })
 }
 
 /// The annotated objects of every frame (annotations only; images are not read).
