@@ -31,8 +31,9 @@ pub const LARGE_CATEGORIES: &[&str] = CATEGORIES.split_at(10).0;
 /// tables, desks, dressers, nightstands and the like"; the like, here: a sofa's seat, which carries
 /// cushions and pillows, and a counter's top, which carries sinks): detections of these report a surface
 /// height (`crate::features::surface`), from the model's latent slice or measured from the points, and
-/// the small categories whose models say so (`"support": "surfaces"`: the shipped pillow, monitor and
-/// sink) are searched on those surfaces (`crate::features::hypotheses::surface_window`).
+/// the small categories whose models say so (`"support": "surfaces"`: the shipped monitor;
+/// `"floor+surfaces"`: the shipped sink) are searched on the surfaces of their supporters
+/// ([`SurfaceCategories`]; `crate::features::hypotheses::surface_window`).
 pub const SURFACE_CATEGORIES: [&str; 7] = ["bed", "table", "desk", "dresser", "nightstand", "sofa", "counter"];
 
 /// A set of [`SURFACE_CATEGORIES`] (bit `k` for category `k`): the supporters whose surfaces a model's
