@@ -268,7 +268,8 @@ fn check_budget_with(pre: &Preprocessed, frame_yaws: &FrameYaws, models: &[Model
         let layers = match model.window.support {
             Support::Free => free_bottoms(0.0, model.window.step).len(),
             Support::Floor | Support::Surfaces => 1,
-            // The floor's layer and, bounding the surfaces' (small footprints), one more.
+            // The floor's layer and, for the surfaces', one more: a frame's few pieces of furniture cover
+            // its lattice about once (an estimate, as for the surface window's one layer).
             Support::FloorAndSurfaces => 2,
         };
         let sizes = model.sizes().len() * layers;

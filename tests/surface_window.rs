@@ -333,7 +333,7 @@ fn a_free_models_training_example_answers_at_the_pillows_height() {
 /// on counters) is exactly the floor window's hypotheses and the surface window's, each yaw's together in
 /// yaw order, with the two counts of generated boxes summed; it finds the pillow on the table as the
 /// surface window does, and keeps every floor box. A surface at the floor's own height repeats floor
-/// boxes: they are scored once.
+/// boxes: they are scored once (the floor window's).
 #[test]
 fn the_floor_and_surface_window_is_the_union_of_the_two_without_repeats() {
     use cog_gpu::features::hypotheses::floor_and_surface_window;
@@ -373,6 +373,8 @@ fn the_floor_and_surface_window_is_the_union_of_the_two_without_repeats() {
     for (i, a) in union.hypotheses.iter().enumerate() {
         assert!(!union.hypotheses[i + 1..].iter().any(|b| same(a, b)), "{a:?} twice");
     }
+    // That surface is the floor: the floor window alone searches it.
+    assert_eq!(union.hypotheses, floor.hypotheses);
 }
 
 /// A floor-and-surfaces model's training example answers on its surfaces (the pillow on the table is its

@@ -674,32 +674,22 @@ pub fn free_window(scene: &FeatureScene, options: &WindowOptions) -> HypothesisS
 
 /// The window of [`Support::FloorAndSurfaces`]: the hypotheses of [`sliding_window`] and then those of
 /// [`surface_window`] on `surfaces`, each yaw's together and in yaw order (as every window's); `generated`
-/// is the sum of the two. A surface hypothesis that repeats a floor one (a surface at the floor's height)
-/// is left out, so no box is scored twice.
+/// is the sum of the two. A surface at the floor's own height is the floor, searched by the floor window:
+/// it is left out, so no box (same lattice cell, size and bottom) is scored twice.
 pub fn floor_and_surface_window(
     scene: &FeatureScene,
     options: &WindowOptions,
     surfaces: &[SupportSurface],
 ) -> HypothesisSet {
+    let raised: Vec<SupportSurface> = surfaces.iter().filter(|s| s.z != scene.pre.floor).copied().collect();
     let floor = sliding_window(scene, options);
-    let on_surfaces = surface_window(scene, options, surfaces);
+    let on_surfaces = surface_window(scene, options, &raised);
     let generated = floor.generated + on_surfaces.generated;
     let mut hypotheses = floor.hypotheses;
-    let on_floor: std::collections::HashSet<HypothesisKey> = hypotheses.iter().map(HypothesisKey::of).collect();
-    hypotheses.extend(on_surfaces.hypotheses.into_iter().filter(|h| !on_floor.contains(&HypothesisKey::of(h))));
+    hypotheses.extend(on_surfaces.hypotheses);
     // Stable: within a yaw the floor's hypotheses stay first, each window's in its own order.
     hypotheses.sort_by_key(|h| h.yaw_index);
     HypothesisSet { hypotheses, generated }
-}
-
-/// What makes two hypotheses the same box: yaw, size and the bit patterns of centre and bottom.
-#[derive(PartialEq, Eq, Hash)]
-struct HypothesisKey([u32; 3], u16, u16);
-
-impl HypothesisKey {
-    fn of(h: &Hypothesis) -> HypothesisKey {
-        HypothesisKey([h.centre.x.to_bits(), h.centre.y.to_bits(), h.bottom.to_bits()], h.yaw_index, h.size_index)
-    }
 }
 
 /// The window of `support` on `scene` with `options`: [`sliding_window`], [`surface_window`] on
