@@ -9,7 +9,16 @@
 //! whose box overlaps `i`'s (intersection volume > 0) with the largest `p_j` — the paper's `i_c`, "the
 //! instance of category c with maximum confidence" (ties: the first in the frame's list). With the
 //! overlap `O`, the volumes `V` and the union `U`: `S1 = O/V_i`, `S2 = O/V_j`, `S3 = O/U` (the paper's
-//! three). The paper's "quadratic function" of `z_i` and `S1..3` is taken as the products with the
+//! three). **Small objects** (paper §6.1: "for small objects that are placed on the support surfaces of
+//! large objects, 3D overlap features are noisy. We replace 3D overlap with 2D overlap scores from the
+//! top-down view"): when `c` or `k` is not one of the ten large categories
+//! ([`crate::category::LARGE_CATEGORIES`]; choice: the paper does not list its small ones, ours are the
+//! other nine of its Table 2), `O`, `V` and `U` are the footprints' overlap and areas seen from above
+//! ([`crate::geometry::footprint_overlap_area`]; "overlaps" then means a footprint overlap > 0), so that a
+//! monitor standing on a desk, whose boxes only touch, still sees the desk. A pair of large categories
+//! keeps the 3D overlap, so a cascade of the ten large categories has the same features as before
+//! ([`FEATURES`]' previous set, `object-overlap-layout-v2`, is read for such a cascade).
+//! The paper's "quadratic function" of `z_i` and `S1..3` is taken as the products with the
 //! confidences, which keeps a category that is absent (`p_j = 0`) from contributing anything:
 //!
 //! ```text
@@ -62,10 +71,11 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::calibration::{fit_logistic, Calibration};
+use crate::category::LARGE_CATEGORIES;
 use crate::error::{Error, Result};
 use crate::eval::{average_precision, true_positives_in_input_order, Detection, FrameDetections, ScoredBox};
 use crate::frame::Object;
-use crate::geometry::{intersection_volume, polygon_contains, Cuboid};
+use crate::geometry::{footprint_overlap_area, intersection_volume, polygon_contains, Cuboid};
 use crate::learn::binary_svm::{balanced_costs, train_linear_svm, LinearSvm};
 use glam::Vec2;
 
@@ -73,8 +83,12 @@ use glam::Vec2;
 pub const FORMAT: &str = "cog-gpu-cascade";
 /// The file format's version.
 pub const VERSION: u32 = 1;
-/// Name of the feature set of the module doc (stored in the file; a file with another is refused).
-pub const FEATURES: &str = "object-overlap-layout-v2";
+/// Name of the feature set of the module doc (stored in the file; a file with another is refused, but
+/// for [`PREVIOUS_FEATURES`] on the large categories alone).
+pub const FEATURES: &str = "object-overlap-layout-v3";
+/// The feature set before the small objects' top-down overlap: equal to [`FEATURES`] when every context
+/// category is large, so such a cascade file is still read.
+pub const PREVIOUS_FEATURES: &str = "object-overlap-layout-v2";
 /// The cascade's file name inside a models directory (next to `<category>.json`).
 pub const FILE_NAME: &str = "cascade.json";
 /// Values of the SVM's `C` tried by cross-validation.
@@ -218,7 +232,8 @@ impl Cascade {
                 self.format, self.version
             ));
         }
-        if self.features != FEATURES {
+        let all_large = self.categories.iter().all(|c| is_large(c));
+        if self.features != FEATURES && !(self.features == PREVIOUS_FEATURES && all_large) {
             return Err(format!("feature set '{}' is not this build's '{FEATURES}'", self.features));
         }
         let dim = feature_dim(self.categories.len());
@@ -304,20 +319,22 @@ fn context_features(
     let mut psi = vec![0.0; feature_dim(categories.len())];
     psi[0] = p_i;
     psi[1] = p_i * p_i;
+    let own_large = is_large(&detections[i].category);
     for (k, category) in categories.iter().enumerate() {
-        // (p_j, overlap volume, j) of the most confident overlapping detection of the category.
+        let top_down = !own_large || !is_large(category);
+        // (p_j, overlap, j) of the most confident overlapping detection of the category.
         let mut best: Option<(f64, f64, usize)> = None;
         for (j, d) in detections.iter().enumerate() {
             if j == i || &d.category != category || best.is_some_and(|b| f64::from(d.score) <= b.0) {
                 continue;
             }
-            let overlap = f64::from(intersection_volume(&own, &boxes[j]));
+            let overlap = overlap_measure(&own, &boxes[j], top_down);
             if overlap > 0.0 {
                 best = Some((f64::from(d.score), overlap, j));
             }
         }
         let Some((p_j, overlap, j)) = best else { continue };
-        let (v_i, v_j) = (f64::from(own.volume()), f64::from(boxes[j].volume()));
+        let (v_i, v_j) = (size_measure(&own, top_down), size_measure(&boxes[j], top_down));
         let union = v_i + v_j - overlap;
         let base = 2 + PER_CATEGORY * k;
         psi[base] = p_j;
@@ -340,6 +357,26 @@ fn context_features(
         }
     }
     psi
+}
+
+/// Whether `category` is one of the ten large categories (3D overlap between two of them; module doc).
+fn is_large(category: &str) -> bool {
+    LARGE_CATEGORIES.contains(&category)
+}
+
+/// The overlap `O` of two boxes: their intersection's volume (m³), or with `top_down` the overlap of
+/// their footprints seen from above (m²; module doc).
+fn overlap_measure(a: &Cuboid, b: &Cuboid, top_down: bool) -> f64 {
+    f64::from(if top_down { footprint_overlap_area(a, b) } else { intersection_volume(a, b) })
+}
+
+/// The size `V` that goes with [`overlap_measure`]: volume, or with `top_down` the footprint's area.
+fn size_measure(b: &Cuboid, top_down: bool) -> f64 {
+    if top_down {
+        f64::from(b.size.x) * f64::from(b.size.y)
+    } else {
+        f64::from(b.volume())
+    }
 }
 
 /// One category's training samples over frames: ψ, the combined-score base `z` (first-stage raw score),
@@ -428,9 +465,16 @@ pub fn train_cascade(
     for frame in frames {
         check_first_stage(&frame.detections)?;
     }
+    // Progress: a category's stage takes minutes with ~10 000 detections (the SVM's QP solves).
+    let finished = std::sync::atomic::AtomicUsize::new(0);
     let results: Vec<(String, StageResult)> = categories
         .par_iter()
-        .map(|category| (category.clone(), train_stage(frames, category, categories, iou_threshold)))
+        .map(|category| {
+            let result = train_stage(frames, category, categories, iou_threshold);
+            let done = finished.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+            log::info!("cascade: '{category}' done ({done} of {})", categories.len());
+            (category.clone(), result)
+        })
         .collect();
     let stages = results.iter().filter_map(|(c, r)| r.as_ref().ok().map(|s| (c.clone(), s.clone()))).collect();
     let cascade = Cascade {

@@ -7,8 +7,8 @@ use std::process::Command;
 mod common;
 
 use cog_gpu::cascade::{
-    feature_dim, frame_context_features, train_cascade, wall_context, Cascade, CascadeFrame, CascadeTraining,
-    LAYOUT_FEATURES, RBF_CENTRES, RBF_WIDTHS,
+    feature_dim, frame_context_features, train_cascade, wall_context, Cascade, CascadeFrame, CascadeTraining, FEATURES,
+    LAYOUT_FEATURES, PREVIOUS_FEATURES, RBF_CENTRES, RBF_WIDTHS,
 };
 use cog_gpu::eval::{average_precision, Detection, FrameDetections, ScoredBox};
 use cog_gpu::frame::Object;
@@ -88,6 +88,69 @@ fn context_features_match_a_hand_computation() {
     for (k, (got, want)) in psi.iter().zip(expected).enumerate() {
         assert!((got - want).abs() < 1e-6, "ψ[{k}] = {got}, expected {want}");
     }
+}
+
+/// The paper's top-down overlap for small objects (§6.1): a monitor standing on a desk touches it (no 3D
+/// overlap), yet sees it through their footprints, and the desk sees the monitor; two large categories
+/// (the desk and a chair pushed under it) keep the 3D rule, whose S2 differs from the top-down one here.
+#[test]
+fn small_objects_see_their_supporters_from_above() {
+    let detections = vec![
+        // The desk: 1.2 × 0.6 m, top at 0.75 m, p = 0.8.
+        detection("desk", [0.0, 0.0, 0.375], [1.2, 0.6, 0.75], 0.8, 0.0),
+        // The monitor on it: 0.5 × 0.2 m footprint inside the desk's, from 0.75 m up, p = 0.5.
+        detection("monitor", [0.1, 0.0, 0.95], [0.5, 0.2, 0.4], 0.5, 0.0),
+        // A chair pushed 0.1 m under the desk (y from 0.2 to 1.0 m), 0.9 m tall, p = 0.6.
+        detection("chair", [0.0, 0.6, 0.45], [0.5, 0.8, 0.9], 0.6, 0.0),
+    ];
+    let categories = names(&["chair", "desk", "monitor"]);
+    let psi = frame_context_features(&detections, &categories, None);
+    let block = |i: usize, k: usize| -> Vec<f64> { psi[i][2 + 5 * k..2 + 5 * k + 5].to_vec() };
+    let close = |got: Vec<f64>, want: [f64; 5], what: &str| {
+        for (m, (g, w)) in got.iter().zip(want).enumerate() {
+            assert!((g - w).abs() < 1e-6, "{what}[{m}] = {g}, expected {w} ({got:?})");
+        }
+    };
+    // Monitor (i = 1) and desk: O = 0.1 m², V_i = 0.1, V_j = 0.72, U = 0.72.
+    let (o, a_desk) = (0.5 * 0.2, 1.2 * 0.6);
+    close(block(1, 1), [0.8, 0.8, 0.8 * o / a_desk, 0.8 * o / a_desk, 0.5 * 0.8], "monitor/desk");
+    // Desk (i = 0) and monitor: the same pair from the other side.
+    close(block(0, 2), [0.5, 0.5 * o / a_desk, 0.5, 0.5 * o / a_desk, 0.8 * 0.5], "desk/monitor");
+    // Monitor and chair: apart from above (the monitor's y from −0.1 to 0.1 m), so nothing.
+    close(block(1, 0), [0.0; 5], "monitor/chair");
+    // Desk and chair (both large, 3D): footprint overlap 0.5 × 0.1 m = 0.05 m², heights 0–0.75 and 0–0.9:
+    // O = 0.05 · 0.75 m³, V_desk = 0.54, V_chair = 0.36 (from above S2 would be 0.05 / 0.4 = 0.125, not 0.104).
+    let o3 = 0.05 * 0.75;
+    let (v_desk, v_chair) = (1.2 * 0.6 * 0.75, 0.5 * 0.8 * 0.9);
+    let u = v_desk + v_chair - o3;
+    close(block(0, 0), [0.6, 0.6 * o3 / v_desk, 0.6 * o3 / v_chair, 0.6 * o3 / u, 0.8 * 0.6], "desk/chair");
+}
+
+/// A cascade file of the previous feature set is read when its categories are all large (whose features
+/// did not change) and refused with the file named when it has a small one.
+#[test]
+fn previous_feature_set_is_read_only_for_large_categories() {
+    let training: Vec<_> = (0..20).map(frame).collect();
+    let (mut cascade, _) =
+        train_cascade(&training, &names(&["bed", "table"]), 0.25, CascadeTraining::default()).unwrap();
+    assert_eq!(cascade.features, FEATURES);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("cascade.json");
+    cascade.features = PREVIOUS_FEATURES.to_string();
+    cascade.write(&path).unwrap();
+    assert_eq!(Cascade::read(&path).unwrap(), cascade);
+    let stage = cascade.stages["table"].clone();
+    cascade.categories.push("pillow".to_string());
+    let mut longer = stage;
+    longer.weights = vec![0.0; feature_dim(3)];
+    cascade.stages.insert("table".to_string(), longer);
+    cascade.write(&path).unwrap();
+    let err = Cascade::read(&path).unwrap_err().to_string();
+    assert!(err.contains("cascade.json") && err.contains(PREVIOUS_FEATURES), "{err}");
+    cascade.features = FEATURES.to_string();
+    cascade.stages.remove("bed");
+    cascade.write(&path).unwrap();
+    assert!(Cascade::read(&path).is_ok(), "the same file with this build's feature set is read");
 }
 
 /// Frame `f` of a constructed set: a bed and a table (ground truth); the first stage finds the bed
