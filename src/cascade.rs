@@ -398,9 +398,10 @@ fn samples_of(frames: &[CascadeFrame], category: &str, categories: &[String], io
     for (f, frame) in frames.iter().enumerate() {
         s.truth.push(frame.truth.iter().filter(|o| o.category == category).map(|o| o.cuboid).collect());
         let detections = &frame.detections;
-        let features = frame_context_features(detections, categories, frame.room.as_deref());
+        let frame_boxes: Vec<Cuboid> = detections.iter().map(Detection::cuboid).collect();
         for (i, d) in detections.iter().enumerate().filter(|(_, d)| d.category == category) {
-            s.psi.push(features[i].clone());
+            // ψ of this category's detections only (every category's stage reads the same frames).
+            s.psi.push(context_features(detections, &frame_boxes, i, categories, frame.room.as_deref()));
             s.raw.push(d.raw_score.unwrap_or(d.score));
             s.frame.push(f);
             s.cuboids.push(d.cuboid());

@@ -84,9 +84,14 @@ fn context_features_match_a_hand_computation() {
         0.0, 0.0, 0.0, 0.0, 0.0, // table: no other table
         1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, // no room
     ];
-    assert_eq!(expected.len(), psi.len());
-    for (k, (got, want)) in psi.iter().zip(expected).enumerate() {
-        assert!((got - want).abs() < 1e-6, "ψ[{k}] = {got}, expected {want}");
+    assert_close(psi, &expected, "ψ");
+}
+
+/// Every number of `got` within 1e-6 of `want`, lengths equal.
+fn assert_close(got: &[f64], want: &[f64], what: &str) {
+    assert_eq!(got.len(), want.len(), "{what}: {got:?}");
+    for (k, (g, w)) in got.iter().zip(want).enumerate() {
+        assert!((g - w).abs() < 1e-6, "{what}[{k}] = {g}, expected {w} ({got:?})");
     }
 }
 
@@ -105,12 +110,8 @@ fn small_objects_see_their_supporters_from_above() {
     ];
     let categories = names(&["chair", "desk", "monitor"]);
     let psi = frame_context_features(&detections, &categories, None);
-    let block = |i: usize, k: usize| -> Vec<f64> { psi[i][2 + 5 * k..2 + 5 * k + 5].to_vec() };
-    let close = |got: Vec<f64>, want: [f64; 5], what: &str| {
-        for (m, (g, w)) in got.iter().zip(want).enumerate() {
-            assert!((g - w).abs() < 1e-6, "{what}[{m}] = {g}, expected {w} ({got:?})");
-        }
-    };
+    let block = |i: usize, k: usize| -> &[f64] { &psi[i][2 + 5 * k..2 + 5 * k + 5] };
+    let close = |got: &[f64], want: [f64; 5], what: &str| assert_close(got, &want, what);
     // Monitor (i = 1) and desk: O = 0.1 m², V_i = 0.1, V_j = 0.72, U = 0.72.
     let (o, a_desk) = (0.5 * 0.2, 1.2 * 0.6);
     close(block(1, 1), [0.8, 0.8, 0.8 * o / a_desk, 0.8 * o / a_desk, 0.5 * 0.8], "monitor/desk");
