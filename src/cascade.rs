@@ -364,7 +364,7 @@ fn context_features(
     psi
 }
 
-/// Whether `category` is one of the ten large categories (3D overlap between two of them; module doc).
+/// Whether `category` is one of the ten large categories, which keep the 3D overlap (module doc).
 fn is_large(category: &str) -> bool {
     LARGE_CATEGORIES.contains(&category)
 }

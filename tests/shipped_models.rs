@@ -139,9 +139,10 @@ fn the_shipped_layout_model_lays_out_the_real_frame() {
 }
 
 /// The shipped context cascade (`assets/models/cascade.json`) has this build's feature set, a context
-/// category for each of the 19 shipped models and a second stage for at least one small category; through the README's main command (`detect`, which applies it with the
-/// room of the shipped layout model) the sample bedroom's detections are rescored and its two best
-/// detections are still correct, the bed one of them.
+/// category for each of the 19 shipped models and a second stage for at least one small category; through
+/// the README's main command (`detect`, which applies it with the room of the shipped layout model) the
+/// sample bedroom's detections are rescored and its two best detections are still correct, the bed one of
+/// them.
 #[test]
 fn the_shipped_cascade_rescores_the_sample_and_keeps_its_best_two_correct() {
     use cog_gpu::cascade::{Cascade, FEATURES};
