@@ -9,8 +9,8 @@
 # not retrained (delete them to retrain).
 # Data (320x240, synth's default room mix; seeds never shared between sets):
 #   train        400 frames, seed 11;
-#   validation   100 frames, seed 13 (chose C among 100, 1000, 10000 and 100000, the orientation step and
-#                the box features);
+#   validation   100 frames, seed 13 (chose C among 100, 1000, 10000 and 100000, the orientation step,
+#                the box features, the snap and the front wall's reach beyond the points);
 #   development  200 frames, seed 12: the first version's test set, looked at while developing (so its
 #                figures are not held out; kept for comparison with the first version's numbers);
 #   test         200 frames, seed 14: held out, generated after every choice was made;

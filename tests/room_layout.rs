@@ -1,7 +1,8 @@
 //! Room layout (`cog_gpu::room_layout`): free-space IoU against hand-computed boxes, the Manhattan and
 //! cubical region assignment of hand-placed points, the summed-area IoU against the direct count, the
 //! hypotheses' 80 % rule, the orientation features against their closed form, the wall leaks against a
-//! direct count, the floor and ceiling snapped to constructed planes, the model file,
+//! direct count, front walls and reach features beyond the points of a room larger than the sensor's range,
+//! the floor and ceiling snapped to constructed planes, the model file,
 //! and the PLY writer read back.
 
 use cog_gpu::frame::RoomLayout;
@@ -12,8 +13,8 @@ use cog_gpu::room_layout::free_space::{free_space_counts, free_space_iou, YawFre
 use cog_gpu::room_layout::learn::yaw_difference_mod_90;
 use cog_gpu::room_layout::orientation::orientation_features;
 use cog_gpu::room_layout::voxels::{
-    box_features, cubical_region, features, manhattan_region, Discretisation, ScoringTables, YawCells, BOX_FEATURES,
-    LAYERS, ORIENTATION_FEATURES,
+    box_features, cubical_region, features, front_plane_evidence, manhattan_region, Discretisation, ScoringTables,
+    YawCells, BOX_FEATURES, LAYERS, ORIENTATION_FEATURES, REACH_FEATURES, WALL_LEAK_FEATURES,
 };
 use cog_gpu::room_layout::{
     orientation_yaw, room_axes, snap_floor_and_ceiling, to_mm, LayoutScene, RoomBox, MIN_ROOM_HEIGHT, ORIENTATIONS,
@@ -103,7 +104,7 @@ fn room_scene() -> LayoutScene {
             normals.push(Vec3::Z);
         }
     }
-    LayoutScene { camera, image_size, points, normals, floor: -1.5, ceiling: 1.0, stride: 1 }
+    LayoutScene { camera, image_size, points, normals, floor: -1.5, ceiling: 1.0, stride: 1, missing_rays: Vec::new() }
 }
 
 /// Index of the orientation with yaw `degrees` (panics when there is none: a test set-up error).
@@ -197,7 +198,8 @@ fn features_of_a_constructed_room_put_wall_points_in_their_bands() {
     // front corners within 150 mm (cells of the front band by the diagonal split): nothing is exterior.
     let exterior: f32 = voxel_part[8 * LAYERS * 4..].iter().sum();
     assert_eq!(exterior, 0.0);
-    assert_eq!(phi[288 + ORIENTATION_FEATURES..], [0.0; 4], "no wall leaks");
+    // No wall leaks, and no reach (the walls are at the points).
+    assert_eq!(phi[288 + ORIENTATION_FEATURES..], [0.0; WALL_LEAK_FEATURES + REACH_FEATURES]);
     // A room 1 m too narrow on the left puts the left wall's points outside, in region 9.
     let narrow = RoomBox { u0: -1000, ..truth };
     let phi = features(Discretisation::Manhattan, &cells, &narrow);
@@ -384,6 +386,81 @@ fn hypotheses_hold_eighty_percent_and_include_the_room() {
         .map(|b| free_space_iou(&b.to_room(-1.5, 1.0), &truth, &scene.camera, scene.image_size))
         .fold(0.0, f64::max);
     assert!(best > 0.97, "best hypothesis IoU {best}");
+}
+
+#[test]
+fn the_front_wall_reaches_beyond_the_farthest_points() {
+    // The 4 × 5 m room of `room_scene` seen only to y < 3 m, as by a sensor of 3 m range: the farthest cell
+    // ends at v = 3000 mm and the front wall (5 m) returns no depth.
+    let full = room_scene();
+    let (points, normals): (Vec<Vec3>, Vec<Vec3>) =
+        full.points.iter().zip(&full.normals).filter(|(p, _)| p.y < 3.0).map(|(p, n)| (*p, *n)).unzip();
+    let scene = LayoutScene { points, normals, ..full };
+    let (cells, boxes) = cog_gpu::room_layout::hypotheses(&scene);
+    let at_yaw_zero: Vec<&RoomBox> = boxes.iter().filter(|b| b.yaw_index as usize == YAW_ZERO).collect();
+    assert_eq!(cells[YAW_ZERO].farthest_front(), 3000);
+    // Front walls at the farthest edge and 0.5, 1 and 2 m beyond it, all among the hypotheses.
+    for v1 in [3000, 3500, 4000, 5000] {
+        assert!(at_yaw_zero.iter().any(|b| b.v1 == v1), "no front wall at {v1} mm");
+    }
+    // The other walls stop at their points (the left points at x = −2.0 fill the cell [−2000, −1950) mm,
+    // the right ones at 2.0 the cell [2000, 2050)) and at the camera (the back: the points start at 0.5 m).
+    for b in &at_yaw_zero {
+        assert!(b.u0 >= -2000 && b.u1 <= 2050 && b.v0 == 0, "{b:?}");
+    }
+    // The room itself (front wall 2 m beyond the points) is a hypothesis, and the best one.
+    let truth = rect(-2.0, 2.0, 0.0, 5.0, -1.5, 1.0);
+    let iou = |b: &RoomBox| free_space_iou(&b.to_room(-1.5, 1.0), &truth, &scene.camera, scene.image_size);
+    let best = boxes.iter().max_by(|a, b| iou(a).total_cmp(&iou(b))).unwrap();
+    assert_eq!((best.yaw_index as usize, best.v1), (YAW_ZERO, 5000), "{best:?}");
+    assert!(iou(best) > 0.97, "best hypothesis IoU {}", iou(best));
+    // Reach features [r > 0, r, r², (r > 0)·f] with f = 3 m, the farthest cell's edge.
+    let reach_of =
+        |b: &RoomBox| box_features(&cells[YAW_ZERO], b)[ORIENTATION_FEATURES + WALL_LEAK_FEATURES..].to_vec();
+    let room = RoomBox { yaw_index: YAW_ZERO as u32, u0: -2000, u1: 2050, v0: 0, v1: 5000 };
+    assert_eq!(reach_of(&room).len(), REACH_FEATURES);
+    // The scene has no missing rays, so the three `missing` products are 0; `near` counts the side walls'
+    // points within 0.5 m short of the plane (the next test checks the counting by hand) and enters as its
+    // square root.
+    let [missing, near] = cells[YAW_ZERO].front_evidence;
+    assert_eq!(missing, 0.0);
+    assert!(near > 0.0);
+    let s = (near as f64).sqrt();
+    assert_eq!(reach_of(&room), [1.0, 2.0, 4.0, 3.0, 0.0, 0.0, 0.0, s, 2.0 * s]);
+    assert_eq!(reach_of(&RoomBox { v1: 3500, ..room }), [1.0, 0.5, 0.25, 3.0, 0.0, 0.0, 0.0, s, 0.5 * s]);
+    assert_eq!(reach_of(&RoomBox { v1: 3000, ..room }), [0.0; REACH_FEATURES]);
+    // With the evidence of an unseen wall (set by hand), the `missing` products follow.
+    let mut unseen = cells[YAW_ZERO].clone();
+    unseen.front_evidence = [0.75, 0.0];
+    let reach =
+        box_features(&unseen, &RoomBox { v1: 4000, ..room })[ORIENTATION_FEATURES + WALL_LEAK_FEATURES..].to_vec();
+    assert_eq!(reach, [1.0, 1.0, 1.0, 3.0, 0.75, 0.75, 0.75, 0.0, 0.0]);
+}
+
+#[test]
+fn front_plane_evidence_counts_the_rays_through_the_plane_by_hand() {
+    // Camera at the origin looking along +y; floor −1.5 m, ceiling 1.0 m; the plane y = 4 m.
+    let (camera, image_size) = wide_camera();
+    let mut points = Vec::new();
+    // 10 points of a wall on the plane (crossing, near), 5 of a chair at 2 m (crossing, not near),
+    // 3 floor points at 2 m (their rays pass below the floor at the plane: not crossing).
+    points.extend((0..10).map(|i| Vec3::new(-1.0 + 0.2 * i as f32, 4.0, 0.0)));
+    points.extend((0..5).map(|i| Vec3::new(0.1 * i as f32, 2.0, 0.0)));
+    points.extend((0..3).map(|i| Vec3::new(0.1 * i as f32, 2.0, -1.5)));
+    let normals = vec![Vec3::Z; points.len()];
+    // Missing rays: 6 level ones ahead (crossing), 2 behind the camera, 1 so steep that it meets the plane
+    // above the ceiling (z = 4 > 1).
+    let mut missing_rays = vec![Vec3::new(0.0, 1.0, 0.1); 6];
+    missing_rays.extend([Vec3::new(0.0, -1.0, 0.0), Vec3::new(0.3, -1.0, 0.0), Vec3::new(0.0, 1.0, 1.0)]);
+    let scene = LayoutScene { camera, image_size, points, normals, floor: -1.5, ceiling: 1.0, stride: 1, missing_rays };
+    let crossing = 10.0 + 5.0 + 6.0;
+    assert_eq!(front_plane_evidence(&scene, Vec2::Y, 4.0), [6.0 / crossing, 10.0 / crossing]);
+    // At 4.6 m the wall's points are 0.6 m short of the plane: not near.
+    assert_eq!(front_plane_evidence(&scene, Vec2::Y, 4.6), [6.0 / crossing, 0.0]);
+    // Looking backwards only the two rays behind the camera cross; both missing.
+    assert_eq!(front_plane_evidence(&scene, -Vec2::Y, 4.0), [1.0, 0.0]);
+    // No plane in front (no points there): no evidence.
+    assert_eq!(front_plane_evidence(&scene, Vec2::Y, 0.0), [0.0, 0.0]);
 }
 
 #[test]

@@ -61,9 +61,9 @@ fn train_layout_eval_and_detect_end_to_end() {
     ok(&["train-layout", "--data", &p("data"), "--out", &p("layout.json"), "--max-iterations", "3"]);
     let model = json(&dir.path().join("layout.json"));
     assert_eq!(model["format"], "cog-gpu-layout-model");
-    // 288 Manhattan-voxel weights and 7 box-feature weights.
-    assert_eq!(model["weights"].as_array().unwrap().len(), 295);
-    assert_eq!(model["version"], 2);
+    // 288 Manhattan-voxel weights and 16 box-feature weights.
+    assert_eq!(model["weights"].as_array().unwrap().len(), 304);
+    assert_eq!(model["version"], 3);
     assert_eq!(model["provenance"]["data_seed"], 5);
 
     ok(&["layout", &p("data"), "--model", &p("layout.json"), "--out", &p("out"), "--ply"]);
@@ -164,23 +164,26 @@ fn bad_layout_inputs_are_errors_naming_the_file() {
     std::fs::write(dir.path().join("garbage.json"), "{not json").unwrap();
     rejected(&["layout", "--model", &p("garbage.json"), "--out", &p("out")], "garbage.json");
     let short =
-        r#"{"format": "cog-gpu-layout-model", "version": 2, "discretisation": "manhattan", "weights": [1.0, 2.0]}"#;
+        r#"{"format": "cog-gpu-layout-model", "version": 3, "discretisation": "manhattan", "weights": [1.0, 2.0]}"#;
     std::fs::write(dir.path().join("short.json"), short).unwrap();
     rejected(&["layout", "--model", &p("short.json"), "--out", &p("out")], "short.json");
     let nan = format!(
-        r#"{{"format": "cog-gpu-layout-model", "version": 2, "discretisation": "cubical", "weights": [{}]}}"#,
-        vec!["1e30"; 391].join(",")
+        r#"{{"format": "cog-gpu-layout-model", "version": 3, "discretisation": "cubical", "weights": [{}]}}"#,
+        vec!["1e30"; 400].join(",")
     );
     std::fs::write(dir.path().join("huge.json"), nan).unwrap();
     rejected(&["layout", "--model", &p("huge.json"), "--out", &p("out")], "huge.json");
-    // A version-1 file (before the orientation features) is refused with the way out.
-    let old = format!(
-        r#"{{"format": "cog-gpu-layout-model", "version": 1, "discretisation": "manhattan", "weights": [{}]}}"#,
-        vec!["0.5"; 288].join(",")
-    );
-    std::fs::write(dir.path().join("old.json"), old).unwrap();
-    let stderr = rejected(&["layout", "--model", &p("old.json"), "--out", &p("out")], "old.json");
-    assert!(stderr.contains("train-layout"), "{stderr}");
+    // Older files (version 1 before the box features, version 2 before their reach) are refused with the
+    // way out.
+    for (version, dim) in [(1, 288), (2, 295)] {
+        let old = format!(
+            r#"{{"format": "cog-gpu-layout-model", "version": {version}, "discretisation": "manhattan", "weights": [{}]}}"#,
+            vec!["0.5"; dim].join(",")
+        );
+        std::fs::write(dir.path().join("old.json"), old).unwrap();
+        let stderr = rejected(&["layout", "--model", &p("old.json"), "--out", &p("out")], "old.json");
+        assert!(stderr.contains("train-layout"), "{stderr}");
+    }
     rejected(&["eval", "--layout", "--data", &p("nowhere"), "--detections", &p("out")], "nowhere");
     rejected(&["train-layout", "--data", &p("nowhere"), "--out", &p("m.json")], "nowhere");
 }

@@ -42,7 +42,18 @@
 //!   points whose normal faces that wall (planes show as peaks), searched between the farthest point and the
 //!   0.2 quantile (a wall closer than that would leave more than 20 % of the points outside), and (iii) the
 //!   camera's own coordinate when the camera lies beyond the farthest point (the camera is in the room; the
-//!   wall behind it is never seen). All combinations with sides ≥ [`MIN_SIDE_MM`] that contain the camera
+//!   wall behind it is never seen), and (iv) for the front wall — the one the camera faces — the positions
+//!   [`REACH_STEPS_MM`] = 0.5, 1 and 2 m beyond the farthest point (our addition: the paper bounds the walls
+//!   by the farthest point, but a depth sensor stops at 4.5–7.5 m and a large room's far wall returns no
+//!   depth, while free-space IoU counts the whole room inside the view; on the validation frames (seed 13)
+//!   the best hypothesis's mean free-space IoU goes 94.9 → 96.9 with them, and the hypotheses per frame
+//!   from a mean of 434 to 871. Reaching with the left and right walls too gave 97.8 with 6 523 hypotheses,
+//!   but a model trained with them chose side walls beyond the points where they are out of view — free for
+//!   the loss — and scored 92.49 against 92.85 without any reach. The box features' *reach* (see
+//!   [`voxels`]) tells the model how far beyond the points the front wall lies and whether the sensor saw
+//!   the plane of the farthest points ([`voxels::front_plane_evidence`], from the rays of the pixels
+//!   without depth, [`LayoutScene::missing_rays`]): the reach alone, without that evidence, did not help
+//!   (92.69), with it the validation mean rose to 93.85). All combinations with sides ≥ [`MIN_SIDE_MM`] that contain the camera
 //!   (our addition: the camera is in the room; without it the learned model sometimes put the unseen back
 //!   wall in front of the camera) and whose cuboid holds ≥ 80 % of the points (cell centres, see
 //!   [`voxels`]) are kept.
@@ -87,6 +98,8 @@ pub const MIN_INSIDE_FRACTION: f64 = 0.8;
 pub const PEAKS_PER_WALL: usize = 8;
 /// Smallest room side, millimetres.
 pub const MIN_SIDE_MM: i32 = 1000;
+/// Front-wall candidates beyond the farthest point (millimetres past it; see the module doc).
+pub const REACH_STEPS_MM: [i32; 3] = [500, 1000, 2000];
 
 /// Yaw (radians) of orientation `k`.
 pub fn orientation_yaw(k: usize) -> f32 {
@@ -148,6 +161,10 @@ pub struct LayoutScene {
     pub ceiling: f32,
     /// Pixel stride of the subsampling.
     pub stride: u32,
+    /// Upright directions (from the camera, the origin) of the subsampled pixels that returned **no depth**
+    /// (the same pixel grid as `points`): the evidence that the sensor saw nothing within its range along
+    /// them ([`voxels::front_plane_evidence`]). Not unit length (any positive multiple of the ray).
+    pub missing_rays: Vec<Vec3>,
 }
 
 impl LayoutScene {
@@ -181,8 +198,38 @@ impl LayoutScene {
         let normals = estimate_normals(&points);
         let (floor, ceiling) = snap_floor_and_ceiling(&points, &normals, floor, ceiling);
         let camera = Camera::new(frame.intrinsics(), frame.rtilt());
-        Ok(LayoutScene { camera, image_size: [frame.width(), frame.height()], points, normals, floor, ceiling, stride })
+        let missing_rays = missing_rays(frame, stride);
+        Ok(LayoutScene {
+            camera,
+            image_size: [frame.width(), frame.height()],
+            points,
+            normals,
+            floor,
+            ceiling,
+            stride,
+            missing_rays,
+        })
     }
+}
+
+/// Upright directions of the pixels on the subsampling grid (every `stride`-th column and row, as the points)
+/// whose depth is missing: the back-projection of the frame module at depth 1 (`(x, 1, −y)` rotated by
+/// Rtilt, in double precision as [`Frame::point_cloud`]).
+pub fn missing_rays(frame: &Frame, stride: u32) -> Vec<Vec3> {
+    let (w, h) = (frame.width(), frame.height());
+    let rtilt = frame.rtilt_f64();
+    let (fx, fy, cx, cy) = (frame.k[0][0], frame.k[1][1], frame.k[0][2], frame.k[1][2]);
+    let mut out = Vec::new();
+    for row in (0..h).step_by(stride as usize) {
+        for col in (0..w).step_by(stride as usize) {
+            if frame.depth_mm[(row * w + col) as usize] == 0 {
+                let x = ((col + 1) as f64 - cx) / fx;
+                let y = ((row + 1) as f64 - cy) / fy;
+                out.push((rtilt * glam::DVec3::new(x, 1.0, -y)).as_vec3());
+            }
+        }
+    }
+    out
 }
 
 /// Floor and ceiling from their height quantiles `(floor_q, ceiling_q)` and the subsampled points with
@@ -229,8 +276,16 @@ pub struct PredictedLayout {
     pub hypotheses: usize,
 }
 
-/// Wall candidates of one side in one orientation, ascending, deduplicated.
-fn wall_candidates(coords: &[i32], facing: &[bool], low_side: bool, camera_mm: i32, cell_mm: i32) -> Vec<i32> {
+/// Wall candidates of one side in one orientation, ascending, deduplicated; `reach` adds those beyond the
+/// farthest point ([`REACH_STEPS_MM`]).
+fn wall_candidates(
+    coords: &[i32],
+    facing: &[bool],
+    low_side: bool,
+    reach: bool,
+    camera_mm: i32,
+    cell_mm: i32,
+) -> Vec<i32> {
     let mut sorted = coords.to_vec();
     sorted.sort_unstable();
     let n = sorted.len();
@@ -265,6 +320,9 @@ fn wall_candidates(coords: &[i32], facing: &[bool], low_side: bool, camera_mm: i
     let mut out: Vec<i32> =
         peaks.iter().take(PEAKS_PER_WALL).map(|&(_, i)| origin + i as i32 * cell_mm + cell_mm / 2).collect();
     out.push(farthest);
+    if reach {
+        out.extend(REACH_STEPS_MM.iter().map(|&step| if low_side { farthest - step } else { farthest + step }));
+    }
     let camera_beyond = if low_side { camera_mm < farthest } else { camera_mm > farthest };
     if camera_beyond {
         out.push(camera_mm);
@@ -283,10 +341,11 @@ pub fn orientation_hypotheses(scene: &LayoutScene, cells: &voxels::YawCells) -> 
     let faces_a: Vec<bool> = scene.normals.iter().map(|n| voxels::normal_class(*n, a, b) == voxels::ALONG_A).collect();
     let faces_b: Vec<bool> = scene.normals.iter().map(|n| voxels::normal_class(*n, a, b) == voxels::ALONG_B).collect();
     let cell = voxels::CELL_MM;
-    let u0s = wall_candidates(&us, &faces_a, true, 0, cell);
-    let u1s = wall_candidates(&us, &faces_a, false, 0, cell);
-    let v0s = wall_candidates(&vs, &faces_b, true, 0, cell);
-    let v1s = wall_candidates(&vs, &faces_b, false, 0, cell);
+    // Only the front wall (v1), the one the camera faces, reaches beyond the points (see the module doc).
+    let u0s = wall_candidates(&us, &faces_a, true, false, 0, cell);
+    let u1s = wall_candidates(&us, &faces_a, false, false, 0, cell);
+    let v0s = wall_candidates(&vs, &faces_b, true, false, 0, cell);
+    let v1s = wall_candidates(&vs, &faces_b, false, true, 0, cell);
     let needed = (MIN_INSIDE_FRACTION * cells.total_points as f64).ceil() as u64;
     let mut out = Vec::new();
     // The camera (the origin) is inside every hypothesis.

@@ -2,9 +2,9 @@
 //! (`crate::model::read_models_dir` skips it by name, [`crate::model::LAYOUT_MODEL_FILE`]).
 //!
 //! ```json
-//! {"format": "cog-gpu-layout-model", "version": 2, "discretisation": "manhattan" | "cubical",
-//!  "weights": [295 or 391 numbers: the voxel weights in the order of room_layout::voxels::feature_index,
-//!              then the 7 box-feature weights of room_layout::voxels::box_features],
+//! {"format": "cog-gpu-layout-model", "version": 3, "discretisation": "manhattan" | "cubical",
+//!  "weights": [304 or 400 numbers: the voxel weights in the order of room_layout::voxels::feature_index,
+//!              then the 16 box-feature weights of room_layout::voxels::box_features],
 //!  "provenance": {free-form: the training command, data, seeds, counts, solver figures}}
 //! ```
 
@@ -14,9 +14,10 @@ use super::voxels::Discretisation;
 use crate::error::{Error, Result};
 
 pub const FORMAT: &str = "cog-gpu-layout-model";
-/// Version 2 added the box features (`room_layout::voxels::box_features`); a version-1 file has none and is
-/// refused (retrain it with `cog-gpu train-layout`).
-pub const VERSION: u32 = 2;
+/// Version 2 added the box features (`room_layout::voxels::box_features`), version 3 their reach features
+/// (with the hypotheses beyond the farthest point); an older file lacks them and is refused (retrain it with
+/// `cog-gpu train-layout`).
+pub const VERSION: u32 = 3;
 /// Largest |weight| accepted (a larger one is no trained model and would overflow the fixed-point scores).
 pub const MAX_WEIGHT: f32 = 1e6;
 
@@ -42,8 +43,8 @@ impl LayoutModel {
         }
         if self.version != VERSION {
             return Err(format!(
-                "version {} (this build reads version {VERSION}, which adds the box features; retrain the \
-                 model with `cog-gpu train-layout`)",
+                "version {} (this build reads version {VERSION}, which adds the box features' reach; retrain \
+                 the model with `cog-gpu train-layout`)",
                 self.version
             ));
         }
