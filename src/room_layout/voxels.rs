@@ -30,7 +30,7 @@
 //! horizontal, other). The point density is the sum of the four classes, so a linear model has it without
 //! a separate entry. COG (image gradients) is not used by the layout (not implemented).
 //! Feature index: `(region·6 + layer)·4 + class`; Manhattan 12·6·4 = 288 voxel dimensions, cubical 16·6·4 =
-//! 384. After them come the [`BOX_FEATURES`] = 11 *box features*, computed per hypothesis on the CPU rather
+//! 384. After them come the [`BOX_FEATURES`] = 16 *box features*, computed per hypothesis on the CPU rather
 //! than summed by the kernel: the 3 orientation features of [`super::orientation`] (the same for every
 //! hypothesis of one orientation), then 4 **wall leaks**, per wall (front, left, back, right)
 //! `sqrt(n_w / N)` with `n_w` the points whose cell centre lies more than the band (150 mm) beyond the wall's
@@ -342,11 +342,12 @@ pub const FRONT_NEAR_M: f32 = 0.5;
 ///
 /// Our evidence for a front wall beyond the sensor's range (the paper's walls stop at the farthest point;
 /// our hypotheses reach past it, see [`super`]'s module doc). On the validation frames (seed 13) the 14 of
-/// 100 rooms whose front wall lies more than 0.3 m beyond the farthest point have `missing` 0.49–0.96 (one
-/// 0.01) and `near` ≤ 0.002: the rays through the plane return nothing, and what they do return is short
-/// of it (furniture, side walls). A wall seen at the farthest points has `missing` 0–0.4 (close walls) or
-/// up to 0.86 (walls near the range, whose returns fade out), and then `near` 0.05–0.27 (its own points)
-/// for all but four, which lie within 0.15 m of the farthest point (ambiguous to any evidence). A ray's
+/// 100 rooms whose front wall lies more than 0.3 m beyond the farthest point have `missing` 0.49–0.96 and
+/// `near` ≤ 0.002 (but one: 0.01 and 0.009): the rays through the plane return nothing, and what they do
+/// return is short of it (furniture, side walls). A wall seen at the farthest points has `missing` 0–0.4
+/// (nearer walls; `near` 0.02–1) or, for the 11 near the sensor's range, whose returns fade out, up to
+/// 0.86, and then `near` 0.05–0.27 (its own points) for all but four (0.003–0.007), which lie within
+/// 0.15 m of the farthest point (ambiguous to any evidence). A ray's
 /// direction is what counts (a point on a chair in front of the plane still says that the sensor saw along
 /// that ray); the side walls are ignored (the plane is unbounded across).
 pub fn front_plane_evidence(scene: &LayoutScene, b: Vec2, front_m: f32) -> [f32; 2] {
