@@ -419,12 +419,16 @@ fn the_front_wall_reaches_beyond_the_farthest_points() {
         |b: &RoomBox| box_features(&cells[YAW_ZERO], b)[ORIENTATION_FEATURES + WALL_LEAK_FEATURES..].to_vec();
     let room = RoomBox { yaw_index: YAW_ZERO as u32, u0: -2000, u1: 2050, v0: 0, v1: 5000 };
     assert_eq!(reach_of(&room).len(), REACH_FEATURES);
-    // The scene has no missing rays, so the three `missing` products are 0; `near` counts the side walls'
-    // points within 0.5 m short of the plane (the next test checks the counting by hand) and enters as its
-    // square root.
+    // The scene has no missing rays, so the three `missing` products are 0; `near` is, of the points whose
+    // ray crosses the plane y = 3 m between floor and ceiling, those within 0.5 m short of it (the side
+    // walls from y = 2.5 m on), counted here directly, and it enters as its square root.
     let [missing, near] = cells[YAW_ZERO].front_evidence;
     assert_eq!(missing, 0.0);
-    assert!(near > 0.0);
+    let crosses = |p: &Vec3| p.y > 0.0 && 3.0 * p.z / p.y > -1.5 && 3.0 * p.z / p.y < 1.0;
+    let crossing: Vec<&Vec3> = scene.points.iter().filter(|p| crosses(p)).collect();
+    let near_by_hand = crossing.iter().filter(|p| p.y >= 2.5).count() as f32 / crossing.len() as f32;
+    assert!(near_by_hand > 0.0 && near_by_hand < 1.0);
+    assert_eq!(near, near_by_hand);
     let s = (near as f64).sqrt();
     assert_eq!(reach_of(&room), [1.0, 2.0, 4.0, 3.0, 0.0, 0.0, 0.0, s, 2.0 * s]);
     assert_eq!(reach_of(&RoomBox { v1: 3500, ..room }), [1.0, 0.5, 0.25, 3.0, 0.0, 0.0, 0.0, s, 0.5 * s]);

@@ -328,6 +328,19 @@ impl YawCells {
         }
         ((self.origin[1] + self.size[1] as i32) * CELL_MM).max(0)
     }
+
+    /// Points whose cell centre `(u, v)` lies in `[u_lo, u_hi] × [v_lo, v_hi]` (millimetres, inclusive).
+    fn points_in(&self, [u_lo, u_hi]: [i32; 2], [v_lo, v_hi]: [i32; 2]) -> u64 {
+        let clamp = |lo: i32, hi: i32, axis: usize| -> Option<(usize, usize)> {
+            let first = (first_cell_at_or_after(lo) - self.origin[axis]).max(0);
+            let last = (cell_index(hi - CELL_MM / 2) - self.origin[axis]).min(self.size[axis] as i32 - 1);
+            (first <= last).then(|| (first as usize, last as usize + 1))
+        };
+        let (Some((i0, i1)), Some((j0, j1))) = (clamp(u_lo, u_hi, 0), clamp(v_lo, v_hi, 1)) else { return 0 };
+        let stride = self.size[0] + 1;
+        let at = |row: usize, col: usize| self.table[row * stride + col] as i64;
+        (at(j1, i1) - at(j0, i1) - at(j1, i0) + at(j0, i0)) as u64
+    }
 }
 
 /// Distance (metres, along the front wall's normal) within which a point counts as seen **at** the front
@@ -362,29 +375,17 @@ pub fn front_plane_evidence(scene: &LayoutScene, b: Vec2, front_m: f32) -> [f32;
         let z = front_m * d.z / along;
         z > scene.floor && z < scene.ceiling
     };
-    let seen: Vec<&Vec3> = scene.points.iter().filter(|d| crosses(d)).collect();
-    let near = seen.iter().filter(|p| (p.truncate().dot(b) - front_m).abs() <= FRONT_NEAR_M).count();
+    let (mut seen, mut near) = (0usize, 0usize);
+    for p in scene.points.iter().filter(|p| crosses(p)) {
+        seen += 1;
+        near += usize::from((p.truncate().dot(b) - front_m).abs() <= FRONT_NEAR_M);
+    }
     let missing = scene.missing_rays.iter().filter(|d| crosses(d)).count();
-    let crossing = seen.len() + missing;
+    let crossing = seen + missing;
     if crossing == 0 {
         [0.0; 2]
     } else {
         [missing as f32 / crossing as f32, near as f32 / crossing as f32]
-    }
-}
-
-impl YawCells {
-    /// Points whose cell centre `(u, v)` lies in `[u_lo, u_hi] × [v_lo, v_hi]` (millimetres, inclusive).
-    fn points_in(&self, [u_lo, u_hi]: [i32; 2], [v_lo, v_hi]: [i32; 2]) -> u64 {
-        let clamp = |lo: i32, hi: i32, axis: usize| -> Option<(usize, usize)> {
-            let first = (first_cell_at_or_after(lo) - self.origin[axis]).max(0);
-            let last = (cell_index(hi - CELL_MM / 2) - self.origin[axis]).min(self.size[axis] as i32 - 1);
-            (first <= last).then(|| (first as usize, last as usize + 1))
-        };
-        let (Some((i0, i1)), Some((j0, j1))) = (clamp(u_lo, u_hi, 0), clamp(v_lo, v_hi, 1)) else { return 0 };
-        let stride = self.size[0] + 1;
-        let at = |row: usize, col: usize| self.table[row * stride + col] as i64;
-        (at(j1, i1) - at(j0, i1) - at(j1, i0) + at(j0, i0)) as u64
     }
 }
 
