@@ -95,9 +95,10 @@ impl DetectOptions {
     }
 }
 
-/// The fast-path engines of one frame: the per-yaw lattices depend on the scene, the layout and the
-/// subdivisions only, so models that share them (all shipped models do) share one engine instead of
-/// binning every point of every yaw again.
+/// The fast-path engines of one frame: one per (scene, feature layout, fast options); the per-yaw lattices
+/// depend on the scene, the subdivisions and whether COG is binned only, so engines that differ in their
+/// voxel grid share them ([`FastEngine::sharing_lattices`]) instead of binning every point of every yaw
+/// again.
 pub struct FastEngines<'a> {
     engines: Vec<FastEngine<'a>>,
 }
@@ -112,7 +113,13 @@ impl<'a> FastEngines<'a> {
         let index = match self.position(scene, model) {
             Some(index) => index,
             None => {
-                self.engines.push(FastEngine::new(scene, &model.layout, model.features.fast_options()));
+                let options = model.features.fast_options();
+                let shared = self
+                    .engines
+                    .iter()
+                    .filter(|e| std::ptr::eq(e.scene(), scene))
+                    .find_map(|e| FastEngine::sharing_lattices(e, &model.layout, options));
+                self.engines.push(shared.unwrap_or_else(|| FastEngine::new(scene, &model.layout, options)));
                 self.engines.len() - 1
             }
         };

@@ -181,3 +181,25 @@ fn lane_dot_products_equal_the_plain_dot_product() {
         assert!((got - reference).abs() <= 1e-6 * magnitude.max(1e-30), "length {len}: {got} vs {reference}");
     }
 }
+
+/// Engines of one scene whose layouts differ only in the voxel grid share their per-yaw lattices
+/// (`FastEngine::sharing_lattices`, used by `detect`): their scores equal those of an engine that binned
+/// the points itself, bit for bit; engines that bin COG differently do not share.
+#[test]
+fn engines_sharing_lattices_score_as_engines_of_their_own() {
+    let w = window("chair", 0.2);
+    let large = FeatureLayout::default();
+    let small = FeatureLayout::new([3, 3, 3], false, Groups::ALL).unwrap();
+    let hyps = sample(&w, 30);
+    let first = FastEngine::new(&w.scene, &large, FastOptions::default());
+    let shared = FastEngine::sharing_lattices(&first, &small, FastOptions::default()).expect("same lattices");
+    let own = FastEngine::new(&w.scene, &small, FastOptions::default());
+    let weights = vec![(0..small.dim()).map(|n| ((n * 37 % 101) as f32 - 50.0) * 0.01).collect::<Vec<f32>>()];
+    let bits = |e: &FastEngine| e.scores(&hyps, &weights).iter().map(|s| s.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(&shared), bits(&own));
+    assert!(bits(&own).iter().any(|&b| f32::from_bits(b) != 0.0));
+    // Other subdivisions, or no COG where the first engine bins it: lattices of their own.
+    assert!(FastEngine::sharing_lattices(&first, &small, FastOptions { subdivisions: 3 }).is_none());
+    let geometry_only = FeatureLayout::new([3, 3, 3], false, Groups::GEOM).unwrap();
+    assert!(FastEngine::sharing_lattices(&first, &geometry_only, FastOptions::default()).is_none());
+}
