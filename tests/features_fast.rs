@@ -203,3 +203,32 @@ fn engines_sharing_lattices_score_as_engines_of_their_own() {
     let geometry_only = FeatureLayout::new([3, 3, 3], false, Groups::GEOM).unwrap();
     assert!(FastEngine::sharing_lattices(&first, &geometry_only, FastOptions::default()).is_none());
 }
+
+/// The call-free floor and ceiling of the sliding window, lattices and tables equal `f32::floor` and
+/// `f32::ceil` cast to i64 on every kind of f32: integers and their neighbours, halves, signed zeros, the
+/// 2²⁴ boundary where every f32 becomes an integer, huge values, infinities and NaN (all saturating casts).
+#[test]
+fn call_free_floor_and_ceiling_equal_the_library_ones() {
+    use cog_gpu::features::scene::{ceil_to_i64, floor_to_i64};
+    let mut values = vec![0.0f32, -0.0, 0.5, -0.5, 1e-30, -1e-30, f32::INFINITY, f32::NEG_INFINITY, f32::NAN, f32::MAX];
+    values.push(f32::MIN);
+    for k in -40..=40 {
+        let x = k as f32 * 0.25;
+        values.extend([x, f32::from_bits(x.to_bits().wrapping_add(1)), f32::from_bits(x.to_bits().wrapping_sub(1))]);
+    }
+    for e in [23, 24, 25, 31, 62, 63, 64, 70] {
+        let big = 2f32.powi(e);
+        values.extend([big, -big, f32::from_bits(big.to_bits() - 1), -f32::from_bits(big.to_bits() - 1)]);
+    }
+    let mut state = 0x2545_f491_4f6c_dd1du64;
+    for _ in 0..100_000 {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        values.push(f32::from_bits(state as u32));
+    }
+    for x in values {
+        assert_eq!(floor_to_i64(x), x.floor() as i64, "floor of {x:e} ({:#x})", x.to_bits());
+        assert_eq!(ceil_to_i64(x), x.ceil() as i64, "ceil of {x:e} ({:#x})", x.to_bits());
+    }
+}

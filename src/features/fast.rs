@@ -49,7 +49,7 @@ use super::feature_layout::{
 };
 use super::hypotheses::Hypothesis;
 use super::preprocess::NORMAL_BINS;
-use super::scene::{FeatureScene, YawGrid, FIXED_PER_METRE};
+use super::scene::{ceil_to_i64, floor_to_i64, FeatureScene, YawGrid, FIXED_PER_METRE};
 use crate::geometry::MIN_PROJECT_DEPTH;
 
 /// Integer channels per ground cell: count, 25 normal bins, 9 COG bins, one pad (so a cell is 144 bytes).
@@ -536,8 +536,8 @@ fn voxel_boundaries(g: &[u32; 3], record: &HypothesisRecord, lattice: &YawLattic
                 let face = record.lo[axis] + i as f32 * record.cell[axis];
                 // Ties (a cell centre on a face, common: centres and sizes are round numbers)
                 // go to the voxel above the face, robustly against rounding.
-                let first = ((face - lattice.origin[axis]) / lattice.cell - 0.5 - TIE_CELLS).ceil();
-                first.clamp(0.0, lattice.cells[axis] as f32) as usize
+                let first = ceil_to_i64((face - lattice.origin[axis]) / lattice.cell - 0.5 - TIE_CELLS);
+                first.clamp(0, lattice.cells[axis] as i64) as usize
             })
             .collect()
     };
@@ -604,8 +604,7 @@ impl YawLattice {
             .map(|r| {
                 let q = Vec3::new(r.s as f32, r.t as f32, r.z as f32) / FIXED_PER_METRE;
                 let index = |axis: usize| -> usize {
-                    let c = ((q[axis] - origin[axis]) / cell).floor();
-                    c.clamp(0.0, (cells[axis] - 1) as f32) as usize
+                    floor_to_i64((q[axis] - origin[axis]) / cell).clamp(0, cells[axis] as i64 - 1) as usize
                 };
                 let mut point = LatticePoint {
                     cell: (index(1) * cells[0] + index(0)) as u32,
@@ -655,23 +654,23 @@ impl LayerTable {
             entry[COG + p.cog_bins[0] as usize] = entry[COG + p.cog_bins[0] as usize].wrapping_add(p.cog_shares[0]);
             entry[COG + p.cog_bins[1] as usize] = entry[COG + p.cog_bins[1] as usize].wrapping_add(p.cog_shares[1]);
         }
-        // Inclusive 2D prefix sums per layer: along s, then along t.
+        // Inclusive 2D prefix sums per layer in one pass over the rows (a layer is often larger than the
+        // cache; two passes, along s then along t, read it twice): entry (x, y) = entry (x, y − 1) + the
+        // running sum of row y up to x. Row 0 and column 0 are the zero border.
         sums.par_chunks_mut(per_layer * CHANNELS).for_each(|layer| {
+            let row_words = stride[0] * CHANNELS;
             for y in 1..stride[1] {
-                let row = y * stride[0];
+                let (rows_before, rows_from) = layer.split_at_mut(y * row_words);
+                let above = &rows_before[(y - 1) * row_words..];
+                let row = &mut rows_from[..row_words];
+                let mut running = [0u32; CHANNELS];
                 for x in 1..stride[0] {
-                    let (prev, cur) = layer.split_at_mut((row + x) * CHANNELS);
-                    let left = &prev[(row + x - 1) * CHANNELS..];
+                    let entry = &mut row[x * CHANNELS..(x + 1) * CHANNELS];
+                    let up = &above[x * CHANNELS..(x + 1) * CHANNELS];
                     for ch in 0..CHANNELS {
-                        cur[ch] = cur[ch].wrapping_add(left[ch]);
+                        running[ch] = running[ch].wrapping_add(entry[ch]);
+                        entry[ch] = up[ch].wrapping_add(running[ch]);
                     }
-                }
-            }
-            for y in 2..stride[1] {
-                let (prev, cur) = layer.split_at_mut(y * stride[0] * CHANNELS);
-                let above = &prev[(y - 1) * stride[0] * CHANNELS..];
-                for (value, up) in cur[..stride[0] * CHANNELS].iter_mut().zip(above) {
-                    *value = value.wrapping_add(*up);
                 }
             }
         });

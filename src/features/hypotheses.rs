@@ -29,7 +29,7 @@ use glam::{Vec2, Vec3};
 use serde::{Deserialize, Serialize};
 
 use super::preprocess::Preprocessed;
-use super::scene::{extent, rotate, FeatureScene, YawGrid};
+use super::scene::{ceil_to_i64, extent, floor_to_i64, rotate, FeatureScene, YawGrid};
 use crate::error::{Error, Result};
 use crate::geometry::{polygon_contains, Cuboid};
 
@@ -375,7 +375,7 @@ impl CountTable {
         for row in 0..grid.cells[1] {
             for col in 0..grid.cells[0] {
                 for r in &grid.records[grid.row_span(row, (col, col))] {
-                    let z = (((r.z_metres() - floor) * inv_z_cell).floor().max(0.0) as usize).min(nz - 1);
+                    let z = floor_to_i64((r.z_metres() - floor) * inv_z_cell).clamp(0, nz as i64 - 1) as usize;
                     sums[at(col as usize + 1, row as usize + 1, z + 1)] += 1;
                 }
             }
@@ -420,7 +420,7 @@ impl CountTable {
 /// The range of cell indices whose centres `origin + (c + ½)·cell` lie in `[lo, hi]` (empty when the
 /// first exceeds the last).
 fn centred_cells(lo: f32, hi: f32, origin: f32, cell: f32) -> (i64, i64) {
-    (((lo - origin) / cell - 0.5).ceil() as i64, ((hi - origin) / cell - 0.5).floor() as i64)
+    (ceil_to_i64((lo - origin) / cell - 0.5), floor_to_i64((hi - origin) / cell - 0.5))
 }
 
 /// Pushes onto `kept` the hypotheses of every size of `options` at `(yaw_index, centre, bottom)` (`centre`
