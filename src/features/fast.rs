@@ -656,25 +656,30 @@ impl LayerTable {
         }
         // Inclusive 2D prefix sums per layer in one pass over the rows (a layer is often larger than the
         // cache; two passes, along s then along t, read it twice): entry (x, y) = entry (x, y − 1) + the
-        // running sum of row y up to x. Row 0 and column 0 are the zero border.
-        sums.par_chunks_mut(per_layer * CHANNELS).for_each(|layer| {
-            let row_words = stride[0] * CHANNELS;
-            for y in 1..stride[1] {
-                let (rows_before, rows_from) = layer.split_at_mut(y * row_words);
-                let above = &rows_before[(y - 1) * row_words..];
-                let row = &mut rows_from[..row_words];
-                let mut running = [0u32; CHANNELS];
-                for x in 1..stride[0] {
-                    let entry = &mut row[x * CHANNELS..(x + 1) * CHANNELS];
-                    let up = &above[x * CHANNELS..(x + 1) * CHANNELS];
-                    for ch in 0..CHANNELS {
-                        running[ch] = running[ch].wrapping_add(entry[ch]);
-                        entry[ch] = up[ch].wrapping_add(running[ch]);
+        // running sum of row y up to x. Row 0 and column 0 are the zero border. The counts (channel 0) are
+        // copied out in the same pass.
+        let mut counts = vec![0u32; layers * per_layer];
+        sums.par_chunks_mut(per_layer * CHANNELS).zip(counts.par_chunks_mut(per_layer)).for_each(
+            |(layer, layer_counts)| {
+                let row_words = stride[0] * CHANNELS;
+                for y in 1..stride[1] {
+                    let (rows_before, rows_from) = layer.split_at_mut(y * row_words);
+                    let above = &rows_before[(y - 1) * row_words..];
+                    let row = &mut rows_from[..row_words];
+                    let row_counts = &mut layer_counts[y * stride[0]..(y + 1) * stride[0]];
+                    let mut running = [0u32; CHANNELS];
+                    for x in 1..stride[0] {
+                        let entry = &mut row[x * CHANNELS..(x + 1) * CHANNELS];
+                        let up = &above[x * CHANNELS..(x + 1) * CHANNELS];
+                        for ch in 0..CHANNELS {
+                            running[ch] = running[ch].wrapping_add(entry[ch]);
+                            entry[ch] = up[ch].wrapping_add(running[ch]);
+                        }
+                        row_counts[x] = entry[0];
                     }
                 }
-            }
-        });
-        let counts = sums.iter().step_by(CHANNELS).copied().collect();
+            },
+        );
         LayerTable { sums, counts, stride }
     }
 
