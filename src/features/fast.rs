@@ -110,8 +110,8 @@ pub struct YawLattice {
 const Z_BUCKET_M: f32 = 0.05;
 
 /// The points of a [`YawLattice`] grouped by height, so that a [`LayerTable`] visits only the points near
-/// its z span instead of all of them (a frame's tables were a third of the fast path's scoring time, most
-/// of it spent rejecting points outside the span). Bucket `b` holds the points with
+/// its z span instead of every point of its yaw (the tables were about a third of a frame's scoring time
+/// on the CPU, and a table's span holds a fraction of the points). Bucket `b` holds the points with
 /// `⌊(z − z_min) / Z_BUCKET_M⌋ = b` (clamped to the last), at `points[offsets[b]..offsets[b + 1]]`, in
 /// binning order within a bucket (a stable counting sort, so the order is the same on every run; the tables'
 /// sums do not depend on it anyway).
@@ -201,8 +201,8 @@ impl<'a> FastEngine<'a> {
 
     /// An engine for `layout` that reuses `other`'s lattices when they are the ones `layout` needs: the
     /// lattices depend on the scene, the subdivisions and whether COG is binned, not on the voxel grid or
-    /// the expansion, so models with different grids on one scene (the large categories' 7×7×7, the small
-    /// ones' 3×3×3, …) bin the points of every yaw once. `None` when they differ.
+    /// the expansion, so models with different grids on one scene (the large categories' 5×5×5 base grid, the
+    /// small ones' 3×3×3 and 3×1×3) bin the points of every yaw once. `None` when they differ.
     pub fn sharing_lattices(other: &FastEngine<'a>, layout: &FeatureLayout, options: FastOptions) -> Option<Self> {
         let same =
             options.subdivisions.max(1) == other.options.subdivisions && layout.groups.cog == other.layout.groups.cog;
@@ -688,11 +688,13 @@ impl LayerTable {
         &self.sums
     }
 
-    /// The sums of layer `k` over the cells `< x` along s and `< y` along t, in place.
+    /// The point count of layer `k` over the cells `< x` along s and `< y` along t (channel 0 of
+    /// [`LayerTable::entry`], from the compact table).
     fn count(&self, k: usize, x: usize, y: usize) -> u32 {
         self.counts[(k * self.stride[1] + y) * self.stride[0] + x]
     }
 
+    /// The sums of layer `k` over the cells `< x` along s and `< y` along t, in place.
     fn entry(&self, k: usize, x: usize, y: usize) -> &[u32; CHANNELS] {
         let base = ((k * self.stride[1] + y) * self.stride[0] + x) * CHANNELS;
         self.sums[base..base + CHANNELS].try_into().expect("CHANNELS entries")

@@ -38,8 +38,8 @@ use super::preprocess::{gradient_magnitude, normal_bin, Preprocessed};
 pub const FIXED_PER_METRE: f32 = 65536.0;
 
 /// `x.floor() as i64`, without the call: on baseline x86-64 (no SSE4.1) `f32::floor` is a libm call, and
-/// the sliding window, the lattices and the tables take the floor of a few hundred million cell positions
-/// per frame (5 % of a detection's time went into `floorf` and `ceilf`). Equal to `x.floor() as i64` for every
+/// the sliding window, the lattices and the tables take the floor of millions of cell positions per frame
+/// (7 % of a detection's profile samples were in `floorf` and `ceilf`). Equal to `x.floor() as i64` for every
 /// f32, NaN (0) and infinities (saturated) included: truncation toward zero is the floor except for a
 /// negative non-integer, and `t as f32` is exact wherever `x` has a fractional part (`|x| < 2²⁴`).
 #[inline]
