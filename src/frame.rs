@@ -219,12 +219,22 @@ impl Frame {
         self.depth_mm.iter().filter(|&&d| d > 0).count()
     }
 
+    /// The upright point of pixel (`col`, `row`) (0-based; the toolbox's pixel centres are 1-based) at
+    /// camera depth `z` metres, in double precision: `Rtilt · (x, z, −y)` with `x = (col + 1 − cx)·z / fx`,
+    /// `y = (row + 1 − cy)·z / fy`. At `z = 1` it is the pixel's upright ray direction, bit for bit the
+    /// point at depth 1 (multiplying by 1 is exact).
+    pub fn upright_point(&self, rtilt: &DMat3, col: u32, row: u32, z: f64) -> DVec3 {
+        let (fx, fy, cx, cy) = (self.k[0][0], self.k[1][1], self.k[0][2], self.k[1][2]);
+        let x = ((col + 1) as f64 - cx) * z / fx;
+        let y = ((row + 1) as f64 - cy) * z / fy;
+        *rtilt * DVec3::new(x, z, -y)
+    }
+
     /// The gravity-aligned point cloud (see the module doc for the conventions). Computed in double
     /// precision and rounded once to f32, so it is the reference the f32 GPU kernel is compared with.
     pub fn point_cloud(&self) -> PointCloud {
         let (w, h) = (self.width(), self.height());
         let rtilt = self.rtilt_f64();
-        let (fx, fy, cx, cy) = (self.k[0][0], self.k[1][1], self.k[0][2], self.k[1][2]);
         let mut cloud = PointCloud::default();
         for row in 0..h {
             for col in 0..w {
@@ -233,10 +243,7 @@ impl Frame {
                     continue;
                 }
                 let z = (mm as f64 / 1000.0).min(MAX_DEPTH_M as f64);
-                let x = ((col + 1) as f64 - cx) * z / fx;
-                let y = ((row + 1) as f64 - cy) * z / fy;
-                let p = rtilt * DVec3::new(x, z, -y);
-                cloud.points.push(p.as_vec3());
+                cloud.points.push(self.upright_point(&rtilt, col, row, z).as_vec3());
                 cloud.pixels.push([col, row]);
                 cloud.colours.push(self.rgb.get_pixel(col, row).0);
             }

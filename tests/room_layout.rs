@@ -17,8 +17,8 @@ use cog_gpu::room_layout::voxels::{
     YawCells, BOX_FEATURES, LAYERS, ORIENTATION_FEATURES, REACH_FEATURES, WALL_LEAK_FEATURES,
 };
 use cog_gpu::room_layout::{
-    orientation_yaw, room_axes, snap_floor_and_ceiling, to_mm, LayoutScene, RoomBox, MIN_ROOM_HEIGHT, ORIENTATIONS,
-    SNAP_MIN_POINTS,
+    missing_rays, orientation_yaw, room_axes, snap_floor_and_ceiling, to_mm, LayoutScene, RoomBox, MIN_ROOM_HEIGHT,
+    ORIENTATIONS, SNAP_MIN_POINTS,
 };
 use glam::{Mat3, Vec2, Vec3};
 
@@ -501,5 +501,48 @@ fn ply_reads_back() {
         let (p, q) = (&rows[i], &rows[j]);
         let length = ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt();
         assert!([4.0, 3.0, 2.5].iter().any(|l| (length - l).abs() < 1e-6), "edge {e:?} length {length}");
+    }
+}
+
+/// `missing_rays` lists, in row-major order, exactly the pixels of the stride grid without depth, each as
+/// the upright point that the same pixel would have at 1 m depth (filled in and back-projected by
+/// `Frame::point_cloud`, the reference), bit for bit.
+#[test]
+fn missing_rays_are_the_holes_back_projected_at_one_metre() {
+    use cog_gpu::frame::Frame;
+    let (w, h) = (9u32, 7u32);
+    let mut frame = Frame {
+        name: "holes".into(),
+        rgb: image::RgbImage::from_pixel(w, h, image::Rgb([90, 120, 150])),
+        depth_mm: vec![2000; (w * h) as usize],
+        k: [[7.5, 0.0, 4.7], [0.0, 8.0, 3.2], [0.0, 0.0, 1.0]],
+        // A camera pitched and rolled a little, so that Rtilt is no permutation.
+        extrinsics: [[0.99, 0.1, 0.0], [-0.1, 0.99, 0.05], [0.0, -0.05, 0.998]],
+        scene: None,
+        objects: Vec::new(),
+        layout: None,
+    };
+    let stride = 2;
+    // Holes on the grid (even columns and rows) and off it (which must not be listed).
+    let holes_on_grid = [(0u32, 0u32), (4, 2), (8, 6), (2, 4)];
+    let holes_off_grid = [(1u32, 0u32), (3, 3), (8, 5)];
+    for &(c, r) in holes_on_grid.iter().chain(&holes_off_grid) {
+        frame.depth_mm[(r * w + c) as usize] = 0;
+    }
+    let rays = missing_rays(&frame, stride);
+    let mut expected_pixels: Vec<(u32, u32)> = holes_on_grid.to_vec();
+    expected_pixels.sort_by_key(|&(c, r)| (r, c));
+    assert_eq!(rays.len(), expected_pixels.len());
+    // Reference: only the holes, filled at exactly 1 m, through the point cloud.
+    let mut filled = frame.clone();
+    filled.depth_mm = vec![0; (w * h) as usize];
+    for &(c, r) in &expected_pixels {
+        filled.depth_mm[(r * w + c) as usize] = 1000;
+    }
+    let cloud = filled.point_cloud();
+    let cloud_pixels: Vec<(u32, u32)> = cloud.pixels.iter().map(|p| (p[0], p[1])).collect();
+    assert_eq!(cloud_pixels, expected_pixels);
+    for (ray, point) in rays.iter().zip(&cloud.points) {
+        assert_eq!(ray.to_array().map(f32::to_bits), point.to_array().map(f32::to_bits), "{ray} vs {point}");
     }
 }

@@ -213,19 +213,16 @@ impl LayoutScene {
 }
 
 /// Upright directions of the pixels on the subsampling grid (every `stride`-th column and row, as the points)
-/// whose depth is missing: the back-projection of the frame module at depth 1 (`(x, 1, −y)` rotated by
-/// Rtilt, in double precision as [`Frame::point_cloud`]).
+/// whose depth is missing: [`Frame::upright_point`] at depth 1, the back-projection of
+/// [`Frame::point_cloud`].
 pub fn missing_rays(frame: &Frame, stride: u32) -> Vec<Vec3> {
     let (w, h) = (frame.width(), frame.height());
     let rtilt = frame.rtilt_f64();
-    let (fx, fy, cx, cy) = (frame.k[0][0], frame.k[1][1], frame.k[0][2], frame.k[1][2]);
     let mut out = Vec::new();
     for row in (0..h).step_by(stride as usize) {
         for col in (0..w).step_by(stride as usize) {
             if frame.depth_mm[(row * w + col) as usize] == 0 {
-                let x = ((col + 1) as f64 - cx) / fx;
-                let y = ((row + 1) as f64 - cy) / fy;
-                out.push((rtilt * glam::DVec3::new(x, 1.0, -y)).as_vec3());
+                out.push(frame.upright_point(&rtilt, col, row, 1.0).as_vec3());
             }
         }
     }
