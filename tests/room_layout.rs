@@ -545,4 +545,9 @@ fn missing_rays_are_the_holes_back_projected_at_one_metre() {
     for (ray, point) in rays.iter().zip(&cloud.points) {
         assert_eq!(ray.to_array().map(f32::to_bits), point.to_array().map(f32::to_bits), "{ray} vs {point}");
     }
+    // By hand, independent of the back-projection code: with identity extrinsics Rtilt is the identity,
+    // and pixel (col 4, row 2) looks along ((4 + 1 − 4.7)/7.5, 1, −(2 + 1 − 3.2)/8) = (0.04, 1, 0.025).
+    frame.extrinsics = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    let upright = missing_rays(&frame, stride)[1];
+    assert!((upright - Vec3::new(0.04, 1.0, 0.025)).abs().max_element() < 1e-7, "{upright}");
 }
