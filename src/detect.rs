@@ -14,7 +14,8 @@
 //!
 //! Models whose window stands on support surfaces ([`Support::Surfaces`]: small categories;
 //! [`Support::FloorAndSurfaces`]: sinks, on the floor as well) run after
-//! the others (floor and [`Support::Free`] models): their hypotheses stand on the surfaces of the frame's
+//! the others (floor, [`Support::Free`] and [`Support::Resting`] models): their hypotheses stand on the
+//! surfaces of the frame's
 //! detections of
 //! [`SURFACE_CATEGORIES`] whose calibrated score is at least [`DetectOptions::support_min_score`]
 //! ([`detected_surfaces`], [`surface_window`]), scored, selected and suppressed the same way.
@@ -273,7 +274,7 @@ fn check_budget_with(pre: &Preprocessed, frame_yaws: &FrameYaws, models: &[Model
         let anchor = model.window.yaw_anchor;
         // The free window holds the sizes at each of its bottoms: as many hypotheses as that many sizes.
         let layers = match model.window.support {
-            Support::Free => free_bottoms(0.0, model.window.step).len(),
+            Support::Free | Support::Resting => free_bottoms(0.0, model.window.step).len(),
             Support::Floor | Support::Surfaces => 1,
             // The floor's layer and, for the surfaces', one more: a frame's few pieces of furniture cover
             // its lattice about once (an estimate, as for the surface window's one layer).

@@ -104,7 +104,7 @@ pub fn frame_window_best_ious(pre: &Preprocessed, models: &[Model], objects: &[O
                 .filter(|(c, _)| model.window.supporters.contains(c))
                 .map(|(_, s)| s)
                 .collect(),
-            Support::Floor | Support::Free => Vec::new(),
+            Support::Floor | Support::Free | Support::Resting => Vec::new(),
         };
         let window = window(model.window.support, scene, &options, &surfaces);
         let truths = truths_of(&model.category);

@@ -106,8 +106,10 @@ pub struct WindowSettings {
     pub yaw_anchor: YawAnchor,
     /// Where the boxes stand ([`Support`]): `"floor"` (the sliding window), `"surfaces"` (the support
     /// surfaces of the frame's detections of [`Self::supporters`], searched after them), `"free"` (every
-    /// bottom from the floor to 1.5 m) or `"floor+surfaces"` (both the floor's and the surfaces'). Absent
-    /// in files written before it existed, which are floor models.
+    /// bottom from the floor to 1.5 m), `"floor+surfaces"` (both the floor's and the surfaces') or
+    /// `"resting"` (the free window's boxes on the floor or on a top seen around them). Absent in files
+    /// written before it existed, which are floor models. It is the window of detection; a model may have
+    /// been trained on another one (`training.training_support`, `train --detect-support`).
     #[serde(default)]
     pub support: Support,
     /// Where each yaw's lattice of centres starts ([`LatticePhase`]): `"camera"` (multiples of the step

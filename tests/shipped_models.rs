@@ -32,7 +32,7 @@ fn the_nineteen_shipped_models_load_with_this_builds_layout() {
         let (grid, support) = match model.category.as_str() {
             "sink" => ([3, 3, 3], Support::FloorAndSurfaces),
             "monitor" => ([3, 1, 3], Support::Surfaces),
-            "pillow" | "lamp" => ([3, 3, 3], Support::Free),
+            "pillow" | "lamp" => ([3, 3, 3], Support::Resting),
             "box" => ([3, 3, 3], Support::Floor),
             "tv" => ([3, 1, 3], Support::Free),
             _ => (full.base_grid, Support::Floor),

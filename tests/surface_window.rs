@@ -405,3 +405,78 @@ fn a_floor_and_surfaces_training_example_answers_on_the_surface_and_keeps_the_fl
     let bare = TrainingExample::new("pillow".into(), &scene.pre, Some(pillow), &[]).window(&settings);
     assert!(bottoms(&bare, FLOOR) > 0 && bottoms(&bare, TOP) == 0);
 }
+
+/// The resting window (`Support::Resting`): the free window's boxes less those at a raised bottom below
+/// the camera with no upward-facing top seen around them. On the pillow scene (camera at z = 0, the floor
+/// 1.2 m below) with two pictures hung on walls — one below the camera's height (0.75–1.05 m above the
+/// floor), one above it (1.25–1.55 m), vertical points only: it keeps every floor box, every box on the
+/// table top and every box at or above the camera's height, still finds the pillow, drops every box that
+/// only the low picture holds up, and is a subsequence of the free window.
+#[test]
+fn the_resting_window_keeps_the_free_boxes_that_stand_on_a_seen_top() {
+    use cog_gpu::features::free_window;
+    use cog_gpu::features::hypotheses::{resting_window, RESTING_MIN_UP_POINTS, RESTING_REACH_CELLS};
+    use cog_gpu::features::Hypothesis;
+    let (scene, table, pillow) = scene_with_pillow();
+    let mut pre = scene.pre.clone();
+    let low = Vec2::new(1.3, 4.2);
+    for (x0, z0) in [(low.x - 0.24, FLOOR + 0.76), (-1.54, FLOOR + 1.26)] {
+        for a in 0..25 {
+            for c in 0..15 {
+                pre.points.push(Vec3::new(x0 + 0.02 * a as f32, 4.2, z0 + 0.02 * c as f32));
+                pre.normals.push(-Vec3::Y);
+                pre.gradients.push(Vec2::ZERO);
+            }
+        }
+    }
+    let scene = FeatureScene::new(pre, &scene.yaw_angles(), 0.1);
+    let mut sizes = pillow_sizes(&pillow);
+    sizes.push(Vec3::new(0.5, 0.1, 0.3)); // a picture's box
+    let options = WindowOptions { sizes, min_points: 20 };
+    let free = free_window(&scene, &options);
+    let rest = resting_window(&scene, &options);
+    let key =
+        |h: &Hypothesis| (h.yaw_index, h.size_index, h.centre.x.to_bits(), h.centre.y.to_bits(), h.bottom.to_bits());
+    // A subsequence of the free window.
+    let mut free_keys = free.hypotheses.iter().map(key);
+    for h in &rest.hypotheses {
+        assert!(free_keys.any(|k| k == key(h)), "{h:?} is not a free-window box (or out of its order)");
+    }
+    assert!(rest.generated < free.generated && rest.hypotheses.len() < free.hypotheses.len());
+    let kept: std::collections::HashSet<_> = rest.hypotheses.iter().map(key).collect();
+    // Every floor box, every box whose bottom is the table top and whose centre lies over the table, and
+    // every box at or above the camera's height (there are some: the high picture holds them up).
+    let mut above_camera = 0;
+    for h in &free.hypotheses {
+        let centre = h.cuboid(&scene).centre.truncate();
+        let on_table = (h.bottom - TOP).abs() < 0.01 && polygon_contains(&table.footprint(), centre);
+        above_camera += usize::from(h.bottom >= 0.0);
+        if h.bottom == FLOOR || on_table || h.bottom >= 0.0 {
+            assert!(kept.contains(&key(h)), "{h:?} dropped");
+        }
+    }
+    assert!(above_camera > 0, "the high picture must hold up free boxes");
+    let best = rest.hypotheses.iter().map(|h| iou_3d(&h.cuboid(&scene), &pillow)).fold(0.0f32, f32::max);
+    assert!(best >= 0.5, "best IoU with the pillow {best}");
+    // The low picture holds up free boxes, and none of the resting window's.
+    let at_low_picture = |h: &&Hypothesis| {
+        h.bottom > FLOOR + 0.05 && h.bottom < 0.0 && h.cuboid(&scene).centre.truncate().distance(low) < 0.4
+    };
+    assert!(free.hypotheses.iter().filter(at_low_picture).count() > 0, "the free window must reach the low picture");
+    assert_eq!(rest.hypotheses.iter().filter(at_low_picture).count(), 0);
+    // Every raised box kept below the camera has its upward-facing points (brute force over a region that
+    // holds the window's: 2.5 cells around the centre's cell on each ground axis, its diagonal; a step and
+    // a count cell around the bottom).
+    let reach = (RESTING_REACH_CELLS as f32 + 1.0) * 0.1 * std::f32::consts::SQRT_2;
+    for h in rest.hypotheses.iter().filter(|h| h.bottom != FLOOR && h.bottom < 0.0) {
+        let centre = h.cuboid(&scene).centre.truncate();
+        let tops = scene
+            .pre
+            .points
+            .iter()
+            .zip(&scene.pre.normals)
+            .filter(|(p, n)| n.z > 0.92 && (p.z - h.bottom).abs() <= 0.15 && p.truncate().distance(centre) <= reach)
+            .count();
+        assert!(tops as u32 >= RESTING_MIN_UP_POINTS, "{h:?}: {tops} upward-facing points around it");
+    }
+}

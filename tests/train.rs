@@ -581,7 +581,8 @@ fn a_surface_window_learns_its_supporters_from_the_positives() {
         }
     }
     assert!(sinks > 0 && expected != SurfaceCategories::NONE, "seed 5 must give sinks on counters");
-    let limits = |support| ExampleLimits { positives: 100, negatives: 2, others: OtherInstances::Removed, support };
+    let limits =
+        |support| ExampleLimits { positives: 100, negatives: 2, others: OtherInstances::Removed, support, seen: None };
     let collected = collect_examples(&frames, "sink", limits(Support::FloorAndSurfaces)).unwrap();
     assert_eq!(collected.supporters, expected);
     let annotations = read_all_annotations(&frames).unwrap();
@@ -598,4 +599,72 @@ fn a_surface_window_learns_its_supporters_from_the_positives() {
     let floor = collect_examples(&frames, "sink", limits(Support::Floor)).unwrap();
     assert!(floor.supporters.is_all());
     assert!(floor.examples.iter().all(|e| e.surfaces.is_empty()));
+}
+
+#[test]
+fn the_seen_rule_counts_the_points_above_the_floor_slab_inside_the_box() {
+    use cog_gpu::learn::detector::SeenRule;
+    use glam::Vec3;
+    // A 1 m cube standing on the floor (z = 0) two metres ahead.
+    let cube = Cuboid::new(Vec3::new(0.0, 2.0, 0.5), Vec3::ONE, 0.0);
+    let points = [
+        Vec3::new(0.0, 2.0, 0.5),   // inside, above the slab
+        Vec3::new(0.4, 2.4, 0.9),   // inside, above the slab
+        Vec3::new(-0.4, 1.6, 0.25), // inside, above the slab (0.25 > 0.2)
+        Vec3::new(0.0, 2.0, 0.1),   // inside, in the floor slab
+        Vec3::new(0.0, 3.0, 0.5),   // outside (y beyond 2.5)
+        Vec3::new(0.6, 2.0, 0.5),   // outside (x beyond 0.5)
+    ];
+    let rule = |min_points| SeenRule { min_points, floor_slab: 0.2 };
+    assert!(rule(3).sees(&cube, &points, 0.0));
+    assert!(!rule(4).sees(&cube, &points, 0.0), "the slab point and the two outside must not count");
+    // A higher floor moves the slab: z 0.25 is then within 0.2 of a floor at 0.1.
+    assert!(!rule(3).sees(&cube, &points, 0.1));
+    assert!(rule(2).sees(&cube, &points, 0.1));
+}
+
+#[test]
+fn skip_unseen_leaves_out_instances_without_points() {
+    use cog_gpu::learn::detector::{collect_examples, ExampleLimits, SeenRule};
+    let dir = tempfile::tempdir().unwrap();
+    let data = tiny_dataset(dir.path());
+    let mut frames: Vec<PathBuf> = std::fs::read_dir(&data).unwrap().map(|e| e.unwrap().path()).collect();
+    frames.retain(|p| p.is_dir());
+    frames.sort();
+    // Beside every bed, a copy 40 m away along X: far beyond any depth sensor, it holds no point.
+    let mut far_copies = 0;
+    for frame in &frames {
+        let path = frame.join("annotation3Dfinal/index.json");
+        let mut index: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+        let objects = index["objects"].as_array_mut().unwrap();
+        let beds: Vec<serde_json::Value> =
+            objects.iter().filter(|o| !o.is_null() && o["name"] == "bed").cloned().collect();
+        for mut bed in beds {
+            for x in bed["polygon"][0]["X"].as_array_mut().unwrap() {
+                *x = serde_json::json!(x.as_f64().unwrap() + 40.0);
+            }
+            objects.push(bed);
+            far_copies += 1;
+        }
+        std::fs::write(&path, serde_json::to_string(&index).unwrap()).unwrap();
+    }
+    assert!(far_copies > 0, "seed 11's bedrooms must have beds");
+    let is_far = |c: &Cuboid| c.centre.truncate().length() > 30.0;
+    let limits = |seen| ExampleLimits {
+        positives: 100,
+        negatives: 1,
+        others: OtherInstances::Removed,
+        support: Support::Floor,
+        seen,
+    };
+    let truths = |seen| -> Vec<Cuboid> {
+        let collected = collect_examples(&frames, "bed", limits(seen)).unwrap();
+        collected.examples.iter().filter_map(|e| e.truth).collect()
+    };
+    let all = truths(None);
+    assert_eq!(all.iter().filter(|c| is_far(c)).count(), far_copies, "without the rule every instance is a positive");
+    let seen = truths(Some(SeenRule { min_points: 50, floor_slab: 0.2 }));
+    assert!(seen.iter().all(|c| !is_far(c)), "an instance without points must not be a positive");
+    assert!(!seen.is_empty(), "the beds in view stay positives");
+    assert_eq!(seen.len() + far_copies, all.len(), "the beds in view all hold 50 points: only the copies go");
 }

@@ -25,6 +25,10 @@
 //!   find nothing, a full pass checks the whole window; at most `--max-full-passes` (4) full passes (the
 //!   first, at w = 0, scores nothing and caches random hypotheses plus the boxes nearest the truth; the
 //!   others mine the hard negatives of the w trained so far);
+//! * every instance is a positive candidate, also one the depth sensor did not see (beyond its range:
+//!   no hypothesis of the window can fit it); `--skip-unseen` leaves out those whose box holds fewer than
+//!   `--min-points` points above the floor slab (off by default: the shipped models were trained on every
+//!   instance, and the bookshelf's gain with it was within the noise; README, Training);
 //! * a positive example drops the points of the frame's other instances of the category
 //!   (`--other-instances removed`, the paper's choice), or keeps them and leaves the boxes that detect
 //!   them out of its answers (`ignored`; see `cog_gpu::learn::detector::OtherInstances`);
@@ -47,7 +51,7 @@ use cog_gpu::features::{budget, FeatureLayout, Groups, LatticePhase, SizeQuantil
 use cog_gpu::frame::Dataset;
 use cog_gpu::learn::detector::{
     cached_rows_per_example, collect_examples, instances_of, read_all_annotations, train_detector, DetectorOracle,
-    ExampleLimits, FeatureEngine, OtherInstances, PositiveTarget, TrainingExample, TrainingSettings,
+    ExampleLimits, FeatureEngine, OtherInstances, PositiveTarget, SeenRule, TrainingExample, TrainingSettings,
 };
 use cog_gpu::learn::detector::{surface_weights, train_latent_detector, LatentProgress, LatentSettings, SURFACE_DIM};
 use cog_gpu::learn::latent::impute;
@@ -93,6 +97,11 @@ pub struct Args {
     /// Most frames without the category to train on.
     #[arg(long, default_value_t = 60)]
     pub negatives: usize,
+    /// Train only on instances the depth sensor saw: an instance whose annotated box holds fewer than
+    /// `--min-points` points more than one `--step` above the floor (the window's own keep rule) is not a
+    /// positive; `--positives` are spread over the others.
+    #[arg(long)]
+    pub skip_unseen: bool,
     #[arg(value_parser = options::step)]
     /// Centre step of the training sliding window (metres).
     #[arg(long, default_value_t = 0.2)]
@@ -160,6 +169,12 @@ pub struct Args {
     /// window and the surfaces': for what stands on either, e.g. pedestal sinks and basins on counters).
     #[arg(long, value_enum, default_value_t = SupportArg::Floor)]
     pub support: SupportArg,
+    /// The window detection uses, written into the model when it differs from `--support` (as
+    /// `--detect-step` for the step): `resting` for a model trained on the `free` window detects only the
+    /// free boxes that rest on a seen top or the floor (README, "The free window"). Must search surfaces
+    /// exactly when `--support` does (a surface model's supporters are learnt from its training window).
+    #[arg(long, value_enum)]
+    pub detect_support: Option<SupportArg>,
     #[arg(value_parser = parse_grid)]
     /// The base voxel grid `NXxNYxNZ` (width × depth × height; the paper: 5x5x5 for the large
     /// categories, 3x3x3 for pillows and lamps, 3x1x3 for monitors and TVs).
@@ -193,6 +208,7 @@ pub enum SupportArg {
     Free,
     #[value(name = "floor+surfaces")]
     FloorAndSurfaces,
+    Resting,
 }
 
 impl From<SupportArg> for Support {
@@ -202,6 +218,7 @@ impl From<SupportArg> for Support {
             SupportArg::Surfaces => Support::Surfaces,
             SupportArg::Free => Support::Free,
             SupportArg::FloorAndSurfaces => Support::FloorAndSurfaces,
+            SupportArg::Resting => Support::Resting,
         }
     }
 }
@@ -395,6 +412,17 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     if pretrained.is_some() && args.features != PathArg::Fast {
         bail!("--surfaces-from needs the fast feature path (--features fast)");
     }
+    if let Some(detect) = args.detect_support {
+        let (trained, detected) = (Support::from(args.support), Support::from(detect));
+        if trained.uses_surfaces() != detected.uses_surfaces() {
+            bail!(
+                "--detect-support {} with --support {}: a model searches surfaces in detection exactly when it \
+                 trained on them",
+                detected.name(),
+                trained.name()
+            );
+        }
+    }
     let out = args.out.clone().unwrap_or_else(|| PathBuf::from("models").join(format!("{category}.json")));
     let checkpoint = PathBuf::from(format!("{}.ckpt", out.display()));
     if args.resume && !checkpoint.is_file() {
@@ -444,6 +472,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         negatives: args.negatives,
         others: args.other_instances.into(),
         support: args.support.into(),
+        seen: args.skip_unseen.then_some(SeenRule { min_points: args.min_points, floor_slab: args.step }),
     };
     log::info!(
         "{category}: {} instances in {} frames; preparing up to {} positive and {} negative examples",
@@ -553,7 +582,9 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         "positives": positives,
         "negatives": oracle.examples.len() - positives,
         "training_step": args.step,
+        "training_support": Support::from(args.support).name(),
         "other_instances": match args.other_instances { OthersArg::Removed => "removed", OthersArg::Ignored => "ignored" },
+        "skip_unseen": args.skip_unseen,
         "formulation": "1-slack",
         "full_every": args.full_every,
         "full_passes": trained.full_passes,
@@ -598,7 +629,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         step: args.detect_step,
         min_points: args.min_points,
         yaw_anchor: args.yaw_anchor.into(),
-        support: args.support.into(),
+        support: args.detect_support.unwrap_or(args.support).into(),
         lattice: args.lattice.into(),
         supporters,
     };

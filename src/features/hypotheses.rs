@@ -29,7 +29,7 @@ use glam::{Vec2, Vec3};
 use serde::{Deserialize, Serialize};
 
 use super::preprocess::Preprocessed;
-use super::scene::{ceil_to_i64, extent, floor_to_i64, rotate, FeatureScene, YawGrid};
+use super::scene::{ceil_to_i64, extent, floor_to_i64, rotate, FeatureScene, PointRecord, YawGrid};
 use crate::error::{Error, Result};
 use crate::geometry::{polygon_contains, Cuboid};
 
@@ -365,6 +365,12 @@ struct CountTable {
 impl CountTable {
     /// The table of `grid`'s points with z cells of side `z_cell` from `floor` up.
     fn build(grid: &YawGrid, floor: f32, z_cell: f32) -> CountTable {
+        Self::build_of(grid, floor, z_cell, |_| true)
+    }
+
+    /// [`CountTable::build`] counting only the points for which `counted` holds (the table's z extent is
+    /// still that of all points).
+    fn build_of(grid: &YawGrid, floor: f32, z_cell: f32, counted: impl Fn(&PointRecord) -> bool) -> CountTable {
         let inv_z_cell = 1.0 / z_cell;
         let max_z = grid.records.iter().fold(floor, |m, r| m.max(r.z_metres()));
         let nz = (((max_z - floor) * inv_z_cell).floor() as usize + 1).max(1);
@@ -374,7 +380,7 @@ impl CountTable {
         let at = |x: usize, y: usize, z: usize| (z * sy + y) * sx + x;
         for row in 0..grid.cells[1] {
             for col in 0..grid.cells[0] {
-                for r in &grid.records[grid.row_span(row, (col, col))] {
+                for r in grid.records[grid.row_span(row, (col, col))].iter().filter(|r| counted(r)) {
                     let z = floor_to_i64((r.z_metres() - floor) * inv_z_cell).clamp(0, nz as i64 - 1) as usize;
                     sums[at(col as usize + 1, row as usize + 1, z + 1)] += 1;
                 }
@@ -538,6 +544,11 @@ pub enum Support {
     /// Searched after the floor models, like [`Support::Surfaces`].
     #[serde(rename = "floor+surfaces")]
     FloorAndSurfaces,
+    /// The free window's boxes that rest on something seen ([`resting_window`]): every box on the
+    /// floor, and a box at a raised bottom only where upward-facing points lie at that height around its
+    /// centre — a pillow or a lamp on furniture stands on a top the camera sees beside it. For what stands
+    /// on furniture no detector finds; not for what hangs on a wall (a wall-mounted TV stands on nothing).
+    Resting,
 }
 
 impl Support {
@@ -548,6 +559,7 @@ impl Support {
             Support::Surfaces => "surfaces",
             Support::Free => "free",
             Support::FloorAndSurfaces => "floor+surfaces",
+            Support::Resting => "resting",
         }
     }
 
@@ -672,6 +684,57 @@ pub fn free_window(scene: &FeatureScene, options: &WindowOptions) -> HypothesisS
     })
 }
 
+/// Upward-facing points ([`normal_bin`] 0) a raised bottom of [`resting_window`] needs around a
+/// centre: a pillow or lamp on a bed, sofa, nightstand or dresser has hundreds around it; 5 ignores the
+/// odd stray normal on a wall.
+///
+/// [`normal_bin`]: crate::features::preprocess::normal_bin
+pub const RESTING_MIN_UP_POINTS: u32 = 5;
+/// Ground cells on each side of a centre's own cell that [`resting_window`] looks at for a top: 2, so a
+/// 5 × 5 block (0.5 m × 0.5 m at the 0.1 m step) — what a small object stands on reaches beyond it
+/// (3 cells kept the same calibration boxes within reach).
+pub const RESTING_REACH_CELLS: i64 = 2;
+
+/// The resting window (see [`Support::Resting`]): the boxes of [`free_window`], in its order, less those at
+/// a raised bottom `b` (every bottom of [`free_bottoms`] but the floor) below the camera's height
+/// (upright z 0) whose centre's ground cell and the [`RESTING_REACH_CELLS`] cells around it hold fewer than
+/// [`RESTING_MIN_UP_POINTS`] upward-facing points within one step of `b` (the [`SURFACE_COUNT_CELL_M`]
+/// layers whose centres lie in `b ± step`). Choices (made on the calibration set's window recall, README
+/// "The free window"): one step rather than half, so a top keeps the two bottoms nearest it — the
+/// window's best box for a thin pillow is often the layer just above or below its top (half a step lost
+/// a tenth of the pillows at IoU 0.5); bottoms at or above the camera's height are always kept, because a
+/// top there is seen edge-on or not at all (a lamp on a tall cabinet). The skipping test is the free
+/// window's. `generated` counts the hypotheses at the bottoms and centres kept, before the skipping test.
+pub fn resting_window(scene: &FeatureScene, options: &WindowOptions) -> HypothesisSet {
+    let floor = scene.pre.floor;
+    each_yaw(scene, Some(SURFACE_COUNT_CELL_M), |yaw_index, grid, table, kept| {
+        let tops = CountTable::build_of(grid, floor, SURFACE_COUNT_CELL_M, |r| r.normal_bin == 0);
+        let reach = RESTING_REACH_CELLS;
+        let mut generated = 0;
+        for (layer, bottom) in free_bottoms(floor, grid.step).into_iter().enumerate() {
+            let z_cells = cells_above(bottom, floor);
+            let needs_top = layer > 0 && bottom < 0.0;
+            let (z0, z1) = centred_cells(bottom - grid.step, bottom + grid.step, floor, SURFACE_COUNT_CELL_M);
+            for row in 0..grid.cells[1] {
+                for col in 0..grid.cells[0] {
+                    if grid.row_span(row, (col, col)).is_empty() {
+                        continue;
+                    }
+                    let (c, r) = (col as i64, row as i64);
+                    if needs_top
+                        && tops.count([c - reach, r - reach, z0], [c + reach, r + reach, z1]) < RESTING_MIN_UP_POINTS
+                    {
+                        continue;
+                    }
+                    let centre = cell_centre(grid, col, row);
+                    generated += push_sizes(table, grid, (yaw_index, centre, bottom), options, &z_cells, kept);
+                }
+            }
+        }
+        generated
+    })
+}
+
 /// The window of [`Support::FloorAndSurfaces`]: the hypotheses of [`sliding_window`] and then those of
 /// [`surface_window`] on `surfaces`, each yaw's together and in yaw order (as every window's); `generated`
 /// is the sum of the two. A surface at the floor's own height is the floor, searched by the floor window:
@@ -693,8 +756,8 @@ pub fn floor_and_surface_window(
 }
 
 /// The window of `support` on `scene` with `options`: [`sliding_window`], [`surface_window`] on
-/// `surfaces` (read only when [`Support::uses_surfaces`]), [`free_window`] or
-/// [`floor_and_surface_window`].
+/// `surfaces` (read only when [`Support::uses_surfaces`]), [`free_window`],
+/// [`floor_and_surface_window`] or [`resting_window`].
 pub fn window(
     support: Support,
     scene: &FeatureScene,
@@ -706,6 +769,7 @@ pub fn window(
         Support::Surfaces => surface_window(scene, options, surfaces),
         Support::Free => free_window(scene, options),
         Support::FloorAndSurfaces => floor_and_surface_window(scene, options, surfaces),
+        Support::Resting => resting_window(scene, options),
     }
 }
 

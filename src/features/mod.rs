@@ -17,8 +17,8 @@ pub mod surface;
 
 pub use feature_layout::{FeatureLayout, Groups};
 pub use hypotheses::{
-    default_yaws, free_window, sliding_window, surface_window, window_yaws, yaws_under, FrameYaws, Hypothesis,
-    HypothesisSet, SizeQuantiles, Support, SupportSurface, WindowOptions, YawAnchor,
+    default_yaws, free_window, resting_window, sliding_window, surface_window, window_yaws, yaws_under, FrameYaws,
+    Hypothesis, HypothesisSet, SizeQuantiles, Support, SupportSurface, WindowOptions, YawAnchor,
 };
 pub use preprocess::{ImageGradients, Preprocessed};
 pub use scene::{FeatureScene, LatticePhase, PointRecord, YawGrid};

@@ -1012,6 +1012,42 @@ pub struct ExampleLimits {
     /// [`Support::FloorAndSurfaces`] every example gets its surfaces too, but every instance is a positive
     /// and every frame without one a negative, as with the floor window.
     pub support: Support,
+    /// Instances whose annotated box holds fewer than `seen.min_points` of the frame's points more than
+    /// `seen.floor_slab` above the floor are not positives: objects the depth sensor did not see (beyond
+    /// its range, hidden), which no hypothesis of the window can fit — the window keeps a box only with
+    /// `min_points` points above its floor slab, so its best box for such an instance is a neighbouring
+    /// wall or floor box whose IoU with the annotation is low, and training toward it teaches the model
+    /// empty boxes. `None` trains on every instance (as every shipped model was trained). The choice among
+    /// the seen instances is [`spread`] over them, as over all.
+    pub seen: Option<SeenRule>,
+}
+
+/// When an annotated instance counts as seen by the depth sensor ([`ExampleLimits::seen`]): the window's
+/// own keep rule ([`crate::features::hypotheses::WindowOptions::min_points`], points more than one
+/// window step above the floor) applied to the annotated box, its points counted exactly.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SeenRule {
+    pub min_points: u32,
+    /// Height above the frame's floor ([`crate::features::preprocess::floor_height`]) below which points
+    /// do not count (metres): the window's step, its floor slab.
+    pub floor_slab: f32,
+}
+
+impl SeenRule {
+    /// Whether `cuboid` holds at least `min_points` of `points` more than `floor_slab` above `floor`.
+    pub fn sees(&self, cuboid: &Cuboid, points: &[Vec3], floor: f32) -> bool {
+        let above = floor + self.floor_slab;
+        let mut count = 0u32;
+        for p in points {
+            if p.z > above && cuboid.contains(*p) {
+                count += 1;
+                if count >= self.min_points {
+                    return true;
+                }
+            }
+        }
+        count >= self.min_points
+    }
 }
 
 /// How far (metres) an annotated small object's bottom may lie from a measured surface and still stand
@@ -1035,6 +1071,42 @@ pub fn spread(total: usize, count: usize) -> Vec<usize> {
         return (0..total).collect();
     }
     (0..count).map(|k| k * total / count).collect()
+}
+
+/// The `(frame, instance)` pairs of `candidates` whose instance `rule` sees in its frame's point cloud,
+/// in order; logs how many were left out.
+fn seen_positives(
+    frames: &[std::path::PathBuf],
+    annotations: &[Vec<crate::frame::Object>],
+    category: &str,
+    candidates: &[(usize, usize)],
+    rule: SeenRule,
+) -> Result<Vec<(usize, usize)>> {
+    let mut with_instances: Vec<usize> = candidates.iter().map(|p| p.0).collect();
+    with_instances.dedup();
+    let seen: Vec<(usize, Vec<bool>)> = with_instances
+        .par_iter()
+        .map(|&f| {
+            let frame = crate::frame::Frame::read(&frames[f], crate::frame::DepthSource::Raw)?;
+            let points = frame.point_cloud().points;
+            let floor = crate::features::preprocess::floor_height(&points);
+            let flags = instances_of(&annotations[f], category).iter().map(|c| rule.sees(c, &points, floor)).collect();
+            Ok((f, flags))
+        })
+        .collect::<Result<_>>()?;
+    let kept: Vec<(usize, usize)> = candidates
+        .iter()
+        .copied()
+        .filter(|&(f, k)| seen.binary_search_by_key(&f, |s| s.0).is_ok_and(|i| seen[i].1[k]))
+        .collect();
+    log::info!(
+        "{} of {} instances of '{category}' hold fewer than {} points above the floor slab (unseen by the depth \
+         sensor); not trained on",
+        candidates.len() - kept.len(),
+        candidates.len(),
+        rule.min_points
+    );
+    Ok(kept)
 }
 
 /// What [`collect_examples`] gathers.
@@ -1070,6 +1142,10 @@ pub fn collect_examples(
         }
         positives.extend((0..instances.len()).map(|k| (f, k)));
     }
+    let positives = match limits.seen {
+        Some(rule) => seen_positives(frames, &annotations, category, &positives, rule)?,
+        None => positives,
+    };
     let positives: Vec<(usize, usize)> =
         spread(positives.len(), limits.positives).into_iter().map(|n| positives[n]).collect();
     let negatives: Vec<usize> = spread(negatives.len(), limits.negatives).into_iter().map(|n| negatives[n]).collect();
