@@ -497,10 +497,13 @@ fn cell_centre(grid: &YawGrid, col: u32, row: u32) -> Vec2 {
 
 /// The centre (in the yaw's rotated frame) of every lattice cell of `grid` that holds a point.
 fn occupied_centres(grid: &YawGrid) -> impl Iterator<Item = Vec2> + '_ {
+    occupied_cells(grid).map(move |(col, row)| cell_centre(grid, col, row))
+}
+
+/// The (column, row) of every lattice cell of `grid` that holds a point, row by row.
+fn occupied_cells(grid: &YawGrid) -> impl Iterator<Item = (u32, u32)> + '_ {
     (0..grid.cells[1]).flat_map(move |row| {
-        (0..grid.cells[0])
-            .filter(move |&col| !grid.row_span(row, (col, col)).is_empty())
-            .map(move |col| cell_centre(grid, col, row))
+        (0..grid.cells[0]).filter(move |&col| !grid.row_span(row, (col, col)).is_empty()).map(move |col| (col, row))
     })
 }
 
@@ -671,17 +674,7 @@ pub fn free_bottoms(floor: f32, step: f32) -> Vec<f32> {
 /// not the object — counted on ground cells × [`SURFACE_COUNT_CELL_M`] layers. `generated` counts the
 /// hypotheses before the skipping test.
 pub fn free_window(scene: &FeatureScene, options: &WindowOptions) -> HypothesisSet {
-    let floor = scene.pre.floor;
-    each_yaw(scene, Some(SURFACE_COUNT_CELL_M), |yaw_index, grid, table, kept| {
-        let mut generated = 0;
-        for bottom in free_bottoms(floor, grid.step) {
-            let z_cells = cells_above(bottom, floor);
-            for centre in occupied_centres(grid) {
-                generated += push_sizes(table, grid, (yaw_index, centre, bottom), options, &z_cells, kept);
-            }
-        }
-        generated
-    })
+    layered_window(scene, options, false)
 }
 
 /// Upward-facing points ([`normal_bin`] 0) a raised bottom of [`resting_window`] needs around a
@@ -706,29 +699,30 @@ pub const RESTING_REACH_CELLS: i64 = 2;
 /// top there is seen edge-on or not at all (a lamp on a tall cabinet). The skipping test is the free
 /// window's. `generated` counts the hypotheses at the bottoms and centres kept, before the skipping test.
 pub fn resting_window(scene: &FeatureScene, options: &WindowOptions) -> HypothesisSet {
+    layered_window(scene, options, true)
+}
+
+/// The free window's boxes ([`free_window`]), with `on_seen_tops` only those of the resting window
+/// ([`resting_window`]): one loop for both, so the resting window stays a subsequence of the free one.
+fn layered_window(scene: &FeatureScene, options: &WindowOptions, on_seen_tops: bool) -> HypothesisSet {
     let floor = scene.pre.floor;
     each_yaw(scene, Some(SURFACE_COUNT_CELL_M), |yaw_index, grid, table, kept| {
-        let tops = CountTable::build_of(grid, floor, SURFACE_COUNT_CELL_M, |r| r.normal_bin == 0);
+        let tops = on_seen_tops.then(|| CountTable::build_of(grid, floor, SURFACE_COUNT_CELL_M, |r| r.normal_bin == 0));
         let reach = RESTING_REACH_CELLS;
         let mut generated = 0;
         for (layer, bottom) in free_bottoms(floor, grid.step).into_iter().enumerate() {
             let z_cells = cells_above(bottom, floor);
-            let needs_top = layer > 0 && bottom < 0.0;
+            let needs_top = tops.as_ref().filter(|_| layer > 0 && bottom < 0.0);
             let (z0, z1) = centred_cells(bottom - grid.step, bottom + grid.step, floor, SURFACE_COUNT_CELL_M);
-            for row in 0..grid.cells[1] {
-                for col in 0..grid.cells[0] {
-                    if grid.row_span(row, (col, col)).is_empty() {
-                        continue;
-                    }
-                    let (c, r) = (col as i64, row as i64);
-                    if needs_top
-                        && tops.count([c - reach, r - reach, z0], [c + reach, r + reach, z1]) < RESTING_MIN_UP_POINTS
-                    {
-                        continue;
-                    }
-                    let centre = cell_centre(grid, col, row);
-                    generated += push_sizes(table, grid, (yaw_index, centre, bottom), options, &z_cells, kept);
+            for (col, row) in occupied_cells(grid) {
+                let (c, r) = (col as i64, row as i64);
+                if needs_top.is_some_and(|t| {
+                    t.count([c - reach, r - reach, z0], [c + reach, r + reach, z1]) < RESTING_MIN_UP_POINTS
+                }) {
+                    continue;
                 }
+                let centre = cell_centre(grid, col, row);
+                generated += push_sizes(table, grid, (yaw_index, centre, bottom), options, &z_cells, kept);
             }
         }
         generated
