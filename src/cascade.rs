@@ -37,9 +37,25 @@
 //!   ++ [no_room, A, p_i·A, r_1(D) … r_5(D), p_i·r_1(D) … p_i·r_5(D)]
 //! ```
 //!
-//! so `dim = 2 + 5·K + 13` ([`feature_dim`]). The room is the frame's predicted layout (its floor polygon,
-//! written by `detect` under `"layout"` when the models directory has a layout model;
-//! [`read_detections_and_room`]).
+//! then (feature set v5, [`V5_FEATURES`], `cascade --features v5`; our addition, beyond the paper's §6.1;
+//! not the default until measured to help, [`FeatureSet::DEFAULT`]) the **neighbourhood** and the
+//! **geometry** of the detection's own box:
+//!
+//! ```text
+//!   ++ for each k: n_k  ++  [l, l², s, s², h, h², b, b²]
+//! ```
+//!
+//! `n_k` is the sum of the confidences `p_j` of the detections of `k` other than `i` whose footprint meets
+//! `i`'s footprint grown by [`NEIGHBOURHOOD_MARGIN`] = 0.5 m on every side (seen from above, heights
+//! ignored): the chairs pulled out around a table, which need not touch it, against the one chair at a desk;
+//! a sum rather than a maximum so that several weak neighbours count. `l` and `s` are the footprint's longer
+//! and shorter sides, `h` the height and `b` the bottom's height above the room's floor (0 without a room):
+//! the first stage's features are normalised to the box, so its score does not say whether the box has a
+//! table's or a desk's proportions, or stands on the floor or on a bed; the squares let a linear stage
+//! prefer a middle range. So `dim = 2 + 5·K + 13` for v4 ([`V4_FEATURES`], the default, [`feature_dim`])
+//! and `2 + 6·K + 13 + 8` for v5 ([`FeatureSet::dim`]). The room is the frame's predicted
+//! layout (its floor polygon and floor height, written by `detect` under `"layout"` when the models
+//! directory has a layout model; [`read_detections_and_room`]).
 //! `D` ([`wall_context`]) is the smallest distance from a corner of the cuboid's footprint to a wall
 //! segment of the polygon, negative when the cuboid's centre lies outside the polygon; the closest wall
 //! is the segment that gives it. `A` is the angle between the cuboid's width axis and that wall, folded
@@ -81,16 +97,20 @@ use crate::eval::{average_precision, true_positives_in_input_order, Detection, F
 use crate::frame::Object;
 use crate::geometry::{footprint_overlap_area, intersection_volume, polygon_contains, Cuboid};
 use crate::learn::binary_svm::{balanced_costs, train_linear_svm, LinearSvm};
-use glam::Vec2;
+use glam::{Vec2, Vec3};
 
 /// The `format` field of a cascade file.
 pub const FORMAT: &str = "cog-gpu-cascade";
 /// The file format's version.
 pub const VERSION: u32 = 1;
-/// Name of the feature set of the module doc (stored in the file; a file with another is refused, but
-/// for [`PREVIOUS_FEATURES`] on the large categories alone).
-pub const FEATURES: &str = "object-overlap-layout-v4";
-/// Earlier feature sets, equal to [`FEATURES`] when every context category is large (v2: the 3D overlap
+/// Name of the feature set with the neighbourhood and geometry parts (module doc; `cascade --features v5`).
+pub const V5_FEATURES: &str = "object-overlap-layout-geometry-v5";
+/// The feature set without them: ψ's first part, a prefix of [`V5_FEATURES`]'s (the shipped cascade's).
+pub const V4_FEATURES: &str = "object-overlap-layout-v4";
+/// The feature set `cascade` trains by default ([`FeatureSet::DEFAULT`]): v4 until v5 has been measured
+/// to do better on held-out frames (README, "Context cascade").
+pub const FEATURES: &str = V4_FEATURES;
+/// Earlier feature sets, equal to [`V4_FEATURES`] when every context category is large (v2: the 3D overlap
 /// for every pair; v3: also the top-down overlap for a large category with a small context category), so
 /// such a cascade file is still read.
 pub const PREVIOUS_FEATURES: [&str; 2] = ["object-overlap-layout-v2", "object-overlap-layout-v3"];
@@ -107,9 +127,58 @@ pub const RBF_WIDTHS: [f64; 5] = [0.15, 0.15, 0.25, 0.5, 1.0];
 /// Length of the room layout's part of ψ: `no_room`, `A`, `p_i·A`, 5 `r(D)`, 5 `p_i·r(D)`.
 pub const LAYOUT_FEATURES: usize = 3 + 2 * RBF_CENTRES.len();
 
-/// Length of ψ for `context_categories` categories.
+/// How far (metres) around a detection's footprint its neighbourhood reaches: a detection of another
+/// category counts as a neighbour when its footprint meets the detection's footprint grown by this much on
+/// every side (module doc).
+pub const NEIGHBOURHOOD_MARGIN: f32 = 0.5;
+/// Length of the geometry part of ψ: `l, l², s, s², h, h², b, b²` (module doc).
+pub const GEOMETRY_FEATURES: usize = 8;
+
+/// A cascade's feature set: which parts ψ has (module doc).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FeatureSet {
+    /// Overlap and layout parts ([`V4_FEATURES`], and [`PREVIOUS_FEATURES`] for large categories).
+    V4,
+    /// Also the neighbourhood and geometry parts ([`V5_FEATURES`]).
+    V5,
+}
+
+impl FeatureSet {
+    /// The set `cascade` trains unless told otherwise ([`FEATURES`]).
+    pub const DEFAULT: FeatureSet = FeatureSet::V4;
+
+    /// The name a cascade file stores.
+    pub fn name(self) -> &'static str {
+        match self {
+            FeatureSet::V4 => V4_FEATURES,
+            FeatureSet::V5 => V5_FEATURES,
+        }
+    }
+
+    /// The set a cascade file names, given whether its context categories are all large; `None` when this
+    /// build cannot compute it.
+    pub fn named(name: &str, all_large: bool) -> Option<FeatureSet> {
+        match name {
+            V5_FEATURES => Some(FeatureSet::V5),
+            V4_FEATURES => Some(FeatureSet::V4),
+            _ if all_large && PREVIOUS_FEATURES.contains(&name) => Some(FeatureSet::V4),
+            _ => None,
+        }
+    }
+
+    /// Length of ψ for `context_categories` categories.
+    pub fn dim(self, context_categories: usize) -> usize {
+        let v4 = 2 + PER_CATEGORY * context_categories + LAYOUT_FEATURES;
+        match self {
+            FeatureSet::V4 => v4,
+            FeatureSet::V5 => v4 + context_categories + GEOMETRY_FEATURES,
+        }
+    }
+}
+
+/// Length of ψ of the default feature set ([`FEATURES`]) for `context_categories` categories.
 pub fn feature_dim(context_categories: usize) -> usize {
-    2 + PER_CATEGORY * context_categories + LAYOUT_FEATURES
+    FeatureSet::DEFAULT.dim(context_categories)
 }
 
 /// One frame of a cascade's training set: its annotated objects, its first-stage detections and its
@@ -118,18 +187,27 @@ pub fn feature_dim(context_categories: usize) -> usize {
 pub struct CascadeFrame {
     pub truth: Vec<Object>,
     pub detections: Vec<Detection>,
-    pub room: Option<Vec<Vec2>>,
+    pub room: Option<Room>,
 }
 
-/// A detections file (`path`, its `text`) with its room: the floor polygon that `detect` writes under
-/// `"layout"` (the `corners` of `room_layout::output::LayoutRecord`), or `None` when the file has none.
-pub fn read_detections_and_room(path: &Path) -> Result<(FrameDetections, Option<Vec<Vec2>>)> {
+/// A frame's predicted room as the cascade reads it: the floor polygon (upright x-y, metres) and the
+/// floor's height (upright z), both as `detect` writes them under `"layout"`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Room {
+    pub corners: Vec<Vec2>,
+    pub floor: f32,
+}
+
+/// A detections file (`path`, its `text`) with its room: the floor polygon and floor height that `detect`
+/// writes under `"layout"` (the `corners` and `floor` of `room_layout::output::LayoutRecord`), or `None`
+/// when the file has none.
+pub fn read_detections_and_room(path: &Path) -> Result<(FrameDetections, Option<Room>)> {
     let text = crate::frame::read_text(path)?;
     Ok((FrameDetections::parse(path, &text)?, room_in(path, &text)?))
 }
 
 /// The room of a detections file's `text` (see [`read_detections_and_room`]); errors name `path`.
-pub fn room_in(path: &Path, text: &str) -> Result<Option<Vec<Vec2>>> {
+pub fn room_in(path: &Path, text: &str) -> Result<Option<Room>> {
     #[derive(Deserialize)]
     struct File {
         layout: Option<Layout>,
@@ -137,13 +215,18 @@ pub fn room_in(path: &Path, text: &str) -> Result<Option<Vec<Vec2>>> {
     #[derive(Deserialize)]
     struct Layout {
         corners: Vec<[f32; 2]>,
+        floor: Option<f32>,
     }
     let file: File = serde_json::from_str(text).map_err(|e| Error::invalid(path, e.to_string()))?;
     let Some(layout) = file.layout else { return Ok(None) };
     if layout.corners.len() < 3 || layout.corners.iter().flatten().any(|v| !v.is_finite()) {
         return Err(Error::invalid(path, "the layout's corners are not a polygon of finite points".to_string()));
     }
-    Ok(Some(layout.corners.into_iter().map(Vec2::from).collect()))
+    let floor = match layout.floor {
+        Some(floor) if floor.is_finite() => floor,
+        _ => return Err(Error::invalid(path, "the layout has no finite floor height".to_string())),
+    };
+    Ok(Some(Room { corners: layout.corners.into_iter().map(Vec2::from).collect(), floor }))
 }
 
 /// `(D, A)` of the module doc: the signed distance (metres) from `cuboid`'s footprint to the closest wall
@@ -237,11 +320,10 @@ impl Cascade {
                 self.format, self.version
             ));
         }
-        let all_large = self.categories.iter().all(|c| is_large(c));
-        if self.features != FEATURES && !(PREVIOUS_FEATURES.contains(&self.features.as_str()) && all_large) {
-            return Err(format!("feature set '{}' is not this build's '{FEATURES}'", self.features));
-        }
-        let dim = feature_dim(self.categories.len());
+        let set = self.feature_set().ok_or_else(|| {
+            format!("feature set '{}' is not this build's '{V5_FEATURES}' nor '{V4_FEATURES}'", self.features)
+        })?;
+        let dim = set.dim(self.categories.len());
         for (category, stage) in &self.stages {
             if stage.weights.len() != dim {
                 return Err(format!("'{category}': {} weights, expected {dim}", stage.weights.len()));
@@ -254,12 +336,18 @@ impl Cascade {
         Ok(())
     }
 
+    /// The feature set the file names (`None` when this build cannot compute it).
+    pub fn feature_set(&self) -> Option<FeatureSet> {
+        FeatureSet::named(&self.features, self.categories.iter().all(|c| is_large(c)))
+    }
+
     /// Rescores one frame's first-stage detections (module doc) in the frame's predicted `room` (floor
     /// polygon; `None` without a layout), then sorts them by score, best first (stable). Detections must
     /// be the first stage's, calibrated (`raw_score` present) and not rescored.
-    pub fn rescore(&self, detections: &mut [Detection], room: Option<&[Vec2]>) -> Result<()> {
+    pub fn rescore(&self, detections: &mut [Detection], room: Option<&Room>) -> Result<()> {
         check_first_stage(detections)?;
-        let features = frame_context_features(detections, &self.categories, room);
+        let set = self.feature_set().ok_or_else(|| Error::Input(format!("unknown feature set '{}'", self.features)))?;
+        let features = frame_context_features(detections, &self.categories, room, set);
         let rescored: Vec<Option<(f32, f32)>> = (0..detections.len())
             .map(|i| {
                 let stage = self.stages.get(&detections[i].category)?;
@@ -306,9 +394,14 @@ fn check_first_stage(detections: &[Detection]) -> Result<()> {
 
 /// ψ of every detection of one frame's first-stage `detections` (module doc), in their order, in the
 /// frame's predicted `room`; `p` is each detection's `score` (the first stage's calibrated probability).
-pub fn frame_context_features(detections: &[Detection], categories: &[String], room: Option<&[Vec2]>) -> Vec<Vec<f64>> {
+pub fn frame_context_features(
+    detections: &[Detection],
+    categories: &[String],
+    room: Option<&Room>,
+    set: FeatureSet,
+) -> Vec<Vec<f64>> {
     let boxes: Vec<Cuboid> = detections.iter().map(Detection::cuboid).collect();
-    (0..detections.len()).map(|i| context_features(detections, &boxes, i, categories, room)).collect()
+    (0..detections.len()).map(|i| context_features(detections, &boxes, i, categories, room, set)).collect()
 }
 
 /// ψ of detection `i`; `boxes` are the detections' cuboids.
@@ -317,11 +410,12 @@ fn context_features(
     boxes: &[Cuboid],
     i: usize,
     categories: &[String],
-    room: Option<&[Vec2]>,
+    room: Option<&Room>,
+    set: FeatureSet,
 ) -> Vec<f64> {
     let own = boxes[i];
     let p_i = f64::from(detections[i].score);
-    let mut psi = vec![0.0; feature_dim(categories.len())];
+    let mut psi = vec![0.0; set.dim(categories.len())];
     psi[0] = p_i;
     psi[1] = p_i * p_i;
     // A small object sees every context category from above (module doc).
@@ -349,7 +443,7 @@ fn context_features(
         psi[base + 4] = p_i * p_j;
     }
     let layout = 2 + PER_CATEGORY * categories.len();
-    match room.and_then(|room| wall_context(&own, room)) {
+    match room.and_then(|room| wall_context(&own, &room.corners)) {
         None => psi[layout] = 1.0,
         Some((d, a)) => {
             psi[layout + 1] = a;
@@ -361,7 +455,43 @@ fn context_features(
             }
         }
     }
+    if set == FeatureSet::V5 {
+        let neighbourhood = layout + LAYOUT_FEATURES;
+        psi[neighbourhood..neighbourhood + categories.len()]
+            .copy_from_slice(&neighbourhood_confidences(detections, boxes, i, categories));
+        let geometry = neighbourhood + categories.len();
+        psi[geometry..geometry + GEOMETRY_FEATURES].copy_from_slice(&geometry_features(&own, room));
+    }
     psi
+}
+
+/// For each context category `k`, `n_k`: the sum of the confidences of the detections of `k` other than
+/// `i` whose footprint meets `i`'s grown by [`NEIGHBOURHOOD_MARGIN`] on every side (module doc).
+fn neighbourhood_confidences(detections: &[Detection], boxes: &[Cuboid], i: usize, categories: &[String]) -> Vec<f64> {
+    let own = boxes[i];
+    let grown = Cuboid::new(own.centre, own.size + Vec3::new(2.0, 2.0, 0.0) * NEIGHBOURHOOD_MARGIN, own.yaw);
+    categories
+        .iter()
+        .map(|category| {
+            detections
+                .iter()
+                .zip(boxes)
+                .enumerate()
+                .filter(|&(j, (d, b))| j != i && &d.category == category && footprint_overlap_area(&grown, b) > 0.0)
+                .map(|(_, (d, _))| f64::from(d.score))
+                .sum()
+        })
+        .collect()
+}
+
+/// The geometry part of ψ (module doc): the footprint's longer side `l` and shorter side `s`, the height
+/// `h` and the bottom's height above the room's floor `b` (0 without a room), each with its square.
+fn geometry_features(cuboid: &Cuboid, room: Option<&Room>) -> [f64; GEOMETRY_FEATURES] {
+    let l = f64::from(cuboid.size.x.max(cuboid.size.y));
+    let s = f64::from(cuboid.size.x.min(cuboid.size.y));
+    let h = f64::from(cuboid.size.z);
+    let b = room.map_or(0.0, |room| f64::from(cuboid.centre.z - 0.5 * cuboid.size.z - room.floor));
+    [l, l * l, s, s * s, h, h * h, b, b * b]
 }
 
 /// Whether `category` is one of the ten large categories, which keep the 3D overlap (module doc).
@@ -397,7 +527,13 @@ struct Samples {
 }
 
 /// The samples of `category` (labels as the benchmark matches the first-stage scores).
-fn samples_of(frames: &[CascadeFrame], category: &str, categories: &[String], iou_threshold: f32) -> Samples {
+fn samples_of(
+    frames: &[CascadeFrame],
+    category: &str,
+    categories: &[String],
+    iou_threshold: f32,
+    set: FeatureSet,
+) -> Samples {
     let mut s = Samples { psi: vec![], raw: vec![], labels: vec![], frame: vec![], cuboids: vec![], truth: vec![] };
     let mut boxes = Vec::new();
     for (f, frame) in frames.iter().enumerate() {
@@ -406,7 +542,7 @@ fn samples_of(frames: &[CascadeFrame], category: &str, categories: &[String], io
         let frame_boxes: Vec<Cuboid> = detections.iter().map(Detection::cuboid).collect();
         for (i, d) in detections.iter().enumerate().filter(|(_, d)| d.category == category) {
             // ψ of this category's detections only (every category's stage reads the same frames).
-            s.psi.push(context_features(detections, &frame_boxes, i, categories, frame.room.as_deref()));
+            s.psi.push(context_features(detections, &frame_boxes, i, categories, frame.room.as_ref(), set));
             s.raw.push(d.raw_score.unwrap_or(d.score));
             s.frame.push(f);
             s.cuboids.push(d.cuboid());
@@ -458,7 +594,7 @@ fn cross_validate(s: &Samples, c: f64, iou_threshold: f32) -> Option<(f32, f32)>
 pub type StageResult = std::result::Result<SecondStage, String>;
 
 /// Trains the second stage of each of `categories` on `frames` (annotated objects and first-stage
-/// detections per frame), with `categories` also the context categories. A category whose detections
+/// detections per frame), with `categories` also the context categories and ψ of the feature `set`. A category whose detections
 /// hold no true or no false positive, whose cross-validation folds do, or whose cross-validated AP the
 /// context does not raise gets no stage (the reason is returned): its detections keep their first-stage
 /// scores.
@@ -467,6 +603,7 @@ pub fn train_cascade(
     categories: &[String],
     iou_threshold: f32,
     training: CascadeTraining,
+    set: FeatureSet,
 ) -> Result<(Cascade, BTreeMap<String, StageResult>)> {
     for frame in frames {
         check_first_stage(&frame.detections)?;
@@ -476,7 +613,7 @@ pub fn train_cascade(
     let results: Vec<(String, StageResult)> = categories
         .par_iter()
         .map(|category| {
-            let result = train_stage(frames, category, categories, iou_threshold);
+            let result = train_stage(frames, category, categories, iou_threshold, set);
             let done = finished.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
             log::info!("cascade: '{category}' done ({done} of {})", categories.len());
             (category.clone(), result)
@@ -486,7 +623,7 @@ pub fn train_cascade(
     let cascade = Cascade {
         format: FORMAT.into(),
         version: VERSION,
-        features: FEATURES.into(),
+        features: set.name().into(),
         categories: categories.to_vec(),
         stages,
         training,
@@ -495,8 +632,14 @@ pub fn train_cascade(
 }
 
 /// One category's stage (module doc): C by cross-validation, then the SVM and calibration on all frames.
-fn train_stage(frames: &[CascadeFrame], category: &str, categories: &[String], iou_threshold: f32) -> StageResult {
-    let s = samples_of(frames, category, categories, iou_threshold);
+fn train_stage(
+    frames: &[CascadeFrame],
+    category: &str,
+    categories: &[String],
+    iou_threshold: f32,
+    set: FeatureSet,
+) -> StageResult {
+    let s = samples_of(frames, category, categories, iou_threshold, set);
     let positives = s.labels.iter().filter(|&&y| y).count();
     if positives == 0 || positives == s.labels.len() {
         return Err(format!("{positives} true positives among {} detections", s.labels.len()));

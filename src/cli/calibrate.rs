@@ -173,6 +173,6 @@ pub struct LabelledDetections {
     pub frames: usize,
     pub truth: Vec<Vec<Object>>,
     /// The predicted room of each frame's detections file (`"layout"`), when it has one.
-    pub rooms: Vec<Option<Vec<glam::Vec2>>>,
+    pub rooms: Vec<Option<cog_gpu::cascade::Room>>,
     pub detections: Vec<Vec<Detection>>,
 }

@@ -1,5 +1,5 @@
 //! `cog-gpu cascade --data DIR --detections DIR [--models assets/models] [--out FILE] [--iou 0.25]
-//! [--categories a,b,...]`: trains the context cascade ([`cog_gpu::cascade`]) on the first-stage detections
+//! [--categories a,b,...] [--features v4|v5]`: trains the context cascade ([`cog_gpu::cascade`]) on the first-stage detections
 //! of held-out frames and writes it as `<models>/cascade.json`, which `detect` then applies.
 //!
 //! The detections are those of `cog-gpu detect --no-cascade --min-score -3` with the calibrated models the
@@ -12,7 +12,7 @@
 use std::path::PathBuf;
 
 use anyhow::bail;
-use cog_gpu::cascade::{train_cascade, CascadeFrame, CascadeTraining, FILE_NAME};
+use cog_gpu::cascade::{train_cascade, CascadeFrame, CascadeTraining, FeatureSet, FILE_NAME};
 
 use super::calibrate::{read_labelled_detections, HeldOutArgs, LabelledDetections};
 use super::GlobalOptions;
@@ -24,6 +24,26 @@ pub struct Args {
     /// Where to write the cascade; default `<models>/cascade.json`.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// The feature set: v4 (the paper's overlap and layout features, the shipped cascade's) or v5 (also
+    /// each detection's neighbourhood and its box's geometry; README, "Context cascade").
+    #[arg(long, value_enum, default_value = "v4")]
+    pub features: FeaturesArg,
+}
+
+/// `--features`.
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum FeaturesArg {
+    V4,
+    V5,
+}
+
+impl From<FeaturesArg> for FeatureSet {
+    fn from(arg: FeaturesArg) -> FeatureSet {
+        match arg {
+            FeaturesArg::V4 => FeatureSet::V4,
+            FeaturesArg::V5 => FeatureSet::V5,
+        }
+    }
 }
 
 pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
@@ -60,7 +80,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         iou: held_out.iou,
     };
     log::info!("training the second stage of {} categories on {frames} frames", categories.len());
-    let (cascade, results) = train_cascade(&inputs, &categories, held_out.iou, training)?;
+    let (cascade, results) = train_cascade(&inputs, &categories, held_out.iou, training, args.features.into())?;
     println!(
         "{:<12} {:>10} {:>6} {:>7} {:>12} {:>12}",
         "category", "detections", "TP", "C", "CV AP first", "CV AP cascade"

@@ -329,9 +329,12 @@ pub(super) fn rescore_in_room(
     layout: Option<&(PredictedLayout, LayoutRecord)>,
 ) -> anyhow::Result<()> {
     if let Some(cascade) = cascade {
-        let room = layout.map(|(predicted, _)| predicted.room.corners.as_slice());
+        let room = layout.map(|(predicted, _)| cog_gpu::cascade::Room {
+            corners: predicted.room.corners.clone(),
+            floor: predicted.room.floor,
+        });
         cascade
-            .rescore(&mut detections.detections, room)
+            .rescore(&mut detections.detections, room.as_ref())
             .with_context(|| format!("rescoring the detections of {}", detections.frame))?;
     }
     Ok(())

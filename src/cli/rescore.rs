@@ -53,7 +53,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         let text = cog_gpu::frame::read_text(path)?;
         let mut frame = FrameDetections::parse(path, &text)?;
         let room = cog_gpu::cascade::room_in(path, &text)?;
-        cascade.rescore(&mut frame.detections, room.as_deref()).with_context(|| format!("{}", path.display()))?;
+        cascade.rescore(&mut frame.detections, room.as_ref()).with_context(|| format!("{}", path.display()))?;
         let mut file: serde_json::Value = serde_json::from_str(&text).with_context(|| format!("{}", path.display()))?;
         file["detections"] = serde_json::to_value(&frame.detections)?;
         let name = path.file_name().context("a detections file without a name")?;
