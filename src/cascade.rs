@@ -490,7 +490,7 @@ fn geometry_features(cuboid: &Cuboid, room: Option<&Room>) -> [f64; GEOMETRY_FEA
     let l = f64::from(cuboid.size.x.max(cuboid.size.y));
     let s = f64::from(cuboid.size.x.min(cuboid.size.y));
     let h = f64::from(cuboid.size.z);
-    let b = room.map_or(0.0, |room| f64::from(cuboid.centre.z - 0.5 * cuboid.size.z - room.floor));
+    let b = room.map_or(0.0, |room| f64::from(cuboid.bottom() - room.floor));
     [l, l * l, s, s * s, h, h * h, b, b * b]
 }
 
