@@ -9,7 +9,8 @@ use cog_gpu::category::CATEGORIES;
 use cog_gpu::frame::{DepthSource, Frame};
 use cog_gpu::geometry::{wrap_angle, Cuboid};
 use cog_gpu::synth::{
-    self, camera::Sensor, render, rng::Rng, sizes, Rest, Room, RoomType, Scene, Support, SynthFrame, SynthOptions, View,
+    self, camera::Sensor, furniture, render, rng::Rng, sizes, AnnotationRule, Item, ItemKind, Rest, Room, RoomType,
+    Scene, Support, SynthFrame, SynthOptions, View,
 };
 use glam::{Vec2, Vec3};
 
@@ -400,7 +401,83 @@ fn wall_frame(sensor: Sensor, distance: f32, seed: u64) -> (SynthFrame, View) {
         pitch: 0.0,
         roll: 0.0,
     };
-    (synth::render_frame(scene, &rs, view, RoomType::Office, seed, 0), view)
+    (synth::render_frame(scene, &rs, view, RoomType::Office, seed, 0, AnnotationRule::Depth), view)
+}
+
+/// A Kinect v1 (no return beyond 5.5 m) looking along +y at two dressers, one 3 m away, one 9 m away, in a
+/// 12 m deep room, annotated by `rule`.
+fn near_and_far_dressers(rule: AnnotationRule) -> SynthFrame {
+    let room = Room::rectangle(RoomType::Bedroom, 12.0, 12.0, 3.0);
+    let dresser = |x: f32, y: f32, seed: u64| Item {
+        kind: ItemKind::Object("dresser"),
+        model: furniture::build("dresser", None, &mut Rng::new(seed)),
+        position: Vec3::new(x, y, 0.0),
+        yaw: std::f32::consts::PI,
+        rest: Rest::Floor,
+        collides: true,
+    };
+    let scene = Scene { room, items: vec![dresser(5.4, 4.0, 1), dresser(7.0, 10.0, 2)] };
+    let rs = render::build(&scene, &mut Rng::new(2));
+    let view = View {
+        sensor: Sensor::Kv1,
+        width: 320,
+        height: 240,
+        intrinsics: [260.0, 260.0, 160.5, 120.5],
+        position: Vec3::new(6.0, 1.0, 1.5),
+        heading: std::f32::consts::FRAC_PI_2,
+        pitch: 0.2,
+        roll: 0.0,
+    };
+    synth::render_frame(scene, &rs, view, RoomType::Bedroom, 5, 0, rule)
+}
+
+#[test]
+fn the_depth_rule_annotates_what_the_sensor_sees() {
+    let by_depth = near_and_far_dressers(AnnotationRule::Depth);
+    let by_pixels = near_and_far_dressers(AnnotationRule::Visible);
+    // The rule changes the annotations only: the same images.
+    assert_eq!(by_depth.frame.rgb, by_pixels.frame.rgb);
+    assert_eq!(by_depth.frame.depth_mm, by_pixels.frame.depth_mm);
+    // Each instance's counts, recounted from the instance buffer and the raw depth.
+    for (id, inst) in by_depth.instances.iter().enumerate() {
+        let shown: Vec<usize> =
+            (0..by_depth.pixel_instance.len()).filter(|&p| by_depth.pixel_instance[p] as usize == id).collect();
+        assert_eq!(inst.pixels, shown.len(), "instance {id}");
+        assert_eq!(
+            inst.depth_pixels,
+            shown.iter().filter(|&&p| by_depth.frame.depth_mm[p] > 0).count(),
+            "instance {id}"
+        );
+    }
+    let min = synth::min_annotated_pixels(320, 240);
+    let (near, far) = (&by_depth.instances[1], &by_depth.instances[2]);
+    assert!(near.pixels >= min && near.depth_pixels >= min, "near: {} / {} pixels", near.depth_pixels, near.pixels);
+    // 9 m is beyond the Kinect v1's 5.5 m: plainly visible, no depth.
+    assert!(far.pixels >= min, "far: {} pixels", far.pixels);
+    assert_eq!(far.depth_pixels, 0);
+    assert_eq!(by_pixels.frame.objects.len(), 2);
+    assert_eq!(by_depth.frame.objects.len(), 1);
+    assert!((by_depth.frame.objects[0].cuboid.centre - by_pixels.frame.objects[0].cuboid.centre).length() < 1e-6);
+    assert_eq!((near.annotation, far.annotation), (Some(0), None));
+    assert_eq!(by_pixels.instances[2].annotation, Some(1));
+    // synth_support.json lists the annotated objects only, with both counts.
+    let support = by_depth.support_json();
+    assert_eq!(support["objects"].as_array().unwrap().len(), 1);
+    assert_eq!(support["objects"][0]["depth_pixels"].as_u64(), Some(near.depth_pixels as u64));
+}
+
+#[test]
+fn annotation_rules_parse_and_the_default_is_depth() {
+    assert_eq!(AnnotationRule::parse(" Depth "), Some(AnnotationRule::Depth));
+    assert_eq!(AnnotationRule::parse("visible"), Some(AnnotationRule::Visible));
+    assert_eq!(AnnotationRule::parse("pixels"), None);
+    assert_eq!(SynthOptions::default().annotate, AnnotationRule::Depth);
+    for rule in [AnnotationRule::Depth, AnnotationRule::Visible] {
+        assert_eq!(AnnotationRule::parse(rule.name()), Some(rule));
+    }
+    // 0.0004·W·H, at least 12: 30 pixels at 320×240, 12 at 160×120 (7.68).
+    assert_eq!(synth::min_annotated_pixels(320, 240), 30);
+    assert_eq!(synth::min_annotated_pixels(160, 120), 12);
 }
 
 #[test]

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{bail, Context};
-use cog_gpu::synth::{self, RoomType, SensorChoice, SynthOptions};
+use cog_gpu::synth::{self, AnnotationRule, RoomType, SensorChoice, SynthOptions};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use super::GlobalOptions;
@@ -32,6 +32,11 @@ pub struct Args {
     /// Comma-separated room types: bedroom, office, living_room, bathroom, dining_room, classroom, kitchen.
     #[arg(long, value_delimiter = ',')]
     pub rooms: Vec<String>,
+    /// Which labelled objects get a 3D box: `depth` (at least max(12, 0.0004·W·H) visible pixels with a
+    /// sensor depth, as SUN RGB-D's boxes drawn on the point cloud) or `visible` (that many visible pixels,
+    /// depth or not: generator synth-1, the shipped models' data). The images do not depend on it.
+    #[arg(long, value_name = "RULE", default_value = "depth")]
+    pub annotate: String,
     /// Also write DIR/preview/synth-NNNNNN.png: cuboids on the RGB, depth colour map beside it.
     #[arg(long)]
     pub preview: bool,
@@ -60,7 +65,10 @@ pub fn options(args: &Args) -> anyhow::Result<SynthOptions> {
         (Some(w), Some(h)) => Some((w, h)),
         _ => None,
     };
-    let options = SynthOptions { sensor, size, rooms };
+    let Some(annotate) = AnnotationRule::parse(&args.annotate) else {
+        bail!("unknown --annotate rule '{}': expected depth or visible", args.annotate);
+    };
+    let options = SynthOptions { sensor, size, rooms, annotate };
     options.validate()?;
     Ok(options)
 }

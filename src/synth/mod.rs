@@ -10,7 +10,8 @@
 //!    best).
 //! 3. **Rendering** ([`render`]): ray casting with rayon, ideal depth and per-pixel instance ids.
 //! 4. **Depth sensor** ([`sensor`]): noise, quantisation, holes.
-//! 5. **Annotation**: every labelled object with at least `max(12, 0.0004·W·H)` visible pixels gets its
+//! 5. **Annotation** ([`AnnotationRule`]): every labelled object with at least `max(12, 0.0004·W·H)`
+//!    visible pixels — by default counting only the pixels where the sensor returned a depth — gets its
 //!    full cuboid (annotators box the whole object, also where it is occluded or cut by the border), in the
 //!    camera-centred upright frame; the room polygon goes to the layout file; support relations to
 //!    `synth_support.json`.
@@ -49,7 +50,9 @@ use crate::geometry::Cuboid;
 use rng::{hash_u64, Rng};
 
 /// Version of the generator's output; bumped whenever the same seed and options would give other files.
-pub const GENERATOR_VERSION: &str = "synth-1";
+/// `synth-2`: the annotation rule ([`AnnotationRule`], default `depth`); `synth-1` annotated by visible
+/// pixels alone, which `--annotate visible` still gives (the same images and annotations, this version).
+pub const GENERATOR_VERSION: &str = "synth-2";
 
 /// Name of the per-frame file with support relations (not part of SUN RGB-D; detectors never read it).
 pub const SUPPORT_FILE: &str = "synth_support.json";
@@ -83,6 +86,55 @@ impl SensorChoice {
     }
 }
 
+/// Which labelled objects get a 3D box.
+///
+/// SUN RGB-D's annotators drew each 3D box on the top view of the frame's point cloud (Song, Lichtenberg
+/// & Xiao, *SUN RGB-D*, CVPR 2015, §3), so an object that the depth does not see — beyond the sensor's
+/// range, black, glossy — has no 3D box there, however plainly the RGB shows it. [`AnnotationRule::Depth`]
+/// (the default) follows that: an object is annotated when at least `max(12, 0.0004·W·H)` of its visible
+/// pixels carry a raw depth. [`AnnotationRule::Visible`] counts the visible pixels alone, as generator
+/// version `synth-1` did (the shipped models' data sets were made that way; the images are the same under
+/// both rules, only the annotations and `synth_support.json` differ).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum AnnotationRule {
+    /// Visible pixels with a raw depth.
+    #[default]
+    Depth,
+    /// Visible pixels, with or without depth (`synth-1`).
+    Visible,
+}
+
+impl AnnotationRule {
+    pub fn parse(name: &str) -> Option<AnnotationRule> {
+        match name.trim().to_ascii_lowercase().as_str() {
+            "depth" => Some(AnnotationRule::Depth),
+            "visible" => Some(AnnotationRule::Visible),
+            _ => None,
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            AnnotationRule::Depth => "depth",
+            AnnotationRule::Visible => "visible",
+        }
+    }
+
+    /// Whether an object with `visible` pixels, `with_depth` of them carrying a raw depth, is annotated in a
+    /// frame whose threshold is `min_pixels`.
+    pub fn annotates(self, visible: usize, with_depth: usize, min_pixels: usize) -> bool {
+        match self {
+            AnnotationRule::Depth => with_depth >= min_pixels,
+            AnnotationRule::Visible => visible >= min_pixels,
+        }
+    }
+}
+
+/// The smallest number of (counted) pixels that gets an object annotated in a `width`×`height` frame.
+pub fn min_annotated_pixels(width: u32, height: u32) -> usize {
+    (0.0004 * (width * height) as f32).max(12.0) as usize
+}
+
 /// Generator options (everything but the seed and the frame index).
 #[derive(Clone, Debug, PartialEq)]
 pub struct SynthOptions {
@@ -91,11 +143,18 @@ pub struct SynthOptions {
     pub size: Option<(u32, u32)>,
     /// Room types to draw from (with their relative frequencies); all when empty.
     pub rooms: Vec<RoomType>,
+    /// Which labelled objects are annotated (the images do not depend on it).
+    pub annotate: AnnotationRule,
 }
 
 impl Default for SynthOptions {
     fn default() -> Self {
-        SynthOptions { sensor: SensorChoice::Mixed, size: None, rooms: RoomType::ALL.to_vec() }
+        SynthOptions {
+            sensor: SensorChoice::Mixed,
+            size: None,
+            rooms: RoomType::ALL.to_vec(),
+            annotate: AnnotationRule::default(),
+        }
     }
 }
 
@@ -184,6 +243,21 @@ pub struct Instance {
     pub annotation: Option<usize>,
     /// Number of pixels showing it.
     pub pixels: usize,
+    /// Number of those pixels where the sensor returned a depth (raw depth > 0).
+    pub depth_pixels: usize,
+}
+
+/// Per instance id below `instances`, the pixels showing it and those of them with a raw depth (> 0 mm).
+pub fn instance_pixels(pixel_instance: &[u32], raw_depth_mm: &[u16], instances: usize) -> (Vec<usize>, Vec<usize>) {
+    let mut pixels = vec![0usize; instances];
+    let mut with_depth = vec![0usize; instances];
+    for (&id, &d) in pixel_instance.iter().zip(raw_depth_mm) {
+        if (id as usize) < instances {
+            pixels[id as usize] += 1;
+            with_depth[id as usize] += usize::from(d > 0);
+        }
+    }
+    (pixels, with_depth)
 }
 
 /// A support surface in upright coordinates.
@@ -238,7 +312,7 @@ pub fn generate_frame(seed: u64, index: u64, options: &SynthOptions) -> Result<S
         &mut Rng::derive(&[seed, index, STREAM_CAMERA]),
     );
     let kind = scene.room.kind;
-    Ok(render_frame(scene, &render_scene, view, kind, seed, index))
+    Ok(render_frame(scene, &render_scene, view, kind, seed, index, options.annotate))
 }
 
 /// Picks the camera pose: the first of up to eight candidates whose 80×60 probe shows at least two
@@ -288,7 +362,8 @@ fn choose_view(
     best.map(|b| b.1).expect("eight candidates were tried")
 }
 
-/// Renders a scene from a view and annotates it (the lower-level entry point: custom scenes and views).
+/// Renders a scene from a view and annotates it by `annotate` (the lower-level entry point: custom scenes
+/// and views).
 pub fn render_frame(
     scene: Scene,
     render_scene: &render::RenderScene,
@@ -296,6 +371,7 @@ pub fn render_frame(
     room_type: RoomType,
     seed: u64,
     index: u64,
+    annotate: AnnotationRule,
 ) -> SynthFrame {
     let buffers = render::render(render_scene, &view, hash_u64(&[seed, index, STREAM_NOISE]));
     let model = DepthModel::for_sensor(view.sensor);
@@ -310,13 +386,8 @@ pub fn render_frame(
     };
     let raw = sensor::simulate(&model, &input, hash_u64(&[seed, index, STREAM_DEPTH]));
     let filled = sensor::filled(&raw, &buffers.depth);
-    let mut pixels = vec![0usize; scene.items.len() + 1];
-    for &id in &buffers.instance {
-        if (id as usize) < pixels.len() {
-            pixels[id as usize] += 1;
-        }
-    }
-    let min_pixels = (0.0004 * (view.width * view.height) as f32).max(12.0) as usize;
+    let (pixels, depth_pixels) = instance_pixels(&buffers.instance, &raw, scene.items.len() + 1);
+    let min_pixels = min_annotated_pixels(view.width, view.height);
     let mut instances = vec![Instance {
         name: "room",
         category: None,
@@ -326,13 +397,14 @@ pub fn render_frame(
         support_surfaces: Vec::new(),
         annotation: None,
         pixels: pixels[0],
+        depth_pixels: depth_pixels[0],
     }];
     let mut objects = Vec::new();
     for (i, item) in scene.items.iter().enumerate() {
         let c = item.cuboid();
         let cuboid = Cuboid::new(view.to_upright(c.centre), c.size, view.yaw_to_upright(c.yaw));
         let annotation = match item.category() {
-            Some(cat) if pixels[i + 1] >= min_pixels => {
+            Some(cat) if annotate.annotates(pixels[i + 1], depth_pixels[i + 1], min_pixels) => {
                 objects.push(Object { category: cat.to_string(), label: None, cuboid });
                 Some(objects.len() - 1)
             }
@@ -366,6 +438,7 @@ pub fn render_frame(
             support_surfaces,
             annotation,
             pixels: pixels[i + 1],
+            depth_pixels: depth_pixels[i + 1],
         });
     }
     let rot = view.world_to_upright();
@@ -474,6 +547,7 @@ impl SynthFrame {
                     "category": inst.category,
                     "variant": inst.variant,
                     "visible_pixels": inst.pixels,
+                    "depth_pixels": inst.depth_pixels,
                     "bottom_z": round4(c.bottom()),
                     "rests_on": rests_on,
                     "supported_by": parent_json,
@@ -553,6 +627,7 @@ pub fn manifest(seed: u64, frames: u64, options: &SynthOptions, preview: bool) -
             "width": options.size.map(|s| s.0),
             "height": options.size.map(|s| s.1),
             "rooms": options.room_types().iter().map(|r| r.name()).collect::<Vec<_>>(),
+            "annotate": options.annotate.name(),
             "preview": preview,
         },
         "layout": "SUN RGB-D frame directories synth-NNNNNN/ (image/, depth/, depth_bfx/, intrinsics.txt, extrinsics/, scene.txt, annotation3Dfinal/, annotation3Dlayout/) plus synth_support.json",
