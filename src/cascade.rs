@@ -470,18 +470,21 @@ fn context_features(
 fn neighbourhood_confidences(detections: &[Detection], boxes: &[Cuboid], i: usize, categories: &[String]) -> Vec<f64> {
     let own = boxes[i];
     let grown = Cuboid::new(own.centre, own.size + Vec3::new(2.0, 2.0, 0.0) * NEIGHBOURHOOD_MARGIN, own.yaw);
-    categories
-        .iter()
-        .map(|category| {
-            detections
-                .iter()
-                .zip(boxes)
-                .enumerate()
-                .filter(|&(j, (d, b))| j != i && &d.category == category && footprint_overlap_area(&grown, b) > 0.0)
-                .map(|(_, (d, _))| f64::from(d.score))
-                .sum()
-        })
-        .collect()
+    // One pass over the detections, each added to its category's sum (in detection order, as a sum per
+    // category would add them).
+    let mut sums = vec![0.0f64; categories.len()];
+    for (j, (detection, cuboid)) in detections.iter().zip(boxes).enumerate() {
+        if j == i {
+            continue;
+        }
+        let Some(k) = categories.iter().position(|c| c == &detection.category) else {
+            continue;
+        };
+        if footprint_overlap_area(&grown, cuboid) > 0.0 {
+            sums[k] += f64::from(detection.score);
+        }
+    }
+    sums
 }
 
 /// The geometry part of ψ (module doc): the footprint's longer side `l` and shorter side `s`, the height
