@@ -59,6 +59,22 @@ impl Calibration {
         sigmoid(self.a * f64::from(raw) + self.b) as f32
     }
 
+    /// The smallest raw score whose calibrated probability ([`Calibration::probability`], as computed, in
+    /// f32) is at least `p` (in (0, 1)): a raw-score cut that keeps exactly the detections with
+    /// probability ≥ `p`. The closed form `(logit(p) − b) / a`, then stepped to the neighbouring f32 values
+    /// until the computed probability crosses `p` (σ is monotone).
+    pub fn raw_score_at(&self, p: f32) -> f32 {
+        let p64 = f64::from(p);
+        let mut raw = (((p64 / (1.0 - p64)).ln() - self.b) / self.a) as f32;
+        while raw.is_finite() && self.probability(raw) < p {
+            raw = raw.next_up();
+        }
+        while raw.is_finite() && self.probability(raw.next_down()) >= p {
+            raw = raw.next_down();
+        }
+        raw
+    }
+
     /// Why this calibration's probabilities are not to be trusted, when it was fitted on fewer than
     /// [`MIN_RELIABLE_TRUE_POSITIVES`] true positives (`None` otherwise).
     pub fn shortage(&self) -> Option<String> {

@@ -58,6 +58,11 @@ pub struct DetectOptions {
     pub candidates: Option<usize>,
     /// Overrides every model's threshold.
     pub min_score: Option<f32>,
+    /// Instead of the raw-score threshold, keeps the detections whose calibrated probability is at least
+    /// this (every model must carry a calibration; [`DetectOptions::threshold`]). The models' raw cut 0
+    /// means a different probability for each model (σ(b): from below 10⁻⁵ to 0.7 for the shipped ones),
+    /// a probability means the same for all.
+    pub min_probability: Option<f32>,
     /// Smallest calibrated probability of a detection of a surface category whose support surface the
     /// surface models (small objects) search ([`detected_surfaces`]).
     pub support_min_score: f32,
@@ -70,6 +75,7 @@ impl Default for DetectOptions {
             max_per_category: 20,
             candidates: None,
             min_score: None,
+            min_probability: None,
             support_min_score: DEFAULT_SUPPORT_MIN_SCORE,
         }
     }
@@ -92,7 +98,32 @@ impl DetectOptions {
         if self.min_score.is_some_and(|s| s.is_nan()) {
             return Err(Error::Input("the minimum score is not a number".into()));
         }
+        if let Some(p) = self.min_probability {
+            if !(p > 0.0 && p < 1.0) {
+                return Err(Error::Input(format!("the minimum probability must be in (0, 1), got {p}")));
+            }
+            if self.min_score.is_some() {
+                return Err(Error::Input("give a minimum raw score or a minimum probability, not both".into()));
+            }
+        }
         Ok(())
+    }
+
+    /// The raw-score cut for `model`'s hypotheses: the minimum raw score when given, else the raw score at
+    /// the minimum probability ([`crate::calibration::Calibration::raw_score_at`]; an error for a model without calibration),
+    /// else the model's own threshold.
+    pub fn threshold(&self, model: &Model) -> Result<f32> {
+        match (self.min_score, self.min_probability) {
+            (Some(score), _) => Ok(score),
+            (None, Some(p)) => model.calibration.as_ref().map(|c| c.raw_score_at(p)).ok_or_else(|| {
+                Error::Input(format!(
+                    "the '{}' model has no calibration, so a minimum probability means nothing for it: \
+                     calibrate it (cog-gpu calibrate) or give a minimum raw score instead",
+                    model.category
+                ))
+            }),
+            (None, None) => Ok(model.threshold),
+        }
     }
 }
 
@@ -483,7 +514,7 @@ fn detect_windows<'a>(
                 model.category, scores[n]
             )));
         }
-        let threshold = options.min_score.unwrap_or(model.threshold);
+        let threshold = options.threshold(model)?;
         let mut order: Vec<usize> = (0..hypotheses.len()).filter(|&n| scores[n] >= threshold).collect();
         let by_score = |a: &usize, b: &usize| scores[*b].total_cmp(&scores[*a]).then(a.cmp(b));
         if let Some(limit) = options.candidates.filter(|&k| order.len() > k) {

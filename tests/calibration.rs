@@ -230,3 +230,30 @@ fn overlay_draws_one_category_per_object() {
     let names: Vec<(&str, f32)> = chosen.iter().map(|d| (d.category.as_str(), d.score)).collect();
     assert_eq!(names, vec![("bed", 0.9), ("bed", 0.7), ("nightstand", 0.6)]);
 }
+
+/// The raw score at a probability: the closed form (logit(p) − b) / a, and exactly the boundary of the
+/// computed probabilities (the score there reaches p, the next lower f32 does not).
+#[test]
+fn the_raw_score_at_a_probability_is_the_exact_boundary() {
+    let calibration = |a: f64, b: f64| Calibration {
+        a,
+        b,
+        detections: 0,
+        true_positives: 0,
+        iou: 0.25,
+        data: String::new(),
+        frames: 0,
+    };
+    // σ(2·0.5 − 1) = 0.5; σ(2·(ln 3 + 1)/2 − 1) = σ(ln 3) = 0.75.
+    let c = calibration(2.0, -1.0);
+    assert!((c.raw_score_at(0.5) - 0.5).abs() <= 1e-6);
+    assert!((c.raw_score_at(0.75) - ((3.0f32).ln() + 1.0) / 2.0).abs() <= 1e-6);
+    for (a, b) in [(2.0, -1.0), (12.24, -9.39), (0.01, 3.0), (8.7, -6.4)] {
+        let c = calibration(a, b);
+        for p in [1e-6f32, 0.001, 0.05, 0.3, 0.5, 0.9, 0.999] {
+            let raw = c.raw_score_at(p);
+            assert!(c.probability(raw) >= p, "a {a} b {b} p {p}: σ at {raw} is {}", c.probability(raw));
+            assert!(c.probability(raw.next_down()) < p, "a {a} b {b} p {p}: {raw} is not the smallest");
+        }
+    }
+}

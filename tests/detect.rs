@@ -101,6 +101,53 @@ fn a_threshold_above_every_score_leaves_no_detection() {
     assert!(detect_frame(&frame, &[], Backend::Cpu, &bad).is_err());
 }
 
+/// `min_probability` keeps exactly the detections whose calibrated score is at least it: the same as
+/// detecting down to any raw score and dropping the rest afterwards (NMS and the per-category cap look only
+/// down the ranking, so boxes below the cut change nothing above it), a detection whose score equals the
+/// cut included.
+#[test]
+fn a_minimum_probability_keeps_exactly_the_detections_at_or_above_it() {
+    use cog_gpu::calibration::Calibration;
+    let frame = Frame::read(SAMPLE, DepthSource::Raw).unwrap();
+    let mut model = density_model(FeaturePath::Fast, 0.3);
+    model.calibration = Some(Calibration {
+        a: 2.0,
+        b: -1.0,
+        detections: 0,
+        true_positives: 0,
+        iou: 0.25,
+        data: String::new(),
+        frames: 0,
+    });
+    let everything = DetectOptions { min_score: Some(f32::MIN), ..DetectOptions::default() };
+    let all = detect_frame(&frame, std::slice::from_ref(&model), Backend::Cpu, &everything).unwrap().detections;
+    assert!(all.len() >= 4, "{} detections", all.len());
+    let mut cuts: Vec<f32> = vec![all[all.len() / 2].score, all[1].score, 0.5 * (all[2].score + all[3].score)];
+    cuts.retain(|&p| p > 0.0 && p < 1.0);
+    assert!(!cuts.is_empty(), "scores {:?}", all.iter().map(|d| d.score).collect::<Vec<_>>());
+    for p in cuts {
+        let options = DetectOptions { min_probability: Some(p), ..DetectOptions::default() };
+        let kept = detect_frame(&frame, std::slice::from_ref(&model), Backend::Cpu, &options).unwrap().detections;
+        let expected: Vec<_> = all.iter().filter(|d| d.score >= p).cloned().collect();
+        assert!(!expected.is_empty());
+        assert_eq!(kept, expected, "cut {p}");
+    }
+    // Without a calibration the probability means nothing: an error naming the model.
+    model.calibration = None;
+    let options = DetectOptions { min_probability: Some(0.5), ..DetectOptions::default() };
+    let error = detect_frame(&frame, &[model], Backend::Cpu, &options).unwrap_err().to_string();
+    assert!(error.contains("'bed' model has no calibration"), "{error}");
+    // A probability outside (0, 1), or both cuts at once, is refused.
+    for bad in [
+        DetectOptions { min_probability: Some(1.0), ..DetectOptions::default() },
+        DetectOptions { min_probability: Some(0.0), ..DetectOptions::default() },
+        DetectOptions { min_probability: Some(f32::NAN), ..DetectOptions::default() },
+        DetectOptions { min_probability: Some(0.5), min_score: Some(0.0), ..DetectOptions::default() },
+    ] {
+        assert!(bad.validate().is_err(), "{bad:?}");
+    }
+}
+
 fn binary() -> &'static str {
     env!("CARGO_BIN_EXE_cog-gpu")
 }
@@ -191,6 +238,12 @@ fn the_cli_names_bad_inputs() {
         (vec!["detect", SAMPLE, "--models", models.to_str().unwrap(), "--categories", "sofa"], "sofa".into()),
         (vec!["detect", SAMPLE, "--models", models.to_str().unwrap(), "--nms-iou", "2"], "IoU".into()),
         (vec!["detect", SAMPLE, "--models", models.to_str().unwrap(), "--step", "0"], "--step".into()),
+        // The test's model has no calibration, so no probability cut.
+        (
+            vec!["detect", SAMPLE, "--models", models.to_str().unwrap(), "--min-probability", "0.5"],
+            "bed.json has no calibration".into(),
+        ),
+        (vec!["detect", SAMPLE, "--models", models.to_str().unwrap(), "--min-probability", "1.5"], "(0, 1)".into()),
         // Two frames named alike would overwrite each other's detections file.
         (vec!["detect", SAMPLE, SAMPLE, "--models", models.to_str().unwrap()], "same name".into()),
     ];

@@ -57,8 +57,13 @@ pub struct Args {
     pub max_per_category: usize,
     /// Drop detections whose raw score (w·φ + bias, before calibration) is below this (overrides the
     /// models' thresholds).
-    #[arg(long, allow_hyphen_values = true)]
+    #[arg(long, allow_hyphen_values = true, conflicts_with = "min_probability")]
     pub min_score: Option<f32>,
+    /// Keep the detections whose first-stage calibrated probability (the reported `score` before the
+    /// cascade) is at least P, in (0, 1), instead of the models' raw-score thresholds; every model must be
+    /// calibrated.
+    #[arg(long, value_name = "P")]
+    pub min_probability: Option<f32>,
     /// Small objects are searched on the support surfaces of the detections of the surface categories
     /// (bed, table, desk, dresser, nightstand, sofa, counter) whose calibrated score is at least this.
     #[arg(long, default_value_t = DEFAULT_SUPPORT_MIN_SCORE, value_parser = options::probability)]
@@ -144,6 +149,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         nms_iou: args.nms_iou,
         max_per_category: args.max_per_category,
         min_score: args.min_score,
+        min_probability: args.min_probability,
         support_min_score: args.support_min_score,
         ..DetectOptions::default()
     };
@@ -185,6 +191,15 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     }
     for warning in models.iter().filter_map(|m| m.step_mismatch()) {
         log::warn!("{warning}");
+    }
+    if detect_options.min_probability.is_some() {
+        if let Some(model) = models.iter().find(|m| m.calibration.is_none()) {
+            bail!(
+                "--min-probability needs calibrated models, and {} has no calibration (run cog-gpu calibrate, \
+                 or give --min-score instead)",
+                models_dir.join(format!("{}.json", model.category)).display()
+            );
+        }
     }
     let cascade = cascade_for(&models_dir, &models, args.no_cascade)?;
     // The room layout comes with the detections when the models directory holds a layout model.
