@@ -481,6 +481,30 @@ fn layout_features_follow_their_definition() {
     assert!((layout[5] - 1.0).abs() < 1e-6);
 }
 
+/// Frame `f` of a constructed set: one annotated `category` object at `truth` (centre, size) detected there,
+/// and a false detection at `false_box`, with overlapping first-stage scores, the false ones higher on
+/// average, so that no function of the score alone separates them.
+fn true_and_false_frame(
+    category: &str,
+    truth: ([f32; 3], [f32; 3]),
+    false_box: ([f32; 3], [f32; 3]),
+    f: usize,
+    room: Option<Room>,
+) -> CascadeFrame {
+    let (raw_false, raw_true) = (1.0 + 0.5 * (f as f32 * 1.3).sin(), 0.8 + 0.5 * (f as f32 * 2.1).cos());
+    let sigmoid = |s: f32| 1.0 / (1.0 + (-s).exp());
+    let objects = vec![Object {
+        category: category.into(),
+        label: None,
+        cuboid: Cuboid::new(Vec3::from(truth.0), Vec3::from(truth.1), 0.0),
+    }];
+    let detections = vec![
+        detection(category, false_box.0, false_box.1, sigmoid(raw_false), raw_false),
+        detection(category, truth.0, truth.1, sigmoid(raw_true), raw_true),
+    ];
+    CascadeFrame { truth: objects, detections, room }
+}
+
 /// A constructed set where only the room tells true from false: true nightstands stand against a wall,
 /// false ones (scored higher by the first stage) stand in the middle of the room. With the room the cascade
 /// ranks every true nightstand first on held-out frames; without rooms it cannot.
@@ -491,20 +515,13 @@ fn the_cascade_learns_that_nightstands_stand_against_walls() {
         let size = [0.5, 0.4, 0.6];
         let wall = ([0.3 + 0.1 * (f % 7) as f32, 0.25, 0.3], size);
         let middle = ([2.5, 2.0 + 0.1 * (f % 5) as f32, 0.3], size);
-        // Overlapping first-stage scores, the false ones higher on average: no function of the score alone
-        // separates them.
-        let (raw_false, raw_true) = (1.0 + 0.5 * (f as f32 * 1.3).sin(), 0.8 + 0.5 * (f as f32 * 2.1).cos());
-        let sigmoid = |s: f32| 1.0 / (1.0 + (-s).exp());
-        let truth = vec![Object {
-            category: "nightstand".into(),
-            label: None,
-            cuboid: Cuboid::new(Vec3::from(wall.0), Vec3::from(wall.1), 0.0),
-        }];
-        let detections = vec![
-            detection("nightstand", middle.0, middle.1, sigmoid(raw_false), raw_false),
-            detection("nightstand", wall.0, wall.1, sigmoid(raw_true), raw_true),
-        ];
-        CascadeFrame { truth, detections, room: with_room.then(|| Room { corners: room.clone(), floor: 0.0 }) }
+        true_and_false_frame(
+            "nightstand",
+            wall,
+            middle,
+            f,
+            with_room.then(|| Room { corners: room.clone(), floor: 0.0 }),
+        )
     };
     let categories = names(&["nightstand"]);
     let training: Vec<_> = (0..40).map(|f| make(f, true)).collect();
@@ -564,18 +581,7 @@ fn the_v5_cascade_learns_a_tables_proportions() {
     let make = |f: usize| {
         let true_table = ([1.0 + 0.1 * (f % 5) as f32, 1.0, 0.375], [1.2, 1.0, 0.75]);
         let false_table = ([4.0, 3.0 + 0.1 * (f % 3) as f32, 0.375], [1.2, 0.6, 0.75]);
-        let (raw_false, raw_true) = (1.0 + 0.5 * (f as f32 * 1.3).sin(), 0.8 + 0.5 * (f as f32 * 2.1).cos());
-        let sigmoid = |s: f32| 1.0 / (1.0 + (-s).exp());
-        let truth = vec![Object {
-            category: "table".into(),
-            label: None,
-            cuboid: Cuboid::new(Vec3::from(true_table.0), Vec3::from(true_table.1), 0.0),
-        }];
-        let detections = vec![
-            detection("table", false_table.0, false_table.1, sigmoid(raw_false), raw_false),
-            detection("table", true_table.0, true_table.1, sigmoid(raw_true), raw_true),
-        ];
-        CascadeFrame { truth, detections, room: None }
+        true_and_false_frame("table", true_table, false_table, f, None)
     };
     let categories = names(&["table"]);
     let training: Vec<_> = (0..40).map(make).collect();

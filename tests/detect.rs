@@ -241,7 +241,7 @@ fn the_cli_names_bad_inputs() {
         // The test's model has no calibration, so no probability cut.
         (
             vec!["detect", SAMPLE, "--models", models.to_str().unwrap(), "--min-probability", "0.5"],
-            "bed.json has no calibration".into(),
+            "bed.json: the 'bed' model has no calibration".into(),
         ),
         (vec!["detect", SAMPLE, "--models", models.to_str().unwrap(), "--min-probability", "1.5"], "(0, 1)".into()),
         // Two frames named alike would overwrite each other's detections file.

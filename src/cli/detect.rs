@@ -192,14 +192,12 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     for warning in models.iter().filter_map(|m| m.step_mismatch()) {
         log::warn!("{warning}");
     }
-    if detect_options.min_probability.is_some() {
-        if let Some(model) = models.iter().find(|m| m.calibration.is_none()) {
-            bail!(
-                "--min-probability needs calibrated models, and {} has no calibration (run cog-gpu calibrate, \
-                 or give --min-score instead)",
-                models_dir.join(format!("{}.json", model.category)).display()
-            );
-        }
+    // Every model's cut up front (a probability cut needs a calibration), so that a bad model stops the run
+    // with its file named instead of failing every frame.
+    for model in &models {
+        detect_options
+            .threshold(model)
+            .with_context(|| models_dir.join(format!("{}.json", model.category)).display().to_string())?;
     }
     let cascade = cascade_for(&models_dir, &models, args.no_cascade)?;
     // The room layout comes with the detections when the models directory holds a layout model.
