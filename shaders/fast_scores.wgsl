@@ -1,7 +1,11 @@
 // Fused scores of the fast path (src/features/fast.rs, steps 3–4) from one summed-area LayerTable.
 // CPU twin: `fast_scores_main` in src/gpu/fast.rs (same names, same loop and reduction order).
 //
-// One workgroup of 64 invocations per hypothesis. Invocation `lid` takes the voxels ℓ = lid, lid + 64, …
+// One dispatch scores every hypothesis of a batch: one workgroup of 64 invocations per hypothesis, the
+// hypotheses of the batch's dispatch records (`dispatches`, one per table group × chunk × weight pass) one
+// after the other; a workgroup finds its record by binary search over their first workgroups (uniform
+// across the workgroup; ~10 cached reads). Each record says where its table, hypotheses, boundaries,
+// weights and scores lie in the shared buffers. Invocation `lid` takes the voxels ℓ = lid, lid + 64, …
 // (ℓ = (k·ny + j)·nx + i, the layout's order; at most 9 voxels for the largest grid), reads the voxel's
 // 36 channels as four table corners (u32 wrapping differences: exact whatever the order), finalises the
 // 35 features (density and normal bins over the linearised projected area, normalised COG; an empty
@@ -35,23 +39,41 @@ struct FastParams {
     m0: vec4<f32>,    // camera_from_rotated, column 0 (xyz)
     m1: vec4<f32>,    // column 1
     m2: vec4<f32>,    // column 2
+    base: vec4<u32>,  // first vec4 of the table in `table`, first record, first boundary, first vec4 of the weights
+    at: vec4<u32>,    // first score in `out`, first workgroup of the dispatch, unused, unused
 }
 
-@group(0) @binding(0) var<uniform> params: FastParams;
-// The LayerTable, one vec4 per 4 channels (CHANNELS = 36 = 9 vec4 per entry).
+// The batch's dispatch records, in order of their first workgroups.
+@group(0) @binding(0) var<storage, read> dispatches: array<FastParams>;
+// The batch's LayerTables, one vec4 per 4 channels (CHANNELS = 36 = 9 vec4 per entry).
 @group(0) @binding(1) var<storage, read> table: array<vec4<u32>>;
 @group(0) @binding(2) var<storage, read> records: array<FastRecord>;
 // Per hypothesis: nx + 1 cell boundaries along s, then ny + 1 along t (voxel i covers cells xs[i]..xs[i+1]).
 @group(0) @binding(3) var<storage, read> bounds: array<u32>;
-// The pass's weight vectors without the view part, each voxel padded to 36 (pad weight 0):
-// weights[(w·voxels + ℓ)·9 + c] holds the weights of channels 4c..4c+3 of voxel ℓ.
+// The passes' weight vectors without the view part, each voxel padded to 36 (pad weight 0):
+// weights[base.w + (w·voxels + ℓ)·9 + c] holds the weights of channels 4c..4c+3 of voxel ℓ.
 @group(0) @binding(4) var<storage, read> weights: array<vec4<f32>>;
 @group(0) @binding(5) var<storage, read_write> out: array<f32>;
 
 var<workgroup> partial: array<f32, 512>; // WORKGROUP × MAX_WEIGHTS
 
-fn camera_point(q: vec3<f32>) -> vec3<f32> {
-    return params.m0.xyz * q.x + params.m1.xyz * q.y + params.m2.xyz * q.z;
+// The dispatch record that workgroup `g` belongs to: the last whose first workgroup is at most g.
+fn dispatch_of(g: u32) -> u32 {
+    var lo = 0u;
+    var hi = arrayLength(&dispatches);
+    while (hi - lo > 1u) {
+        let mid = (lo + hi) / 2u;
+        if (dispatches[mid].at.y <= g) {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    return lo;
+}
+
+fn camera_point(m0: vec4<f32>, m1: vec4<f32>, m2: vec4<f32>, q: vec3<f32>) -> vec3<f32> {
+    return m0.xyz * q.x + m1.xyz * q.y + m2.xyz * q.z;
 }
 
 // Written out (not dot()) so the order of the additions is the CPU's.
@@ -72,7 +94,9 @@ fn sums(high: u32, left: u32, low: u32, both: u32, c: u32) -> vec4<u32> {
 @compute @workgroup_size(64)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
         @builtin(local_invocation_index) lid: u32) {
-    let h = wg.x + wg.y * nwg.x;
+    let g = wg.x + wg.y * nwg.x;
+    let params = dispatches[dispatch_of(g)];
+    let h = g - params.at.y;
     let nx = params.grid.x;
     let ny = params.grid.y;
     let nz = params.grid.z;
@@ -86,14 +110,14 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     var my_partial: array<f32, 8>;
 
     if (working) {
-        let record = records[h];
+        let record = records[params.base.y + h];
         let lo = record.lo.xyz;
         let cell = record.cell.xyz;
         let face_areas = vec3<f32>(cell.y * cell.z, cell.x * cell.z, cell.x * cell.y);
         let fx = params.scale.x;
         let fy = params.scale.y;
         let inv_cog_scale = params.scale.z;
-        let b = h * params.job.w;
+        let b = params.base.z + h * params.job.w;
         let row = params.table.x;
         let voxels = nx * ny * nz;
         for (var v = lid; v < voxels; v += WORKGROUP) {
@@ -106,10 +130,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let y0 = bounds[b + nx + 1u + j];
             let y1 = bounds[b + nx + 1u + j + 1u];
             let layer = k * params.table.y;
-            let high = ((layer + y1) * row + x1) * 9u;
-            let left = ((layer + y1) * row + x0) * 9u;
-            let low = ((layer + y0) * row + x1) * 9u;
-            let both = ((layer + y0) * row + x0) * 9u;
+            let high = params.base.x + ((layer + y1) * row + x1) * 9u;
+            let left = params.base.x + ((layer + y1) * row + x0) * 9u;
+            let low = params.base.x + ((layer + y0) * row + x1) * 9u;
+            let both = params.base.x + ((layer + y0) * row + x0) * 9u;
             let s0 = sums(high, left, low, both, 0u);
             if (s0.x == 0u) {
                 continue;
@@ -120,7 +144,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             var normal = 0.0;
             let centre = vec3<f32>(lo.x + (f32(i) + 0.5) * cell.x, lo.y + (f32(j) + 0.5) * cell.y,
                                    lo.z + (f32(k) + 0.5) * cell.z);
-            let p = camera_point(centre);
+            let p = camera_point(params.m0, params.m1, params.m2, centre);
             if (p.z >= MIN_PROJECT_DEPTH) {
                 let area = fx * fy
                     * (face_areas.x * abs(dot3(params.m0.xyz, p)) + face_areas.y * abs(dot3(params.m1.xyz, p))
@@ -164,7 +188,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             // Constant trip count (unrolled by the driver): my_partial stays in registers.
             for (var w = 0u; w < MAX_WEIGHTS; w++) {
                 if (w < weight_count) {
-                    let wb = (w * voxels + v) * 9u;
+                    let wb = params.base.w + (w * voxels + v) * 9u;
                     var acc = 0.0;
                     acc = dot_acc(acc, weights[wb], f0);
                     acc = dot_acc(acc, weights[wb + 1u], f1);
@@ -196,7 +220,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     }
     if (lid == 0u && working) {
         for (var w = 0u; w < weight_count; w++) {
-            out[h * weight_count + w] = partial[w];
+            out[params.at.x + h * weight_count + w] = partial[w];
         }
     }
 }

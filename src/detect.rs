@@ -43,7 +43,7 @@ use crate::features::{FeatureScene, Hypothesis, Preprocessed};
 use crate::frame::Frame;
 use crate::geometry::Camera;
 use crate::model::{window_scenes, FeaturePath, Model};
-use crate::nms::{nms_detections, NmsOptions, DEFAULT_NMS_IOU};
+use crate::nms::{suppress_in_order, NmsOptions, DEFAULT_NMS_IOU};
 
 /// Settings of [`detect_frame`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -410,15 +410,17 @@ pub fn detect_preprocessed_timed(
     let (floor_models, surface_models): (Vec<&Model>, Vec<&Model>) =
         models.iter().partition(|m| !m.window.support.uses_surfaces());
     // Each model's window (the surface models' on the surfaces `surfaces_of` gives them).
-    let windows_of = |models: &[&Model], surfaces_of: &dyn Fn(&Model) -> Vec<SupportSurface>| -> Vec<HypothesisSet> {
-        models
-            .iter()
-            .map(|model| {
-                let options = WindowOptions { sizes: model.sizes(), min_points: model.window.min_points };
-                window(model.window.support, scene_of(model), &options, &surfaces_of(model))
-            })
-            .collect()
-    };
+    let windows_of =
+        |models: &[&Model], surfaces_of: &(dyn Fn(&Model) -> Vec<SupportSurface> + Sync)| -> Vec<HypothesisSet> {
+            // Models in parallel (each window's yaws in parallel too), gathered in model order.
+            models
+                .par_iter()
+                .map(|model| {
+                    let options = WindowOptions { sizes: model.sizes(), min_points: model.window.min_points };
+                    window(model.window.support, scene_of(model), &options, &surfaces_of(model))
+                })
+                .collect()
+        };
     let windows = windows_of(&floor_models, &|_| Vec::new());
     stages.window_s += lap();
     let mut detections =
@@ -503,37 +505,26 @@ fn detect_windows<'a>(
     let all_hypotheses: Vec<&[Hypothesis]> = windows.iter().map(|w| w.hypotheses.as_slice()).collect();
     let all_scores = score_models(&model_scenes, models, &all_hypotheses, backend, engines)?;
     stages.score_s += lap();
-    let mut candidates = Vec::new();
-    for (((model, scene), hypotheses), (scores, slices)) in
-        models.iter().zip(&model_scenes).zip(&all_hypotheses).zip(all_scores)
-    {
-        stages.hypotheses += hypotheses.len();
-        if let Some(n) = scores.iter().position(|s| !s.is_finite()) {
-            return Err(Error::Input(format!(
-                "frame '{name}': the '{}' model gives hypothesis {n} the score {} (weights or features out of range)",
-                model.category, scores[n]
-            )));
-        }
-        let threshold = options.threshold(model)?;
-        let mut order: Vec<usize> = (0..hypotheses.len()).filter(|&n| scores[n] >= threshold).collect();
-        let by_score = |a: &usize, b: &usize| scores[*b].total_cmp(&scores[*a]).then(a.cmp(b));
-        if let Some(limit) = options.candidates.filter(|&k| order.len() > k) {
-            order.select_nth_unstable_by(limit - 1, by_score);
-            order.truncate(limit);
-        }
-        order.sort_by(by_score);
-        candidates.extend(order.into_iter().map(|n| {
-            let mut detection = Detection::new(&model.category, &hypotheses[n].cuboid(scene), scores[n]);
-            if let Some(slices) = &slices {
-                detection.surface_z = Some(surface_height(&hypotheses[n], slices[n] as usize));
-            }
-            detection
-        }));
-        stages.select_s += lap();
+    // Each model's candidates, models in parallel, gathered in model order (the first error in model order
+    // wins, as in a sequential loop).
+    stages.hypotheses += all_hypotheses.iter().map(|h| h.len()).sum::<usize>();
+    let per_model: Vec<Result<Vec<Detection>>> = models
+        .par_iter()
+        .zip(&model_scenes)
+        .zip(&all_hypotheses)
+        .zip(all_scores)
+        .map(|(((model, scene), hypotheses), (scores, slices))| {
+            model_detections(name, model, scene, hypotheses, &scores, slices.as_deref(), options)
+        })
+        .collect();
+    let mut detections = Vec::new();
+    for model_detections in per_model {
+        detections.extend(model_detections?);
     }
-    let nms =
-        NmsOptions { iou_threshold: options.nms_iou, max_detections: Some(options.max_per_category), top_k: None };
-    let mut detections = nms_detections(&candidates, &nms);
+    // As `nms_detections` orders its survivors: by score, best first, a stable sort over the categories in
+    // model order.
+    detections.sort_by(|a, b| b.score.total_cmp(&a.score));
+    stages.select_s += lap();
     // The survivors' surfaces (a few per category; every point visited): measured in the chosen slice of a
     // model with latent surfaces, from the points alone for the other detections of surface categories.
     detections.par_iter_mut().for_each(|d| {
@@ -546,6 +537,49 @@ fn detect_windows<'a>(
     });
     stages.nms_s += lap();
     Ok(detections)
+}
+
+/// One model's detections: its hypotheses scoring at or above its threshold, best first (ties in hypothesis
+/// order), at most `options.candidates` of them, through greedy 3D NMS (`options.nms_iou`, at most
+/// `options.max_per_category` kept), with raw scores: the boxes that
+/// [`nms_detections`](crate::nms::nms_detections) keeps of all the candidates, but a candidate's box is made
+/// only when the NMS visits it ([`suppress_in_order`]), which stops once the category is full — a model may
+/// have 10⁵ candidates above its threshold.
+fn model_detections(
+    name: &str,
+    model: &Model,
+    scene: &FeatureScene,
+    hypotheses: &[Hypothesis],
+    scores: &[f32],
+    slices: Option<&[u8]>,
+    options: &DetectOptions,
+) -> Result<Vec<Detection>> {
+    if let Some(n) = scores.iter().position(|s| !s.is_finite()) {
+        return Err(Error::Input(format!(
+            "frame '{name}': the '{}' model gives hypothesis {n} the score {} (weights or features out of range)",
+            model.category, scores[n]
+        )));
+    }
+    let threshold = options.threshold(model)?;
+    let mut order: Vec<usize> = (0..hypotheses.len()).filter(|&n| scores[n] >= threshold).collect();
+    let by_score = |a: &usize, b: &usize| scores[*b].total_cmp(&scores[*a]).then(a.cmp(b));
+    if let Some(limit) = options.candidates.filter(|&k| order.len() > k) {
+        order.select_nth_unstable_by(limit - 1, by_score);
+        order.truncate(limit);
+    }
+    order.sort_by(by_score);
+    let detection = |n: usize| {
+        let mut detection = Detection::new(&model.category, &hypotheses[n].cuboid(scene), scores[n]);
+        if let Some(slices) = slices {
+            detection.surface_z = Some(surface_height(&hypotheses[n], slices[n] as usize));
+        }
+        detection
+    };
+    let nms =
+        NmsOptions { iou_threshold: options.nms_iou, max_detections: Some(options.max_per_category), top_k: None };
+    // The box NMS compares is the detection's own (`Detection::cuboid`), as `nms_detections` compares it.
+    let kept = suppress_in_order(order, |n| detection(n).cuboid(), &nms);
+    Ok(kept.into_iter().map(detection).collect())
 }
 
 /// Replaces each detection's raw score by its model's calibrated probability (keeping the raw score in

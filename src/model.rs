@@ -143,14 +143,21 @@ pub fn window_scenes<'m>(
     frame_yaws: &FrameYaws,
     models: impl IntoIterator<Item = &'m Model>,
 ) -> BTreeMap<SceneKey, FeatureScene> {
-    let mut scenes = BTreeMap::new();
+    use rayon::prelude::*;
+    // The distinct settings, then their scenes built in parallel (each scene's yaws in parallel too).
+    let mut settings = BTreeMap::new();
     for model in models {
-        let WindowSettings { step, yaw_anchor, lattice, .. } = model.window;
-        scenes
-            .entry(model.window.scene_key())
-            .or_insert_with(|| FeatureScene::with_lattice(pre.clone(), &frame_yaws.yaws(yaw_anchor), step, lattice));
+        settings.entry(model.window.scene_key()).or_insert(model.window);
     }
-    scenes
+    let settings: Vec<(SceneKey, WindowSettings)> = settings.into_iter().collect();
+    settings
+        .into_par_iter()
+        .map(|(key, WindowSettings { step, yaw_anchor, lattice, .. })| {
+            (key, FeatureScene::with_lattice(pre.clone(), &frame_yaws.yaws(yaw_anchor), step, lattice))
+        })
+        .collect::<Vec<_>>()
+        .into_iter()
+        .collect()
 }
 
 /// One category's detector.

@@ -128,22 +128,33 @@ pub fn suppress(cuboids: &[Cuboid], scores: &[f32], options: &NmsOptions) -> Vec
         }
     }
     order.sort_by(by_score);
+    suppress_in_order(order, |i| cuboids[i], options)
+}
+
+/// The greedy loop of [`suppress`] over candidates already in visiting order (best first, ties decided),
+/// the cuboid of each made by `cuboid_of` only when the candidate is visited: for a caller that sorted its
+/// own candidates and would otherwise build a box for every one of them (the visit stops once
+/// `max_detections` are kept). `top_k` is not applied. Returns the kept candidates in order.
+pub fn suppress_in_order(
+    order: impl IntoIterator<Item = usize>,
+    cuboid_of: impl Fn(usize) -> Cuboid,
+    options: &NmsOptions,
+) -> Vec<usize> {
     let limit = options.max_detections.unwrap_or(usize::MAX);
     let threshold = options.iou_threshold;
     let mut kept: Vec<usize> = Vec::new();
-    let mut kept_bounds: Vec<Bounds> = Vec::new();
+    let mut kept_boxes: Vec<(Cuboid, Bounds)> = Vec::new();
     for i in order {
         if kept.len() >= limit {
             break;
         }
-        let bounds = Bounds::of(&cuboids[i]);
-        let suppressed = kept
-            .iter()
-            .zip(&kept_bounds)
-            .any(|(&k, kb)| !bounds.cannot_exceed(kb, threshold) && iou_3d(&cuboids[i], &cuboids[k]) > threshold);
+        let cuboid = cuboid_of(i);
+        let bounds = Bounds::of(&cuboid);
+        let suppressed =
+            kept_boxes.iter().any(|(kc, kb)| !bounds.cannot_exceed(kb, threshold) && iou_3d(&cuboid, kc) > threshold);
         if !suppressed {
             kept.push(i);
-            kept_bounds.push(bounds);
+            kept_boxes.push((cuboid, bounds));
         }
     }
     kept

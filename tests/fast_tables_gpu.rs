@@ -17,8 +17,8 @@ use cog_gpu::features::{Hypothesis, PreparedWindow, SizeQuantiles};
 use cog_gpu::frame::{DepthSource, Frame};
 use cog_gpu::gpu::fast::{FastParams, FastRecord, MAX_WEIGHTS, WORKGROUP};
 use cog_gpu::gpu::fast_tables::{
-    build_table_gpu, build_table_reference, table_params, table_points, TableParams, TablePoint, SCAN_COLUMNS,
-    SCAN_ROWS,
+    build_table_gpu, build_table_reference, build_tables_gpu, build_tables_reference, table_params, table_params_at,
+    table_points, table_words, TableParams, TablePoint, SCAN_COLUMNS, SCAN_ROWS,
 };
 use cog_gpu::synth::{self, SynthOptions};
 
@@ -78,6 +78,58 @@ fn gpu_tables_equal_the_cpu_tables_on_a_real_and_a_synthetic_frame() {
             let engine = FastEngine::new(&window.scene, &layout, FastOptions::default());
             assert_tables_agree(&engine, &hyps, &format!("{what}, {}", layout.id()));
         }
+    }
+}
+
+#[test]
+fn tables_built_together_equal_each_built_alone() {
+    // Several tables of several yaws in one buffer, at offsets that are not zero, with the yaws' points
+    // packed one after the other (as a batch of the scoring path builds them): each table's words must be
+    // those of the table built alone, by the twins and on the GPU, and the gaps between them stay zero.
+    let frame = synth::generate_frame(5, 0, &SynthOptions::small(160, 120)).unwrap().frame;
+    let window = window(&frame, "chair");
+    let engine = FastEngine::new(&window.scene, &FeatureLayout::default(), FastOptions::default());
+    let hyps = distinct_tables(&window, 6);
+    assert!(hyps.len() >= 4, "only {} distinct tables", hyps.len());
+    let yaws: Vec<usize> = {
+        let mut y: Vec<usize> = hyps.iter().map(|h| h.yaw_index as usize).collect();
+        y.sort_unstable();
+        y.dedup();
+        y
+    };
+    assert!(yaws.len() >= 2, "the tables should come from at least two yaws");
+    let mut points = Vec::new();
+    let mut first_point = vec![0u32; engine.scene().yaws.len()];
+    for &yaw in &yaws {
+        first_point[yaw] = points.len() as u32;
+        points.extend(table_points(engine.lattice(yaw)));
+    }
+    let mut words = 7; // a gap before the first table
+    let mut tables = Vec::new();
+    let mut alone = Vec::new();
+    for hyp in &hyps {
+        let yaw = hyp.yaw_index as usize;
+        let (lattice, span) = (engine.lattice(yaw), engine.table_span_of(hyp));
+        let params = table_params_at(lattice, span, 0, words as u32, first_point[yaw]);
+        tables.push(params);
+        alone.push((words, build_table_reference(lattice, span)));
+        words += table_words(&params) + 5; // and a gap after each
+    }
+    let twin = build_tables_reference(&tables, &points, words);
+    let check = |built: &[u32], what: &str| {
+        let mut covered = vec![false; words];
+        for (n, (at, table)) in alone.iter().enumerate() {
+            assert!(built[*at..at + table.len()] == table[..], "{what}: table {n} differs from the table built alone");
+            covered[*at..at + table.len()].iter_mut().for_each(|c| *c = true);
+        }
+        assert!(
+            built.iter().zip(&covered).all(|(&w, &c)| c || w == 0),
+            "{what}: a word between the tables was written"
+        );
+    };
+    check(&twin, "twins");
+    if let Some(ctx) = common::gpu_context() {
+        check(&build_tables_gpu(&ctx, &tables, &points, words).unwrap(), "GPU");
     }
 }
 

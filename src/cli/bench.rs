@@ -9,7 +9,7 @@
 //! kept hypotheses, including uploads and read-back on the GPU path.
 //!
 //! Paths (keys of `paths` in `--json`): `cpu` and `gpu` (exact path), `fast` (fast path on the CPU) and
-//! `fast_gpu` (fast path: lattice and tables on the CPU, scoring by `gpu::fast`; it also reports
+//! `fast_gpu` (fast path: lattices on the CPU, tables by `gpu::fast_tables` and scoring by `gpu::fast` on the GPU; it also reports
 //! `max_relative_difference_vs_fast_cpu` when both ran). `--cpu` runs only the CPU entries, `--gpu` only the
 //! GPU ones. For the fast entries `score_s` includes the lattice (`lattice_s`) and the tables.
 
@@ -183,7 +183,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
             scores.iter().zip(cpu_scores).map(|(&g, &c)| ((g - c).abs() / c.abs().max(1.0)) as f64).fold(0.0, f64::max)
         });
         let adapter = format!(
-            "{} (fast path: tables on the CPU, scores on the GPU, subdivisions {})",
+            "{} (fast path: lattices on the CPU, tables and scores on the GPU, subdivisions {})",
             ctx.adapter_summary(),
             fast_options.subdivisions
         );

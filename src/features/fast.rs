@@ -561,9 +561,24 @@ pub(crate) struct TableKey {
 
 /// Groups hypothesis indices by table key, in a deterministic order.
 pub(crate) fn group_by_table(hypotheses: &[Hypothesis]) -> Vec<(TableKey, Vec<usize>)> {
+    // Pieces grouped in parallel, merged in piece order: each group's members stay in ascending order.
+    const PIECE: usize = 1 << 16;
+    let pieces: Vec<HashMap<TableKey, Vec<usize>>> = hypotheses
+        .par_chunks(PIECE)
+        .enumerate()
+        .map(|(p, piece)| {
+            let mut groups: HashMap<TableKey, Vec<usize>> = HashMap::new();
+            for (n, hyp) in piece.iter().enumerate() {
+                groups.entry(key_of(hyp)).or_default().push(p * PIECE + n);
+            }
+            groups
+        })
+        .collect();
     let mut groups: HashMap<TableKey, Vec<usize>> = HashMap::new();
-    for (n, hyp) in hypotheses.iter().enumerate() {
-        groups.entry(key_of(hyp)).or_default().push(n);
+    for piece in pieces {
+        for (key, members) in piece {
+            groups.entry(key).or_default().extend(members);
+        }
     }
     let mut groups: Vec<_> = groups.into_iter().collect();
     groups.sort_by_key(|(key, _)| *key);

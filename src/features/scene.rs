@@ -347,7 +347,8 @@ impl FeatureScene {
 
     /// [`FeatureScene::new`] with the lattice at `lattice`'s phase.
     pub fn with_lattice(pre: Preprocessed, yaws: &[f32], step: f32, lattice: LatticePhase) -> FeatureScene {
-        let grids = yaws.iter().map(|&yaw| YawGrid::build_with(&pre, yaw, step, lattice)).collect();
+        // The yaws' grids are independent: built in parallel, gathered in yaw order.
+        let grids = yaws.par_iter().map(|&yaw| YawGrid::build_with(&pre, yaw, step, lattice)).collect();
         FeatureScene { pre, yaws: grids }
     }
 

@@ -2,27 +2,32 @@
 //! the fast path's summed-area tables — steps 3–4 of [`crate::features::fast`] on the GPU.
 //!
 //! # Design
-//! Steps 1–2 (the per-yaw lattices and the per-(yaw, bottom, height) [`LayerTable`]s) stay on the CPU, built
-//! by the [`FastEngine`]'s own code, in parallel (a few table groups per thread at a time). Hypotheses are
-//! grouped by table (the engine's grouping); each group's hypotheses are dispatched in chunks of at most
-//! [`MAX_CHUNK`] (fewer when the device's storage-binding limit asks for it), with up to [`MAX_WEIGHTS`]
-//! weight vectors per pass. **Batches, not dispatches, meet the queue**: table groups are collected into a
-//! batch of at most [`MAX_BATCH_BYTES`] (all of one model's groups on a 640×480 frame); per batch one
-//! buffer per kind of input (tables, records, boundaries, parameters at aligned offsets) and one for the
-//! scores are filled through the queue, every dispatch is recorded in one compute pass with its own bind
-//! group of buffer ranges, and the batch is submitted once and read back once. No buffer is created per
-//! dispatch and the CPU waits once per batch, not once per dispatch. How the work is batched does not
-//! change a single bit of the scores (tested).
+//! Step 1 (the per-yaw lattices) stays on the CPU, built by the [`FastEngine`]; step 2 (the per-(yaw, bottom,
+//! height) [`LayerTable`]s) and steps 3–4 run on the GPU. Hypotheses are grouped by table (the engine's
+//! grouping, over every job of the call: a table that several models use is built once); each group's
+//! hypotheses are cut into chunks of at most [`MAX_CHUNK`], with up to [`MAX_WEIGHTS`] weight vectors per
+//! pass: one *dispatch record* ([`FastParams`]) per (group, chunk, pass). **Batches, not dispatches, meet
+//! the queue**: groups are collected into a batch of at most [`MAX_BATCH_BYTES`] (and at most the
+//! storage-binding limit: a batch's tables are bound as one range). Per batch, one [`BatchLayout`] places
+//! everything in shared buffers — the yaws' lattice points, the tables, the records and boundaries, the
+//! weight passes, the dispatch records and the scores — taken from a pool that the [`GpuContext`] keeps
+//! from batch to batch and frame to frame (no buffer is created per batch once the pool has grown); the
+//! table range is cleared on the GPU, the tables are built by [`crate::gpu::fast_tables`]'s three kernels,
+//! **one dispatch per phase for all the batch's tables**, and every hypothesis of the batch is scored by
+//! **one dispatch** of this kernel; the batch is submitted once and its scores read back once. How the work
+//! is batched does not change a single bit of the scores (tested).
 //!
 //! Per hypothesis the CPU packs a [`FastRecord`] (low corner and voxel size of the expanded box) and the
 //! `nx + 1 + ny + 1` voxel-boundary cell indices, computed by the engine's own membership rule
 //! (`FastEngine::voxel_boundaries`, the function its scoring uses), so cell membership is identical by
-//! construction. The shader runs one workgroup of 64 invocations per hypothesis; invocation `lid` takes
-//! the voxels `ℓ = lid + 64·r` in the layout's order, differences four table corners with wrapping `u32`
-//! arithmetic (exact, as on the CPU), finalises the 35 features as `FastEngine::scores` does (density
-//! and normal bins over the linearised projected area, COG normalised `φ/√(‖φ‖² + ε)`, switched-off
-//! groups and empty voxels contributing nothing) and dots them with the weights. The 64 partial scores are
-//! reduced in workgroup memory in a fixed tree order: results are bit-identical run to run.
+//! construction. The shader runs one workgroup of 64 invocations per hypothesis; the workgroup finds its
+//! dispatch record by a binary search over the records' first workgroups (the batch's hypotheses are
+//! numbered one after the other), and invocation `lid` takes the voxels `ℓ = lid + 64·r` in the layout's
+//! order, differences four table corners with wrapping `u32` arithmetic (exact, as on the CPU), finalises
+//! the 35 features as `FastEngine::scores` does (density and normal bins over the linearised projected
+//! area, COG normalised `φ/√(‖φ‖² + ε)`, switched-off groups and empty voxels contributing nothing) and
+//! dots them with the weights. The 64 partial scores are reduced in workgroup memory in a fixed tree order:
+//! results are bit-identical run to run.
 //!
 //! **Choice: the view features are added on the CPU** ([`FastEngine`]'s own `view`, 12 numbers per
 //! hypothesis), after the voxel part comes back, in the same order as `FastEngine::scores` (voxels first,
@@ -31,10 +36,15 @@
 //! A table larger than the storage-binding limit (128 MiB on lavapipe; ~40 MB for a 10 m × 10 m room at
 //! the default lattice) is an [`Error::Gpu`]; callers fall back to the CPU path.
 //!
+//! With the debug log on (`RUST_LOG=cog_gpu::gpu=debug`), each call logs where its time went (grouping,
+//! packing, the batches' preparation, the wait for the GPU, the view features) and, where the device has
+//! timestamp queries, the GPU time of each of the four passes.
+//!
 //! # CPU twin
-//! [`fast_scores_main`] is the shader's entry point in Rust (same names, same loop order, same
+//! [`fast_scores_main`] is the shader's entry point in Rust (same names, same search, same loop order, same
 //! reduction tree), run over every workgroup by [`fast_scores_reference`], which packs its inputs with the
-//! same code as [`fast_scores_gpu`]. It differs from `FastEngine::scores` only in the order of the float
+//! same code as [`fast_scores_gpu`] (the same [`BatchLayout`], its buffers filled on the CPU with the
+//! CPU-built tables). It differs from `FastEngine::scores` only in the order of the float
 //! additions (the engine sums the voxels in order ℓ), so the three agree to ~1e-6 relative.
 
 use std::collections::BTreeMap;
@@ -43,7 +53,8 @@ use bytemuck::{Pod, Zeroable};
 use rayon::prelude::*;
 
 use super::fast_tables::{
-    table_invocations, table_params, table_points, table_words, TableParams, TablePoint, SCAN_COLUMNS, SCAN_ROWS,
+    table_invocations, table_params, table_params_at, table_points, table_words, TableParams, TablePoint, SCAN_COLUMNS,
+    SCAN_ROWS,
 };
 use super::{BufferBinding, GpuContext, KernelSpec};
 use crate::error::{Error, Result};
@@ -60,7 +71,7 @@ pub const KERNEL: KernelSpec = KernelSpec {
     source: include_str!("../../shaders/fast_scores.wgsl"),
     entry_point: "main",
     bindings: &[
-        BufferBinding::Uniform,
+        BufferBinding::StorageRead,
         BufferBinding::StorageRead,
         BufferBinding::StorageRead,
         BufferBinding::StorageRead,
@@ -76,8 +87,8 @@ pub const WORKGROUP: usize = 64;
 /// Largest number of hypotheses per dispatch.
 pub const MAX_CHUNK: usize = 1 << 16;
 
-/// Twin of WGSL `struct FastParams` in `shaders/fast_scores.wgsl`: one dispatch (one table, one chunk of
-/// hypotheses, one pass of weight vectors).
+/// Twin of WGSL `struct FastParams` in `shaders/fast_scores.wgsl`: one dispatch record (one table, one chunk
+/// of hypotheses, one pass of weight vectors); a batch's records are scored by one GPU dispatch.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct FastParams {
@@ -93,8 +104,14 @@ pub struct FastParams {
     pub m0: [f32; 4],
     pub m1: [f32; 4],
     pub m2: [f32; 4],
+    /// Where the dispatch's inputs lie in the batch's buffers: first `vec4` of its table, first record, first
+    /// boundary, first `vec4` of its weights (filled in by the batch's layout).
+    pub base: [u32; 4],
+    /// First score in the scores buffer, first workgroup (hypothesis) of the dispatch in the batch, unused,
+    /// unused.
+    pub at: [u32; 4],
 }
-const _: () = assert!(std::mem::size_of::<FastParams>() == 112);
+const _: () = assert!(std::mem::size_of::<FastParams>() == 144);
 
 /// Twin of WGSL `struct FastRecord`: one hypothesis's expanded box in the yaw's rotated frame.
 #[repr(C)]
@@ -139,7 +156,8 @@ impl Default for FastChunking {
     }
 }
 
-/// One dispatch's inputs, exactly what the shader binds.
+/// One dispatch record's inputs (what the shader reads for its hypotheses), before the batch's layout places
+/// them in the shared buffers.
 pub struct FastDispatch<'a> {
     /// Index of the table group within its batch (dispatches of one group share the table).
     pub group: usize,
@@ -300,6 +318,7 @@ fn run(
     jobs: &[FastJob],
     chunking: FastChunking,
     build_tables: bool,
+    times: &mut RunTimes,
     mut execute: impl FnMut(&[FastDispatch]) -> Result<Vec<Vec<f32>>>,
 ) -> Result<Vec<Vec<f32>>> {
     let layout = engine.layout();
@@ -337,6 +356,9 @@ fn run(
             m0: m.x_axis.extend(0.0).to_array(),
             m1: m.y_axis.extend(0.0).to_array(),
             m2: m.z_axis.extend(0.0).to_array(),
+            // Filled in by the batch's layout.
+            base: [0; 4],
+            at: [0; 4],
         }
     };
     let mut flush = |batch: &[PackedGroup], scores: &mut [Vec<f32>]| -> Result<()> {
@@ -364,7 +386,10 @@ fn run(
                 chunk_index += 1;
             }
         }
+        let executed = std::time::Instant::now();
         let outs = execute(&dispatches)?;
+        times.execute += executed.elapsed().as_secs_f64();
+        let placing = std::time::Instant::now();
         if outs.len() != dispatches.len() {
             return Err(Error::Gpu(format!("{} dispatches returned {} results", dispatches.len(), outs.len())));
         }
@@ -378,26 +403,32 @@ fn run(
                 }
             }
         }
+        times.place += placing.elapsed().as_secs_f64();
         Ok(())
     };
     // Table groups over all jobs, in key order (deterministic), each with its jobs' members in job order.
+    let grouping = std::time::Instant::now();
     let mut by_key: BTreeMap<TableKey, JobMembers> = BTreeMap::new();
-    for (j, job) in jobs.iter().enumerate() {
-        if job.weights.is_empty() {
-            continue;
-        }
-        for (key, members) in group_by_table(job.hypotheses) {
+    let job_groups: Vec<Vec<(TableKey, Vec<usize>)>> = jobs
+        .par_iter()
+        .map(|job| if job.weights.is_empty() { Vec::new() } else { group_by_table(job.hypotheses) })
+        .collect();
+    for (j, groups) in job_groups.into_iter().enumerate() {
+        for (key, members) in groups {
             by_key.entry(key).or_default().push((j, members));
         }
     }
+    times.group += grouping.elapsed().as_secs_f64();
     let groups: Vec<(TableKey, JobMembers)> = by_key.into_iter().collect();
     let mut batch: Vec<PackedGroup> = Vec::new();
     let mut batch_bytes = 0u64;
     for window in groups.chunks(2 * rayon::current_num_threads().max(1)) {
+        let packing = std::time::Instant::now();
         let packed: Vec<PackedGroup> = window
             .par_iter()
             .map(|(key, members)| PackedGroup::new(engine, jobs, *key, members, chunking.max_chunk, build_tables))
             .collect();
+        times.pack += packing.elapsed().as_secs_f64();
         for group in packed {
             let bytes = group.bytes(&w_totals);
             if !batch.is_empty() && batch_bytes + bytes > chunking.max_batch_bytes {
@@ -412,6 +443,7 @@ fn run(
     if !batch.is_empty() {
         flush(&batch, &mut scores)?;
     }
+    let viewing = std::time::Instant::now();
     if layout.groups.view {
         let offset = layout.view_offset();
         for (job, job_scores) in jobs.iter().zip(scores.iter_mut()) {
@@ -427,7 +459,19 @@ fn run(
             });
         }
     }
+    times.view += viewing.elapsed().as_secs_f64();
     Ok(scores)
+}
+
+/// Seconds of the parts of [`run`] (for the debug log): grouping the hypotheses by table, packing the groups, executing the batches,
+/// placing their scores, and the view features.
+#[derive(Default)]
+struct RunTimes {
+    group: f64,
+    pack: f64,
+    execute: f64,
+    place: f64,
+    view: f64,
 }
 
 /// Fused fast-path scores on the GPU, `scores[h·W + w] = weights[w] · φ(h)`, the layout of
@@ -473,11 +517,9 @@ impl Arena {
 }
 
 /// Several jobs' fast-path scores on the GPU (see [`run`]: tables shared between jobs are built once), cut as
-/// `chunking` says. Per batch: the lattice points of its yaws uploaded once, its
-/// tables built by [`crate::gpu::fast_tables`]'s kernels into one buffer, one buffer per other kind of input
-/// (records, boundaries, parameters) and one for the scores, filled through the queue; the table
-/// dispatches (three phases) and every scoring dispatch recorded in four compute passes, one submission and
-/// one read-back; the weights are uploaded once per call.
+/// `chunking` says. Per batch ([`run_batch`]): its inputs placed by one [`BatchLayout`] in pooled buffers,
+/// its tables built by [`crate::gpu::fast_tables`]'s kernels (one dispatch per phase) and all its hypotheses
+/// scored by one dispatch, in four compute passes of one submission, and one read-back.
 pub fn fast_scores_gpu_jobs(
     ctx: &GpuContext,
     engine: &FastEngine,
@@ -491,14 +533,21 @@ pub fn fast_scores_gpu_jobs(
         ((g[0] + g[1] + 2) as u64 * 4).max(std::mem::size_of::<FastRecord>() as u64).max(MAX_WEIGHTS as u64 * 4);
     let chunking = FastChunking {
         max_chunk: chunking.max_chunk.min(MAX_CHUNK).min((max_binding / per_hyp).max(1) as usize),
-        max_batch_bytes: chunking.max_batch_bytes.min(ctx.limits.max_buffer_size),
+        // A batch's tables are bound as one range (the table kernels see them all).
+        max_batch_bytes: chunking.max_batch_bytes.min(max_binding),
     };
     ctx.checked("fast_scores kernels", || {
-        let mut weight_buffers: Vec<Option<wgpu::Buffer>> = Vec::new();
         let mut submissions = 0usize;
         let mut dispatch_count = 0usize;
         let mut tables = (0usize, 0u64);
-        let scores = run(engine, jobs, chunking, false, |dispatches| {
+        // Where the call's wall time goes (debug log): packing and view features on the CPU are the rest.
+        let started = std::time::Instant::now();
+        let mut batch_times = BatchTimes::default();
+        // Each yaw's lattice points in the shader's layout, made once per call (a yaw's tables may fall in
+        // several batches).
+        let mut points: Vec<Option<Vec<TablePoint>>> = vec![None; engine.scene().yaws.len()];
+        let mut run_times = RunTimes::default();
+        let scores = run(engine, jobs, chunking, false, &mut run_times, |dispatches| {
             for (n, d) in dispatches.iter().enumerate() {
                 let bytes = 4 * fast_tables_words(engine, d) as u64;
                 // Dispatches of one table group are consecutive and share its table.
@@ -512,15 +561,34 @@ pub fn fast_scores_gpu_jobs(
                          {max_binding} bytes"
                     )));
                 }
-                if weight_buffers.len() <= d.pass {
-                    weight_buffers.resize_with(d.pass + 1, || None);
-                }
-                weight_buffers[d.pass].get_or_insert_with(|| ctx.storage_buffer("fast weights", d.weights));
             }
             submissions += 1;
             dispatch_count += dispatches.len();
-            run_batch(ctx, engine, dispatches, &weight_buffers)
+            run_batch(ctx, engine, dispatches, &mut points, &mut batch_times)
         })?;
+        let total = started.elapsed().as_secs_f64();
+        log::debug!(
+            "fast_scores time: {total:.4} s in all (grouping {:.4}, packing {:.4}, placing scores {:.4}, view {:.4}): {:.4} s preparing batches (lattice points {:.4}, buffers {:.4}, \
+             uploads {:.4}, bind groups {:.4}, encoding {:.4}), {:.4} s submitting and waiting for the GPU and the \
+             read-back (GPU passes: scatter {:.4}, rows {:.4}, columns {:.4}, scoring {:.4}), {:.4} s on the CPU \
+             (packing, view)",
+            run_times.group,
+            run_times.pack,
+            run_times.place,
+            run_times.view,
+            batch_times.prepare,
+            batch_times.points,
+            batch_times.buffers,
+            batch_times.uploads,
+            batch_times.bind_groups,
+            batch_times.encoding,
+            batch_times.wait,
+            batch_times.gpu[0],
+            batch_times.gpu[1],
+            batch_times.gpu[2],
+            batch_times.gpu[3],
+            total - batch_times.prepare - batch_times.wait
+        );
         log::debug!(
             "fast_scores: {} jobs, {} hypotheses, {} tables ({:.1} MB) built on the GPU, {dispatch_count} scoring \
              dispatches, {submissions} submissions",
@@ -538,140 +606,293 @@ fn fast_tables_words(engine: &FastEngine, d: &FastDispatch) -> usize {
     table_words(&table_params(engine.lattice(d.yaw_index), d.span, 0))
 }
 
-/// One batch on the GPU: uploads the lattice points of its yaws, builds its tables, records every scoring
-/// dispatch, submits once and reads the scores back once.
+/// Where everything of one batch lies in its buffers, computed once and used alike by the GPU path and its
+/// CPU twin: each yaw's lattice points (packed, indexed by point), each group's table, each chunk's records
+/// and boundaries, each weight pass, and per dispatch its scores and its record ([`FastParams`] with the
+/// bases filled in and its first workgroup: the dispatches' hypotheses are numbered one after the other).
+struct BatchLayout<'p> {
+    /// Per yaw of the scene: its first point and its points, when the batch uses it.
+    yaw_points: Vec<Option<(usize, &'p [TablePoint])>>,
+    point_count: usize,
+    /// Per group index.
+    groups: Vec<GroupPlacement>,
+    /// Per chunk index: byte offsets of its records and boundaries.
+    chunks: Vec<(u64, u64)>,
+    /// Per global weight pass: byte offset of its weights, when the batch uses it.
+    passes: Vec<Option<u64>>,
+    /// Per dispatch: its record, and the byte offset of its scores.
+    params: Vec<FastParams>,
+    outs: Vec<u64>,
+    tables: Arena,
+    records: Arena,
+    bounds: Arena,
+    weights: Arena,
+    scores: Arena,
+    /// Hypotheses (workgroups) of the whole batch.
+    workgroups: usize,
+}
+
+impl<'p> BatchLayout<'p> {
+    /// The layout of `dispatches` with storage offsets aligned to `align` bytes; `points_of_yaw` holds the
+    /// yaws' lattice points (made here for the yaws that lack them).
+    fn new(
+        engine: &FastEngine,
+        dispatches: &[FastDispatch],
+        points_of_yaw: &'p mut [Option<Vec<TablePoint>>],
+        align: u32,
+    ) -> Result<BatchLayout<'p>> {
+        let too_large = |what: &str| Error::Gpu(format!("fast_scores: a batch's {what} pass 2³² elements"));
+        let index = |bytes: u64, unit: u64, what: &str| u32::try_from(bytes / unit).map_err(|_| too_large(what));
+        let mut used = vec![false; points_of_yaw.len()];
+        for d in dispatches {
+            used[d.yaw_index] = true;
+        }
+        points_of_yaw
+            .par_iter_mut()
+            .enumerate()
+            .filter(|(yaw, points)| used[*yaw] && points.is_none())
+            .for_each(|(yaw, points)| *points = Some(table_points(engine.lattice(yaw))));
+        let mut point_count = 0usize;
+        let yaw_points: Vec<Option<(usize, &[TablePoint])>> = points_of_yaw
+            .iter()
+            .zip(&used)
+            .map(|(points, &used)| {
+                let points = points.as_deref().filter(|_| used)?;
+                let first = point_count;
+                point_count += points.len();
+                Some((first, points))
+            })
+            .collect();
+        let [mut tables, mut records, mut bounds, mut weights, mut scores] = [(); 5].map(|_| Arena::new(align));
+        let mut groups: Vec<GroupPlacement> = Vec::new();
+        let mut chunks: Vec<(u64, u64)> = Vec::new();
+        let mut passes: Vec<Option<u64>> = Vec::new();
+        let mut params = Vec::with_capacity(dispatches.len());
+        let mut outs = Vec::with_capacity(dispatches.len());
+        let mut workgroups = 0usize;
+        for d in dispatches {
+            if d.group == groups.len() {
+                let lattice = engine.lattice(d.yaw_index);
+                let table_bytes = 4 * table_words(&table_params(lattice, d.span, 0)) as u64;
+                let table = tables.place(table_bytes);
+                let first_word = index(table, 4, "tables")?;
+                let first_point = yaw_points[d.yaw_index].expect("placed above").0 as u32;
+                let steps = [0, SCAN_ROWS, SCAN_COLUMNS]
+                    .map(|mode| table_params_at(lattice, d.span, mode, first_word, first_point));
+                groups.push(GroupPlacement { table, params: steps });
+            }
+            if d.chunk == chunks.len() {
+                let record = records.place(std::mem::size_of_val(d.records) as u64);
+                chunks.push((record, bounds.place(std::mem::size_of_val(d.bounds) as u64)));
+            }
+            if passes.len() <= d.pass {
+                passes.resize(d.pass + 1, None);
+            }
+            let weight = *passes[d.pass].get_or_insert_with(|| weights.place(std::mem::size_of_val(d.weights) as u64));
+            let (group, (record, bound)) = (&groups[d.group], chunks[d.chunk]);
+            let out = scores.place(4 * (d.records.len() * d.params.job[1] as usize) as u64);
+            params.push(FastParams {
+                base: [
+                    index(group.table, 16, "tables")?,
+                    index(record, std::mem::size_of::<FastRecord>() as u64, "records")?,
+                    index(bound, 4, "boundaries")?,
+                    index(weight, 16, "weights")?,
+                ],
+                at: [index(out, 4, "scores")?, u32::try_from(workgroups).map_err(|_| too_large("hypotheses"))?, 0, 0],
+                ..d.params
+            });
+            outs.push(out);
+            workgroups += d.records.len();
+        }
+        Ok(BatchLayout {
+            yaw_points,
+            point_count,
+            groups,
+            chunks,
+            passes,
+            params,
+            outs,
+            tables,
+            records,
+            bounds,
+            weights,
+            scores,
+            workgroups,
+        })
+    }
+
+    /// Each dispatch's scores, cut from the batch's score buffer `all`.
+    fn split_scores(&self, dispatches: &[FastDispatch], all: &[f32]) -> Vec<Vec<f32>> {
+        dispatches
+            .iter()
+            .zip(&self.outs)
+            .map(|(d, &out)| {
+                let start = (out / 4) as usize;
+                all[start..start + d.records.len() * d.params.job[1] as usize].to_vec()
+            })
+            .collect()
+    }
+}
+
+/// One batch on the GPU: uploads its lattice points, records, boundaries, weights and dispatch records into
+/// pooled buffers, builds its tables (three dispatches) and scores every hypothesis (one dispatch), submits
+/// once and reads the scores back once.
 fn run_batch(
     ctx: &GpuContext,
     engine: &FastEngine,
     dispatches: &[FastDispatch],
-    weight_buffers: &[Option<wgpu::Buffer>],
+    points_of_yaw: &mut [Option<Vec<TablePoint>>],
+    times: &mut BatchTimes,
 ) -> Result<Vec<Vec<f32>>> {
+    let started = std::time::Instant::now();
+    let mut mark = started;
+    // The pooled buffers are this batch's until its scores are read back.
+    let mut pool = ctx.pool.lock().unwrap_or_else(|p| p.into_inner());
     let storage_align = ctx.limits.min_storage_buffer_offset_alignment;
-    let [mut lattices, mut tables, mut records, mut bounds, mut outs] = [(); 5].map(|_| Arena::new(storage_align));
-    let mut params = Arena::new(ctx.limits.min_uniform_buffer_offset_alignment);
-    let fast_params_size = std::mem::size_of::<FastParams>() as u64;
-    let table_params_size = std::mem::size_of::<TableParams>() as u64;
-    // Placement: each yaw's points, each group's table (with its three table params) and each chunk's
-    // records and boundaries once; per dispatch its scores and params.
-    let mut yaw_at: Vec<Option<(u64, Vec<TablePoint>)>> = vec![None; engine.scene().yaws.len()];
-    let mut group_at: Vec<Option<GroupPlacement>> = Vec::new();
-    let mut chunk_at: Vec<Option<(u64, u64)>> = Vec::new();
-    let mut placed = Vec::with_capacity(dispatches.len());
+    let layout = BatchLayout::new(engine, dispatches, points_of_yaw, storage_align)?;
+    times.points += split(&mut mark);
+    let max_size = ctx.limits.max_buffer_size;
+    let mut pooled = |label: &'static str, usage: wgpu::BufferUsages, bytes: u64| {
+        pool.buffer(&ctx.device, label, usage, bytes, max_size)
+    };
+    let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST;
+    let point_bytes = (layout.point_count * std::mem::size_of::<TablePoint>()) as u64;
+    let params_bytes = std::mem::size_of_val(layout.params.as_slice()) as u64;
+    let lattice_buffer = pooled("fast lattice points", storage, point_bytes);
+    // Pooled, so not zero: the table range is cleared on the GPU before the scatter adds into it.
+    let table_buffer = pooled("fast tables", storage, layout.tables.len);
+    let record_buffer = pooled("fast records", storage, layout.records.len);
+    let bound_buffer = pooled("fast bounds", storage, layout.bounds.len);
+    let weight_buffer = pooled("fast weights", storage, layout.weights.len);
+    let params_buffer = pooled("fast params", storage, params_bytes);
+    let out_buffer = pooled("fast scores", storage, layout.scores.len);
+    let staging =
+        pooled("fast scores staging", wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST, layout.scores.len);
+    // The table kernels' params: the three phases one after the other, each at an aligned offset.
+    let table_params_size = std::mem::size_of::<TableParams>();
+    let mut phase_params = Arena::new(storage_align);
+    let phase_at: [u64; 3] = [(); 3].map(|_| phase_params.place((layout.groups.len() * table_params_size) as u64));
+    let table_params_buffer = pooled("fast table params", storage, phase_params.len);
+    times.buffers += split(&mut mark);
+    for (first, points) in layout.yaw_points.iter().flatten() {
+        let at = (first * std::mem::size_of::<TablePoint>()) as u64;
+        ctx.queue.write_buffer(&lattice_buffer, at, bytemuck::cast_slice(points));
+    }
+    for (step, &at) in phase_at.iter().enumerate() {
+        let step_params: Vec<TableParams> = layout.groups.iter().map(|g| g.params[step]).collect();
+        ctx.queue.write_buffer(&table_params_buffer, at, bytemuck::cast_slice(&step_params));
+    }
+    // Each chunk's records and boundaries and each pass's weights once (dispatches share them).
+    let mut chunk_written = vec![false; layout.chunks.len()];
+    let mut pass_written = vec![false; layout.passes.len()];
     for d in dispatches {
-        if yaw_at[d.yaw_index].is_none() {
-            let points = table_points(engine.lattice(d.yaw_index));
-            yaw_at[d.yaw_index] = Some((lattices.place(std::mem::size_of_val(points.as_slice()) as u64), points));
-        }
-        if group_at.len() <= d.group {
-            group_at.resize_with(d.group + 1, || None);
-        }
-        if group_at[d.group].is_none() {
-            let lattice = engine.lattice(d.yaw_index);
-            let steps = [0, SCAN_ROWS, SCAN_COLUMNS].map(|mode| table_params(lattice, d.span, mode));
-            group_at[d.group] = Some(GroupPlacement {
-                yaw_index: d.yaw_index,
-                table: tables.place(4 * table_words(&steps[0]) as u64),
-                table_bytes: 4 * table_words(&steps[0]) as u64,
-                params: steps.map(|p| (params.place(table_params_size), p)),
-            });
-        }
-        if chunk_at.len() <= d.chunk {
-            chunk_at.resize(d.chunk + 1, None);
-        }
-        let (record, bound) = *chunk_at[d.chunk].get_or_insert_with(|| {
-            let record = records.place(std::mem::size_of_val(d.records) as u64);
-            (record, bounds.place(std::mem::size_of_val(d.bounds) as u64))
-        });
-        let count = d.records.len() * d.params.job[1] as usize;
-        placed.push((record, bound, outs.place(4 * count as u64), params.place(fast_params_size)));
-    }
-    let storage = |label: &str, arena: &Arena| ctx.output_buffer(label, arena.len);
-    let lattice_buffer = storage("fast lattice points", &lattices);
-    // New buffers are zeroed (wgpu's guarantee): the tables' scatter adds into zeros.
-    let table_buffer = storage("fast tables", &tables);
-    let record_buffer = storage("fast records", &records);
-    let bound_buffer = storage("fast bounds", &bounds);
-    let out_buffer = storage("fast scores", &outs);
-    let params_buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("fast params"),
-        size: params.len.max(4).next_multiple_of(wgpu::COPY_BUFFER_ALIGNMENT),
-        usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    for (at, points) in yaw_at.iter().flatten() {
-        ctx.queue.write_buffer(&lattice_buffer, *at, bytemuck::cast_slice(points));
-    }
-    // The tables: three phases (scatter, rows, columns), one dispatch per table in each.
-    let mut phases: [Vec<(wgpu::BindGroup, u32)>; 3] = Default::default();
-    for group in group_at.iter().flatten() {
-        let (points_at, points) = yaw_at[group.yaw_index].as_ref().expect("placed with its group");
-        let points_bytes = (std::mem::size_of_val(points.as_slice()) as u64).max(4);
-        let invocations = table_invocations(&group.params[0].1);
-        for (step, &(param_at, step_params)) in group.params.iter().enumerate() {
-            ctx.queue.write_buffer(&params_buffer, param_at, bytemuck::bytes_of(&step_params));
-            let kernel = if step == 0 { &ctx.kernels.fast_table_scatter } else { &ctx.kernels.fast_table_scan };
-            let bind_group = ctx.bind_group_ranges(
-                kernel,
-                &[
-                    (&params_buffer, param_at, table_params_size),
-                    (&lattice_buffer, *points_at, points_bytes),
-                    (&table_buffer, group.table, group.table_bytes),
-                ],
-            );
-            phases[step].push((bind_group, invocations[step]));
-        }
-    }
-    let kernel = &ctx.kernels.fast_scores;
-    let mut written_chunks = vec![false; chunk_at.len()];
-    let mut scoring = Vec::with_capacity(dispatches.len());
-    for (d, &(record, bound, out, param)) in dispatches.iter().zip(&placed) {
-        if !std::mem::replace(&mut written_chunks[d.chunk], true) {
+        if !std::mem::replace(&mut chunk_written[d.chunk], true) {
+            let (record, bound) = layout.chunks[d.chunk];
             ctx.queue.write_buffer(&record_buffer, record, bytemuck::cast_slice(d.records));
             ctx.queue.write_buffer(&bound_buffer, bound, bytemuck::cast_slice(d.bounds));
         }
-        ctx.queue.write_buffer(&params_buffer, param, bytemuck::bytes_of(&d.params));
-        let weights = weight_buffers[d.pass].as_ref().ok_or_else(|| Error::Gpu("fast weights not uploaded".into()))?;
-        let group = group_at[d.group].as_ref().expect("placed above");
-        let count = d.records.len() * d.params.job[1] as usize;
-        let bind_group = ctx.bind_group_ranges(
-            kernel,
-            &[
-                (&params_buffer, param, fast_params_size),
-                (&table_buffer, group.table, group.table_bytes),
-                (&record_buffer, record, std::mem::size_of_val(d.records) as u64),
-                (&bound_buffer, bound, std::mem::size_of_val(d.bounds) as u64),
-                (weights, 0, weights.size()),
-                (&out_buffer, out, 4 * count as u64),
-            ],
-        );
-        // One workgroup per hypothesis: the 1-D convention with 64 invocations per hypothesis.
-        scoring.push((bind_group, (d.records.len() * kernel.invocations_per_workgroup() as usize) as u32));
+        if !std::mem::replace(&mut pass_written[d.pass], true) {
+            let at = layout.passes[d.pass].expect("placed with its dispatch");
+            ctx.queue.write_buffer(&weight_buffer, at, bytemuck::cast_slice(d.weights));
+        }
     }
+    ctx.queue.write_buffer(&params_buffer, 0, bytemuck::cast_slice(&layout.params));
+    times.uploads += split(&mut mark);
+    // The tables: three phases (scatter, rows, columns), each one dispatch over all the batch's tables
+    // (workgroup z: the table), in pieces of at most TABLES_PER_DISPATCH tables.
+    let mut phases: [Vec<(wgpu::BindGroup, u32, u32)>; 3] = Default::default();
+    for (step, &at) in phase_at.iter().enumerate() {
+        let kernel = if step == 0 { &ctx.kernels.fast_table_scatter } else { &ctx.kernels.fast_table_scan };
+        for (piece, members) in layout.groups.chunks(TABLES_PER_DISPATCH).enumerate() {
+            let offset = at + (piece * TABLES_PER_DISPATCH * table_params_size) as u64;
+            let invocations = members.iter().map(|g| table_invocations(&g.params[0])[step]).max().unwrap_or(0);
+            let bind_group = ctx.bind_group_ranges(
+                kernel,
+                &[
+                    (&table_params_buffer, offset, (members.len() * table_params_size) as u64),
+                    (&lattice_buffer, 0, point_bytes.max(4)),
+                    (&table_buffer, 0, layout.tables.len.max(4)),
+                ],
+            );
+            phases[step].push((bind_group, invocations, members.len() as u32));
+        }
+    }
+    let kernel = &ctx.kernels.fast_scores;
+    let scoring = ctx.bind_group_ranges(
+        kernel,
+        &[
+            (&params_buffer, 0, params_bytes),
+            (&table_buffer, 0, layout.tables.len.max(4)),
+            (&record_buffer, 0, layout.records.len.max(4)),
+            (&bound_buffer, 0, layout.bounds.len.max(4)),
+            (&weight_buffer, 0, layout.weights.len.max(4)),
+            (&out_buffer, 0, layout.scores.len.max(4)),
+        ],
+    );
+    times.bind_groups += split(&mut mark);
     let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(kernel.label) });
+    let timer = ctx.pass_timer(4);
+    encoder.clear_buffer(&table_buffer, 0, Some(layout.tables.len.next_multiple_of(wgpu::COPY_BUFFER_ALIGNMENT)));
     // Each dispatch is its own usage scope (WebGPU): a phase sees the previous phase's writes.
-    ctx.encode_dispatches(&mut encoder, &ctx.kernels.fast_table_scatter, &phases[0])?;
-    ctx.encode_dispatches(&mut encoder, &ctx.kernels.fast_table_scan, &phases[1])?;
-    ctx.encode_dispatches(&mut encoder, &ctx.kernels.fast_table_scan, &phases[2])?;
-    ctx.encode_dispatches(&mut encoder, kernel, &scoring)?;
-    let all: Vec<f32> = ctx.read_buffer_after(encoder, &out_buffer, (outs.len / 4) as usize)?;
-    Ok(dispatches
-        .iter()
-        .zip(&placed)
-        .map(|(d, &(_, _, out, _))| {
-            let start = (out / 4) as usize;
-            all[start..start + d.records.len() * d.params.job[1] as usize].to_vec()
-        })
-        .collect())
+    let table_kernels = [&ctx.kernels.fast_table_scatter, &ctx.kernels.fast_table_scan, &ctx.kernels.fast_table_scan];
+    for (index, (kernel, jobs)) in table_kernels.into_iter().zip(&phases).enumerate() {
+        let jobs: Vec<(&wgpu::BindGroup, u32, u32)> = jobs.iter().map(|(b, n, z)| (b, *n, *z)).collect();
+        ctx.encode_layered_dispatches(&mut encoder, kernel, &jobs, timer.as_ref().map(|t| (t, index as u32)))?;
+    }
+    // One workgroup per hypothesis: the 1-D convention with 64 invocations per hypothesis.
+    let invocations = u32::try_from(layout.workgroups * kernel.invocations_per_workgroup() as usize)
+        .map_err(|_| Error::Gpu("fast_scores: a batch of more than 2³² invocations".into()))?;
+    ctx.encode_layered_dispatches(&mut encoder, kernel, &[(&scoring, invocations, 1)], timer.as_ref().map(|t| (t, 3)))?;
+    if let Some(timer) = &timer {
+        timer.resolve(&mut encoder);
+    }
+    times.encoding += split(&mut mark);
+    let prepared = std::time::Instant::now();
+    let all: Vec<f32> = ctx.read_buffer_through(encoder, &out_buffer, (layout.scores.len / 4) as usize, &staging)?;
+    times.prepare += (prepared - started).as_secs_f64();
+    times.wait += prepared.elapsed().as_secs_f64();
+    if let Some(timer) = &timer {
+        for (total, seconds) in times.gpu.iter_mut().zip(timer.seconds(ctx)?) {
+            *total += seconds;
+        }
+    }
+    Ok(layout.split_scores(dispatches, &all))
 }
 
-/// Where one table group's table and its three build params lie in a batch's buffers.
-struct GroupPlacement {
-    yaw_index: usize,
-    table: u64,
-    table_bytes: u64,
-    /// Scatter, rows, columns: (offset in the params buffer, params).
-    params: [(u64, TableParams); 3],
+/// Seconds of [`run_batch`] calls: before the submission, and from it to the scores on the CPU.
+#[derive(Default)]
+struct BatchTimes {
+    prepare: f64,
+    points: f64,
+    buffers: f64,
+    uploads: f64,
+    bind_groups: f64,
+    encoding: f64,
+    wait: f64,
+    /// GPU seconds of the four passes (when the device has timestamp queries and the debug log is on).
+    gpu: [f64; 4],
 }
+
+/// Seconds since `*mark`, moving the mark to now.
+fn split(mark: &mut std::time::Instant) -> f64 {
+    let now = std::time::Instant::now();
+    let seconds = (now - *mark).as_secs_f64();
+    *mark = now;
+    seconds
+}
+
+/// Where one table group's table lies in a batch's buffers, and its build params.
+struct GroupPlacement {
+    /// Byte offset in the tables buffer.
+    table: u64,
+    /// Scatter, rows, columns.
+    params: [TableParams; 3],
+}
+
+/// Tables per dispatch of a table phase (the dispatch's workgroup z); a multiple of 16 so that every piece's
+/// params (48 bytes each) start at a multiple of 256 bytes, the largest storage-offset alignment there is.
+const TABLES_PER_DISPATCH: usize = 16384;
+const _: () = assert!((TABLES_PER_DISPATCH * std::mem::size_of::<TableParams>()).is_multiple_of(256));
 
 /// The CPU twin of the whole GPU path: the same dispatches as [`fast_scores_gpu_chunked`], each run by
 /// [`fast_scores_main`] over its workgroups.
@@ -691,34 +912,71 @@ pub fn fast_scores_reference_jobs(
     jobs: &[FastJob],
     chunking: FastChunking,
 ) -> Result<Vec<Vec<f32>>> {
-    run(engine, jobs, chunking, true, |dispatches| {
-        dispatches
-            .iter()
-            .map(|d| {
-                let table = d.table.ok_or_else(|| Error::Gpu("the CPU twin needs the CPU-built table".into()))?;
-                let count = d.params.job[1] as usize;
-                let mut out = vec![0.0f32; d.records.len() * count];
-                out.par_chunks_mut(count.max(1))
-                    .enumerate()
-                    .for_each(|(h, row)| fast_scores_main(&d.params, table, d.records, d.bounds, d.weights, h, row));
-                Ok(out)
-            })
-            .collect()
+    let mut points: Vec<Option<Vec<TablePoint>>> = vec![None; engine.scene().yaws.len()];
+    run(engine, jobs, chunking, true, &mut RunTimes::default(), |dispatches| {
+        // The GPU's layout and buffers, filled on the CPU (the tables from the CPU's LayerTables).
+        let layout = BatchLayout::new(engine, dispatches, &mut points, TWIN_ALIGN)?;
+        let mut table = vec![0u32; (layout.tables.len / 4) as usize];
+        let mut records = vec![FastRecord::default(); (layout.records.len / 32) as usize];
+        let mut bounds = vec![0u32; (layout.bounds.len / 4) as usize];
+        let mut weights = vec![0.0f32; (layout.weights.len / 4) as usize];
+        for d in dispatches {
+            let group = &layout.groups[d.group];
+            let words = d.table.ok_or_else(|| Error::Gpu("the CPU twin needs the CPU-built table".into()))?;
+            let at = (group.table / 4) as usize;
+            table[at..at + words.len()].copy_from_slice(words);
+            let (record, bound) = layout.chunks[d.chunk];
+            let at = (record / 32) as usize;
+            records[at..at + d.records.len()].copy_from_slice(d.records);
+            let at = (bound / 4) as usize;
+            bounds[at..at + d.bounds.len()].copy_from_slice(d.bounds);
+            let at = (layout.passes[d.pass].expect("placed") / 4) as usize;
+            weights[at..at + d.weights.len()].copy_from_slice(d.weights);
+        }
+        let writes: Vec<Vec<(usize, f32)>> = (0..layout.workgroups)
+            .into_par_iter()
+            .map(|g| fast_scores_main(&layout.params, &table, &records, &bounds, &weights, g))
+            .collect();
+        let mut out = vec![0.0f32; (layout.scores.len / 4) as usize];
+        for (at, value) in writes.into_iter().flatten() {
+            out[at] = value;
+        }
+        Ok(layout.split_scores(dispatches, &out))
     })
 }
 
-/// The shader's `main` for workgroup `h` (all 64 invocations, then the reduction), writing
-/// `out[h·weight_count..]` as `row`. Written to read like `shaders/fast_scores.wgsl`; its `vec4`s are
+/// The CPU twin's storage-offset alignment (any power of two from 32 gives the same scores; 256 is the
+/// largest a device may ask for).
+const TWIN_ALIGN: u32 = 256;
+
+/// The shader's `dispatch_of`: the record that workgroup `g` belongs to (binary search over their first
+/// workgroups).
+fn dispatch_of(dispatches: &[FastParams], g: usize) -> usize {
+    let (mut lo, mut hi) = (0usize, dispatches.len());
+    while hi - lo > 1 {
+        let mid = (lo + hi) / 2;
+        if dispatches[mid].at[1] as usize <= g {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    lo
+}
+
+/// The shader's `main` for workgroup `g` (all 64 invocations, then the reduction): the writes invocation 0
+/// makes, as (index in `out`, value). Written to read like `shaders/fast_scores.wgsl`; its `vec4`s are
 /// `[_; 4]` here, `table` and `weights` are indexed in `vec4` units through [`vec4_at`].
 pub fn fast_scores_main(
-    params: &FastParams,
+    dispatches: &[FastParams],
     table: &[u32],
     records: &[FastRecord],
     bounds: &[u32],
     weights: &[f32],
-    h: usize,
-    row: &mut [f32],
-) {
+    g: usize,
+) -> Vec<(usize, f32)> {
+    let params = &dispatches[dispatch_of(dispatches, g)];
+    let h = g - params.at[1] as usize;
     let [nx, ny, nz, _] = params.grid.map(|v| v as usize);
     let weight_count = params.job[1] as usize;
     let groups = params.job[2];
@@ -726,14 +984,19 @@ pub fn fast_scores_main(
     let use_normals = groups & 2 != 0;
     let use_cog = groups & 4 != 0;
     let mut partial = [0.0f32; WORKGROUP * MAX_WEIGHTS];
+    // Past the last hypothesis of its dispatch (the grid's padding): no work, no write.
+    if h >= params.job[0] as usize {
+        return Vec::new();
+    }
 
-    let record = &records[h];
+    let record = &records[params.base[1] as usize + h];
     let lo = record.lo;
     let cell = record.cell;
     let face_areas = [cell[1] * cell[2], cell[0] * cell[2], cell[0] * cell[1]];
     let [fx, fy, inv_cog_scale, _] = params.scale;
-    let b = h * params.job[3] as usize;
+    let b = params.base[2] as usize + h * params.job[3] as usize;
     let table_row = params.table[0] as usize;
+    let table_base = params.base[0] as usize;
     let voxels = nx * ny * nz;
     let camera_point = |q: [f32; 3]| -> [f32; 3] {
         [0, 1, 2].map(|a| params.m0[a] * q[0] + params.m1[a] * q[1] + params.m2[a] * q[2])
@@ -756,10 +1019,10 @@ pub fn fast_scores_main(
             let y0 = bounds[b + nx + 1 + j] as usize;
             let y1 = bounds[b + nx + 1 + j + 1] as usize;
             let layer = k * params.table[1] as usize;
-            let high = ((layer + y1) * table_row + x1) * 9;
-            let left = ((layer + y1) * table_row + x0) * 9;
-            let low = ((layer + y0) * table_row + x1) * 9;
-            let both = ((layer + y0) * table_row + x0) * 9;
+            let high = table_base + ((layer + y1) * table_row + x1) * 9;
+            let left = table_base + ((layer + y1) * table_row + x0) * 9;
+            let low = table_base + ((layer + y0) * table_row + x1) * 9;
+            let both = table_base + ((layer + y0) * table_row + x0) * 9;
             let sums = |c: usize| -> [u32; 4] {
                 let [hi, le, lo, bo] = [high, left, low, both].map(|e| vec4_at(table, e + c));
                 [0, 1, 2, 3].map(|n| hi[n].wrapping_sub(le[n]).wrapping_sub(lo[n]).wrapping_add(bo[n]))
@@ -812,7 +1075,7 @@ pub fn fast_scores_main(
             ];
             for (w, slot) in my_partial.iter_mut().enumerate() {
                 if w < weight_count {
-                    let wb = (w * voxels + v) * 9;
+                    let wb = params.base[3] as usize + (w * voxels + v) * 9;
                     let mut acc = 0.0f32;
                     for (c, fc) in f.iter().enumerate() {
                         acc = dot_acc(acc, vec4_at(weights, wb + c), *fc);
@@ -833,7 +1096,7 @@ pub fn fast_scores_main(
         }
         stride /= 2;
     }
-    row[..weight_count].copy_from_slice(&partial[..weight_count]);
+    (0..weight_count).map(|w| (params.at[0] as usize + h * weight_count + w, partial[w])).collect()
 }
 
 /// Element `n` of `data` viewed as an array of `vec4`s.

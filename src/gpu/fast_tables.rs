@@ -3,9 +3,10 @@
 //! once per call instead of every (yaw, bottom, height) table.
 //!
 //! # Design
-//! A table is built by three dispatches (scatter the points with atomic `u32` adds, running sums along s,
-//! then along t) into a zeroed range of a buffer; [`crate::gpu::fast`] records them for every table group
-//! of a batch, in three phases, before the scoring dispatches of the same submission. The integer sums
+//! Tables are built by three dispatches (scatter the points with atomic `u32` adds, running sums along s,
+//! then along t) into a zeroed range of a buffer; [`crate::gpu::fast`] records them once for all the
+//! tables of a batch (workgroup z is the table, [`TableParams`] per table say where its words and its
+//! yaw's points lie), before the scoring dispatches of the same submission. The integer sums
 //! wrap exactly as on the CPU, so the table is the same words as [`LayerTable`]'s whatever the order of the
 //! atomic adds (tested against `LayerTable::build` and the twins, on lavapipe).
 //!
@@ -25,7 +26,7 @@ use crate::features::fast::{LatticePoint, TableSpan, YawLattice, CHANNELS};
 use crate::features::feature_layout::COG;
 
 const BINDINGS: &[BufferBinding] =
-    &[BufferBinding::Uniform, BufferBinding::StorageRead, BufferBinding::StorageReadWrite];
+    &[BufferBinding::StorageRead, BufferBinding::StorageRead, BufferBinding::StorageReadWrite];
 
 /// The scatter entry point (registered in [`super::Kernels`]).
 pub const SCATTER_KERNEL: KernelSpec = KernelSpec {
@@ -75,13 +76,14 @@ impl From<&LatticePoint> for TablePoint {
     }
 }
 
-/// Twin of WGSL `struct TableParams`: one table's shape and z layers, and the dispatch's job.
+/// Twin of WGSL `struct TableParams`: one table's shape, z layers and place, and the dispatch's job.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct TableParams {
     /// Entries per row (cells_s + 1), rows per layer (cells_t + 1), layers, cells_s.
     pub shape: [u32; 4],
-    /// Point count, scan mode ([`SCAN_ROWS`] or [`SCAN_COLUMNS`]; unused by the scatter), unused, unused.
+    /// Point count, scan mode ([`SCAN_ROWS`] or [`SCAN_COLUMNS`]; unused by the scatter), first word of the
+    /// table in the tables buffer, first point of the yaw in the points buffer.
     pub job: [u32; 4],
     /// z_lo, 1 / layer height, unused, unused.
     pub span: [f32; 4],
@@ -95,12 +97,25 @@ pub fn table_points(lattice: &YawLattice) -> Vec<TablePoint> {
     lattice.points().iter().map(TablePoint::from).collect()
 }
 
-/// The params of a table of `span` over `lattice`, for the dispatch `mode` (0 for the scatter).
+/// The params of a table of `span` over `lattice`, for the dispatch `mode` (0 for the scatter), alone in
+/// its buffers (its words and its points from 0).
 pub fn table_params(lattice: &YawLattice, span: TableSpan, mode: u32) -> TableParams {
+    table_params_at(lattice, span, mode, 0, 0)
+}
+
+/// [`table_params`] of a table whose words start at word `first_word` of the tables buffer and whose
+/// yaw's points start at point `first_point` of the points buffer.
+pub fn table_params_at(
+    lattice: &YawLattice,
+    span: TableSpan,
+    mode: u32,
+    first_word: u32,
+    first_point: u32,
+) -> TableParams {
     let [row, rows] = lattice.table_stride();
     TableParams {
         shape: [row as u32, rows as u32, span.layers as u32, lattice.cells()[0] as u32],
-        job: [lattice.points().len() as u32, mode, 0, 0],
+        job: [lattice.points().len() as u32, mode, first_word, first_point],
         span: [span.z_lo, span.inv_step, 0.0, 0.0],
     }
 }
@@ -118,12 +133,13 @@ pub fn table_invocations(params: &TableParams) -> [u32; 3] {
     [params.job[0], layers * rows * channels, layers * row * channels]
 }
 
-/// The shader's `scatter` for invocation `n`.
-pub fn scatter_main(params: &TableParams, points: &[TablePoint], table: &mut [u32], n: usize) {
+/// The shader's `scatter` for invocation `n` of table `t` (workgroup z).
+pub fn scatter_main(tables: &[TableParams], points: &[TablePoint], table: &mut [u32], t: usize, n: usize) {
+    let params = &tables[t];
     if n >= params.job[0] as usize {
         return;
     }
-    let p = points[n];
+    let p = points[params.job[3] as usize + n];
     let layer = ((p.z - params.span[0]) * params.span[1]).floor();
     if !(layer >= 0.0 && layer < params.shape[2] as f32) {
         return;
@@ -132,7 +148,7 @@ pub fn scatter_main(params: &TableParams, points: &[TablePoint], table: &mut [u3
     let x = p.cell as usize % cells_s;
     let y = p.cell as usize / cells_s;
     // Cell (x, y) is entry (x + 1, y + 1) before the prefix sums.
-    let base = ((layer as usize * rows + y + 1) * row + x + 1) * CHANNELS;
+    let base = params.job[2] as usize + ((layer as usize * rows + y + 1) * row + x + 1) * CHANNELS;
     let mut atomic_add = |at: usize, value: u32| table[at] = table[at].wrapping_add(value);
     atomic_add(base, 1);
     atomic_add(base + 1 + (p.bins & 0xff) as usize, 1);
@@ -140,16 +156,18 @@ pub fn scatter_main(params: &TableParams, points: &[TablePoint], table: &mut [u3
     atomic_add(base + COG + ((p.bins >> 16) & 0xff) as usize, p.share1);
 }
 
-/// The shader's `scan` for invocation `n` (the mode is `params.job[1]`).
-pub fn scan_main(params: &TableParams, table: &mut [u32], n: usize) {
+/// The shader's `scan` for invocation `n` of table `t` (workgroup z; the mode is its `job[1]`).
+pub fn scan_main(tables: &[TableParams], table: &mut [u32], t: usize, n: usize) {
+    let params = &tables[t];
     let [row, rows, layers, _] = params.shape.map(|v| v as usize);
+    let start = params.job[2] as usize;
     let c = n % CHANNELS;
     if params.job[1] == SCAN_ROWS {
         if n >= layers * rows * CHANNELS {
             return;
         }
         // n / CHANNELS = k·rows + y: the row's first entry.
-        let first = (n / CHANNELS) * row * CHANNELS + c;
+        let first = start + (n / CHANNELS) * row * CHANNELS + c;
         let mut acc = 0u32;
         for x in 1..row {
             let at = first + x * CHANNELS;
@@ -164,7 +182,7 @@ pub fn scan_main(params: &TableParams, table: &mut [u32], n: usize) {
         let k = n / (CHANNELS * row);
         let mut acc = 0u32;
         for y in 1..rows {
-            let at = ((k * rows + y) * row + x) * CHANNELS + c;
+            let at = start + ((k * rows + y) * row + x) * CHANNELS + c;
             acc = acc.wrapping_add(table[at]);
             table[at] = acc;
         }
@@ -178,15 +196,68 @@ pub fn build_table_reference(lattice: &YawLattice, span: TableSpan) -> Vec<u32> 
     let mut table = vec![0u32; table_words(&scatter)];
     let [point_count, row_jobs, column_jobs] = table_invocations(&scatter);
     for n in 0..point_count as usize {
-        scatter_main(&scatter, &points, &mut table, n);
+        scatter_main(&[scatter], &points, &mut table, 0, n);
     }
     for n in 0..row_jobs as usize {
-        scan_main(&table_params(lattice, span, SCAN_ROWS), &mut table, n);
+        scan_main(&[table_params(lattice, span, SCAN_ROWS)], &mut table, 0, n);
     }
     for n in 0..column_jobs as usize {
-        scan_main(&table_params(lattice, span, SCAN_COLUMNS), &mut table, n);
+        scan_main(&[table_params(lattice, span, SCAN_COLUMNS)], &mut table, 0, n);
     }
     table
+}
+
+/// Several tables built together, as a batch of the scoring path builds them: `tables[t]` the scatter
+/// params of table `t` (mode 0; its words from `job[2]`, its yaw's points from `job[3]` of `points`), the
+/// buffer `words` long. The twins in dispatch order: every scatter invocation of every table, then every row
+/// scan, then every column scan.
+pub fn build_tables_reference(tables: &[TableParams], points: &[TablePoint], words: usize) -> Vec<u32> {
+    let mut table = vec![0u32; words];
+    for (t, params) in tables.iter().enumerate() {
+        for n in 0..table_invocations(params)[0] as usize {
+            scatter_main(tables, points, &mut table, t, n);
+        }
+    }
+    for (step, mode) in [(1, SCAN_ROWS), (2, SCAN_COLUMNS)] {
+        let phase: Vec<TableParams> =
+            tables.iter().map(|p| TableParams { job: [p.job[0], mode, p.job[2], p.job[3]], ..*p }).collect();
+        for (t, params) in phase.iter().enumerate() {
+            for n in 0..table_invocations(params)[step] as usize {
+                scan_main(&phase, &mut table, t, n);
+            }
+        }
+    }
+    table
+}
+
+/// [`build_tables_reference`] on the GPU: one dispatch per phase for all the tables (workgroup z).
+pub fn build_tables_gpu(
+    ctx: &GpuContext,
+    tables: &[TableParams],
+    points: &[TablePoint],
+    words: usize,
+) -> Result<Vec<u32>> {
+    ctx.checked("fast_tables kernels", || {
+        let point_buffer = ctx.storage_buffer("table points", points);
+        let table = ctx.output_buffer("fast tables", (words * 4) as u64);
+        let mut encoder =
+            ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("fast_tables") });
+        for (step, mode) in [0, SCAN_ROWS, SCAN_COLUMNS].into_iter().enumerate() {
+            let kernel = if step == 0 { &ctx.kernels.fast_table_scatter } else { &ctx.kernels.fast_table_scan };
+            let phase: Vec<TableParams> =
+                tables.iter().map(|p| TableParams { job: [p.job[0], mode, p.job[2], p.job[3]], ..*p }).collect();
+            let params = ctx.storage_buffer("table params", &phase);
+            let bind_group = ctx.bind_group(kernel, &[&params, &point_buffer, &table]);
+            let invocations = phase.iter().map(|p| table_invocations(p)[step]).max().unwrap_or(0);
+            ctx.encode_layered_dispatches(
+                &mut encoder,
+                kernel,
+                &[(&bind_group, invocations, phase.len() as u32)],
+                None,
+            )?;
+        }
+        ctx.read_buffer_after(encoder, &table, words)
+    })
 }
 
 /// One table built on the GPU and read back (for tests and benchmarks; the scoring path builds its tables
@@ -210,8 +281,8 @@ pub fn build_table_gpu(ctx: &GpuContext, lattice: &YawLattice, span: TableSpan) 
             ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("fast_tables") });
         for (step, mode) in [0, SCAN_ROWS, SCAN_COLUMNS].into_iter().enumerate() {
             let kernel = if step == 0 { &ctx.kernels.fast_table_scatter } else { &ctx.kernels.fast_table_scan };
-            let uniform = ctx.uniform_buffer("table params", &table_params(lattice, span, mode));
-            let bind_group = ctx.bind_group(kernel, &[&uniform, &point_buffer, &table]);
+            let params = ctx.storage_buffer("table params", &[table_params(lattice, span, mode)]);
+            let bind_group = ctx.bind_group(kernel, &[&params, &point_buffer, &table]);
             ctx.encode_dispatch(&mut encoder, kernel, &bind_group, invocations[step])?;
         }
         ctx.read_buffer_after(encoder, &table, words)

@@ -198,6 +198,54 @@ pub struct GpuContext {
     /// The limits the device was created with (what kernels must chunk their jobs to).
     pub limits: wgpu::Limits,
     pub kernels: Kernels,
+    /// Whether the device has timestamp queries (asked for when the adapter offers them): kernels may then
+    /// time their compute passes on the GPU for the debug log ([`GpuContext::pass_timer`]).
+    pub timestamps: bool,
+    /// Buffers kept from one batch to the next (see [`BufferPool`]); a kernel holds the lock from its
+    /// uploads to its read-back, so that two callers never share a buffer in flight.
+    pub pool: Mutex<BufferPool>,
+}
+
+/// Grow-only buffers by role, reused across batches and frames instead of created (and zeroed by wgpu)
+/// each time: a per-frame arena. A kernel that needs zeros clears its range itself.
+#[derive(Default)]
+pub struct BufferPool {
+    buffers: Vec<(&'static str, wgpu::BufferUsages, wgpu::Buffer)>,
+}
+
+impl BufferPool {
+    /// The pooled buffer of `label` and `usage` with at least `size` bytes (rounded up to 4, at least 4):
+    /// the kept one when it is large enough, else a new one — half as large again as the one it replaces
+    /// when that is more, so that slowly growing requests do not reallocate every time, but never over
+    /// `max_size` unless `size` itself is.
+    pub fn buffer(
+        &mut self,
+        device: &wgpu::Device,
+        label: &'static str,
+        usage: wgpu::BufferUsages,
+        size: u64,
+        max_size: u64,
+    ) -> wgpu::Buffer {
+        let size = size.max(4).next_multiple_of(wgpu::COPY_BUFFER_ALIGNMENT);
+        let slot = self.buffers.iter().position(|(l, u, _)| *l == label && *u == usage);
+        if let Some(n) = slot {
+            if self.buffers[n].2.size() >= size {
+                return self.buffers[n].2.clone();
+            }
+        }
+        let grown = slot.map_or(0, |n| self.buffers[n].2.size() * 3 / 2).min(max_size).max(size);
+        let buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: grown.next_multiple_of(wgpu::COPY_BUFFER_ALIGNMENT),
+            usage,
+            mapped_at_creation: false,
+        });
+        match slot {
+            Some(n) => self.buffers[n].2 = buffer.clone(),
+            None => self.buffers.push((label, usage, buffer.clone())),
+        }
+        buffer
+    }
 }
 
 impl std::fmt::Debug for GpuContext {
@@ -307,10 +355,12 @@ impl GpuContext {
         };
         let info = adapter.get_info();
         let limits = required_limits(&adapter.limits());
+        let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
+        log::debug!("adapter {}: timestamp queries {}", info.name, if timestamps { "available" } else { "absent" });
         let (device, queue) = adapter
             .request_device(&wgpu::DeviceDescriptor {
                 label: Some("cog-gpu"),
-                required_features: wgpu::Features::empty(),
+                required_features: if timestamps { wgpu::Features::TIMESTAMP_QUERY } else { wgpu::Features::empty() },
                 required_limits: limits.clone(),
                 experimental_features: wgpu::ExperimentalFeatures::disabled(),
                 memory_hints: wgpu::MemoryHints::Performance,
@@ -323,7 +373,7 @@ impl GpuContext {
         device.on_uncaptured_error(Arc::new(|e: wgpu::Error| log::error!("GPU error outside a checked scope: {e}")));
         device.set_device_lost_callback(|reason, message| log::error!("GPU device lost ({reason:?}): {message}"));
         let kernels = Kernels::new(&device)?;
-        Ok(GpuContext { instance, adapter, device, queue, info, limits, kernels })
+        Ok(GpuContext { instance, adapter, device, queue, info, limits, kernels, timestamps, pool: Mutex::default() })
     }
 
     /// One line for logs: adapter name, backend, device type and driver.
@@ -429,24 +479,72 @@ impl GpuContext {
         kernel: &Kernel,
         jobs: &[(wgpu::BindGroup, u32)],
     ) -> Result<()> {
+        self.encode_dispatches_timed(encoder, kernel, jobs, None)
+    }
+
+    /// A timer of up to `passes` compute passes on the GPU, when the device has timestamp queries and the
+    /// debug log is on (it costs a query set and a read-back); `None` otherwise.
+    pub fn pass_timer(&self, passes: u32) -> Option<PassTimer> {
+        (self.timestamps && log::log_enabled!(log::Level::Debug)).then(|| PassTimer::new(self, passes))
+    }
+
+    /// [`GpuContext::encode_dispatches`], the pass timed as pass `index` of `timer` when there is one.
+    pub fn encode_dispatches_timed(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        kernel: &Kernel,
+        jobs: &[(wgpu::BindGroup, u32)],
+        timer: Option<(&PassTimer, u32)>,
+    ) -> Result<()> {
+        let layered: Vec<(&wgpu::BindGroup, u32, u32)> = jobs.iter().map(|(b, n)| (b, *n, 1)).collect();
+        self.encode_layered_dispatches(encoder, kernel, &layered, timer)
+    }
+
+    /// Records one compute pass of `kernel` (a 1-D kernel) with one dispatch per job `(bind group,
+    /// invocations, layers)`: the 1-D grid of the invocations (see the module doc), repeated `layers` times
+    /// along workgroup z (at most `max_compute_workgroups_per_dimension`), so that one dispatch does the same
+    /// job for many items (the shader reads its item from `global_invocation_id.z`). The pass is timed as pass
+    /// `index` of `timer` when there is one.
+    pub fn encode_layered_dispatches(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        kernel: &Kernel,
+        jobs: &[(&wgpu::BindGroup, u32, u32)],
+        timer: Option<(&PassTimer, u32)>,
+    ) -> Result<()> {
         if kernel.workgroup_size[1] != 1 || kernel.workgroup_size[2] != 1 {
             return Err(Error::Gpu(format!(
                 "kernel '{}' has workgroup size {:?}; a 1-D dispatch needs y = z = 1",
                 kernel.label, kernel.workgroup_size
             )));
         }
+        let max_layers = self.limits.max_compute_workgroups_per_dimension;
         let grids = jobs
             .iter()
-            .map(|(_, invocations)| self.workgroup_grid(invocations.div_ceil(kernel.workgroup_size[0])))
+            .map(|&(_, invocations, layers)| {
+                if layers > max_layers {
+                    return Err(Error::Gpu(format!(
+                        "kernel '{}': {layers} layers exceed the {max_layers} workgroups per dimension",
+                        kernel.label
+                    )));
+                }
+                let [x, y, _] = self.workgroup_grid(invocations.div_ceil(kernel.workgroup_size[0]))?;
+                Ok([x, y, layers])
+            })
             .collect::<Result<Vec<_>>>()?;
-        let mut pass = encoder
-            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(kernel.label), timestamp_writes: None });
+        let timestamp_writes = timer.map(|(timer, index)| wgpu::ComputePassTimestampWrites {
+            query_set: &timer.queries,
+            beginning_of_pass_write_index: Some(2 * index),
+            end_of_pass_write_index: Some(2 * index + 1),
+        });
+        let mut pass =
+            encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(kernel.label), timestamp_writes });
         pass.set_pipeline(&kernel.pipeline);
-        for ((bind_group, _), [x, y, z]) in jobs.iter().zip(grids) {
-            if x == 0 {
+        for ((bind_group, _, _), [x, y, z]) in jobs.iter().zip(grids) {
+            if x == 0 || z == 0 {
                 continue;
             }
-            pass.set_bind_group(0, bind_group, &[]);
+            pass.set_bind_group(0, *bind_group, &[]);
             pass.dispatch_workgroups(x, y, z);
         }
         Ok(())
@@ -509,7 +607,7 @@ impl GpuContext {
     /// Appends a copy of `buffer`'s first `count` elements to `encoder`, submits it, waits, and returns them.
     pub fn read_buffer_after<T: bytemuck::Pod>(
         &self,
-        mut encoder: wgpu::CommandEncoder,
+        encoder: wgpu::CommandEncoder,
         buffer: &wgpu::Buffer,
         count: usize,
     ) -> Result<Vec<T>> {
@@ -530,11 +628,37 @@ impl GpuContext {
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, Some(copy_bytes));
+        self.read_buffer_through(encoder, buffer, count, &staging)
+    }
+
+    /// [`GpuContext::read_buffer_after`] through the given `MAP_READ | COPY_DST` staging buffer (a pooled one,
+    /// at least as large as what is read; it is unmapped again before this returns).
+    pub fn read_buffer_through<T: bytemuck::Pod>(
+        &self,
+        mut encoder: wgpu::CommandEncoder,
+        buffer: &wgpu::Buffer,
+        count: usize,
+        staging: &wgpu::Buffer,
+    ) -> Result<Vec<T>> {
+        let bytes = (count * std::mem::size_of::<T>()) as u64;
+        if bytes > buffer.size() || bytes > staging.size() {
+            return Err(Error::Gpu(format!(
+                "reading {count} elements ({bytes} bytes) from a {}-byte buffer through a {}-byte staging buffer",
+                buffer.size(),
+                staging.size()
+            )));
+        }
+        if bytes == 0 {
+            return Ok(Vec::new());
+        }
+        let copy_bytes = bytes.next_multiple_of(wgpu::COPY_BUFFER_ALIGNMENT).min(buffer.size()).min(staging.size());
+        encoder.copy_buffer_to_buffer(buffer, 0, staging, 0, Some(copy_bytes));
         self.queue.submit([encoder.finish()]);
         let mapped: Arc<Mutex<Option<std::result::Result<(), wgpu::BufferAsyncError>>>> = Arc::default();
         let sink = Arc::clone(&mapped);
-        staging.map_async(wgpu::MapMode::Read, .., move |r| *sink.lock().unwrap_or_else(|p| p.into_inner()) = Some(r));
+        staging.map_async(wgpu::MapMode::Read, ..copy_bytes, move |r| {
+            *sink.lock().unwrap_or_else(|p| p.into_inner()) = Some(r)
+        });
         self.device
             .poll(wgpu::PollType::wait_indefinitely())
             .map_err(|e| Error::Gpu(format!("waiting for the GPU: {e}")))?;
@@ -545,8 +669,9 @@ impl GpuContext {
             None => return Err(Error::Gpu("the read-back buffer was not mapped after the GPU went idle".into())),
         }
         let values = {
-            let view =
-                staging.get_mapped_range(..).map_err(|e| Error::Gpu(format!("reading the mapped buffer: {e}")))?;
+            let view = staging
+                .get_mapped_range(..copy_bytes)
+                .map_err(|e| Error::Gpu(format!("reading the mapped buffer: {e}")))?;
             // Collecting (not casting in place) copes with any alignment of the mapping.
             let mut values: Vec<T> = bytemuck::pod_collect_to_vec(&view[..bytes as usize]);
             values.truncate(count);
@@ -554,6 +679,44 @@ impl GpuContext {
         };
         staging.unmap();
         Ok(values)
+    }
+}
+
+/// GPU timestamps at the beginning and end of a few compute passes (a diagnostic for the debug log).
+pub struct PassTimer {
+    queries: wgpu::QuerySet,
+    resolved: wgpu::Buffer,
+    passes: u32,
+}
+
+impl PassTimer {
+    fn new(ctx: &GpuContext, passes: u32) -> PassTimer {
+        let queries = ctx.device.create_query_set(&wgpu::QuerySetDescriptor {
+            label: Some("pass timer"),
+            ty: wgpu::QueryType::Timestamp,
+            count: 2 * passes,
+        });
+        let resolved = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("pass timer resolved"),
+            size: 16 * u64::from(passes),
+            usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        PassTimer { queries, resolved, passes }
+    }
+
+    /// Records the resolution of the timestamps into `encoder` (after the timed passes).
+    pub fn resolve(&self, encoder: &mut wgpu::CommandEncoder) {
+        encoder.resolve_query_set(&self.queries, 0..2 * self.passes, &self.resolved, 0);
+    }
+
+    /// Seconds each pass took on the GPU (after the encoder that [`PassTimer::resolve`]d was submitted; a
+    /// pass that did not run reads 0).
+    pub fn seconds(&self, ctx: &GpuContext) -> Result<Vec<f64>> {
+        let encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pass timer") });
+        let ticks: Vec<u64> = ctx.read_buffer_after(encoder, &self.resolved, 2 * self.passes as usize)?;
+        let period = f64::from(ctx.queue.get_timestamp_period()) * 1e-9;
+        Ok(ticks.chunks(2).map(|t| t[1].saturating_sub(t[0]) as f64 * period).collect())
     }
 }
 
