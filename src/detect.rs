@@ -235,12 +235,20 @@ pub fn score_models<'a>(
             }
         }
     }
-    for (index, members) in &by_engine {
-        let jobs: Vec<FastJob> = members
-            .iter()
-            .map(|&m| FastJob { hypotheses: hypotheses[m], weights: std::slice::from_ref(&models[m].weights) })
-            .collect();
-        for (&m, scores) in members.iter().zip(backend.fast_scores_jobs(&engines.engines[*index], &jobs)) {
+    // The engines' calls run concurrently: on the GPU one call's packing on the CPU overlaps another's
+    // batches on the GPU (each batch holds the context's buffer pool from its uploads to its read-back).
+    let engine_scores: Vec<Vec<Vec<f32>>> = by_engine
+        .par_iter()
+        .map(|(index, members)| {
+            let jobs: Vec<FastJob> = members
+                .iter()
+                .map(|&m| FastJob { hypotheses: hypotheses[m], weights: std::slice::from_ref(&models[m].weights) })
+                .collect();
+            backend.fast_scores_jobs(&engines.engines[*index], &jobs)
+        })
+        .collect();
+    for ((_, members), scores) in by_engine.iter().zip(engine_scores) {
+        for (&m, scores) in members.iter().zip(scores) {
             raw[m] = Some(scores);
         }
     }

@@ -13,16 +13,16 @@
 //! weight passes, the dispatch records and the scores — taken from a pool that the [`GpuContext`] keeps
 //! from batch to batch and frame to frame (no buffer is created per batch once the pool has grown); the
 //! table range is cleared on the GPU, the tables are built by [`crate::gpu::fast_tables`]'s three kernels,
-//! **one dispatch per phase for all the batch's tables**, and every hypothesis of the batch is scored by
-//! **one dispatch** of this kernel; the batch is submitted once and its scores read back once. How the work
+//! **one dispatch per phase for all the batch's tables**, and the hypotheses are scored by one dispatch of
+//! this kernel per record, **all through one bind group** (the record is a uniform at a dynamic offset); the
+//! batch is submitted once and its scores read back once. How the work
 //! is batched does not change a single bit of the scores (tested).
 //!
 //! Per hypothesis the CPU packs a [`FastRecord`] (low corner and voxel size of the expanded box) and the
 //! `nx + 1 + ny + 1` voxel-boundary cell indices, computed by the engine's own membership rule
 //! (`FastEngine::voxel_boundaries`, the function its scoring uses), so cell membership is identical by
-//! construction. The shader runs one workgroup of 64 invocations per hypothesis; the workgroup finds its
-//! dispatch record by a binary search over the records' first workgroups (the batch's hypotheses are
-//! numbered one after the other), and invocation `lid` takes the voxels `ℓ = lid + 64·r` in the layout's
+//! construction. The shader runs one workgroup of 64 invocations per hypothesis; invocation `lid` takes the
+//! voxels `ℓ = lid + 64·r` in the layout's
 //! order, differences four table corners with wrapping `u32` arithmetic (exact, as on the CPU), finalises
 //! the 35 features as `FastEngine::scores` does (density and normal bins over the linearised projected
 //! area, COG normalised `φ/√(‖φ‖² + ε)`, switched-off groups and empty voxels contributing nothing) and
@@ -41,8 +41,8 @@
 //! timestamp queries, the GPU time of each of the four passes.
 //!
 //! # CPU twin
-//! [`fast_scores_main`] is the shader's entry point in Rust (same names, same search, same loop order, same
-//! reduction tree), run over every workgroup by [`fast_scores_reference`], which packs its inputs with the
+//! [`fast_scores_main`] is the shader's entry point in Rust (same names, same loop order, same reduction
+//! tree), run over every workgroup by [`fast_scores_reference`], which packs its inputs with the
 //! same code as [`fast_scores_gpu`] (the same [`BatchLayout`], its buffers filled on the CPU with the
 //! CPU-built tables). It differs from `FastEngine::scores` only in the order of the float
 //! additions (the engine sums the voxels in order ℓ), so the three agree to ~1e-6 relative.
@@ -71,7 +71,7 @@ pub const KERNEL: KernelSpec = KernelSpec {
     source: include_str!("../../shaders/fast_scores.wgsl"),
     entry_point: "main",
     bindings: &[
-        BufferBinding::StorageRead,
+        BufferBinding::UniformDynamic,
         BufferBinding::StorageRead,
         BufferBinding::StorageRead,
         BufferBinding::StorageRead,
@@ -88,7 +88,7 @@ pub const WORKGROUP: usize = 64;
 pub const MAX_CHUNK: usize = 1 << 16;
 
 /// Twin of WGSL `struct FastParams` in `shaders/fast_scores.wgsl`: one dispatch record (one table, one chunk
-/// of hypotheses, one pass of weight vectors); a batch's records are scored by one GPU dispatch.
+/// of hypotheses, one pass of weight vectors), the uniform of one dispatch (bound at a dynamic offset).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct FastParams {
@@ -107,8 +107,7 @@ pub struct FastParams {
     /// Where the dispatch's inputs lie in the batch's buffers: first `vec4` of its table, first record, first
     /// boundary, first `vec4` of its weights (filled in by the batch's layout).
     pub base: [u32; 4],
-    /// First score in the scores buffer, first workgroup (hypothesis) of the dispatch in the batch, unused,
-    /// unused.
+    /// First score in the scores buffer, unused, unused, unused.
     pub at: [u32; 4],
 }
 const _: () = assert!(std::mem::size_of::<FastParams>() == 144);
@@ -609,7 +608,7 @@ fn fast_tables_words(engine: &FastEngine, d: &FastDispatch) -> usize {
 /// Where everything of one batch lies in its buffers, computed once and used alike by the GPU path and its
 /// CPU twin: each yaw's lattice points (packed, indexed by point), each group's table, each chunk's records
 /// and boundaries, each weight pass, and per dispatch its scores and its record ([`FastParams`] with the
-/// bases filled in and its first workgroup: the dispatches' hypotheses are numbered one after the other).
+/// bases filled in).
 struct BatchLayout<'p> {
     /// Per yaw of the scene: its first point and its points, when the batch uses it.
     yaw_points: Vec<Option<(usize, &'p [TablePoint])>>,
@@ -620,7 +619,8 @@ struct BatchLayout<'p> {
     chunks: Vec<(u64, u64)>,
     /// Per global weight pass: byte offset of its weights, when the batch uses it.
     passes: Vec<Option<u64>>,
-    /// Per dispatch: its record, and the byte offset of its scores.
+    /// Per dispatch: its record (at `i · record_stride` of the records buffer), and the byte offset of its
+    /// scores.
     params: Vec<FastParams>,
     outs: Vec<u64>,
     tables: Arena,
@@ -628,8 +628,6 @@ struct BatchLayout<'p> {
     bounds: Arena,
     weights: Arena,
     scores: Arena,
-    /// Hypotheses (workgroups) of the whole batch.
-    workgroups: usize,
 }
 
 impl<'p> BatchLayout<'p> {
@@ -669,7 +667,6 @@ impl<'p> BatchLayout<'p> {
         let mut passes: Vec<Option<u64>> = Vec::new();
         let mut params = Vec::with_capacity(dispatches.len());
         let mut outs = Vec::with_capacity(dispatches.len());
-        let mut workgroups = 0usize;
         for d in dispatches {
             if d.group == groups.len() {
                 let lattice = engine.lattice(d.yaw_index);
@@ -698,11 +695,10 @@ impl<'p> BatchLayout<'p> {
                     index(bound, 4, "boundaries")?,
                     index(weight, 16, "weights")?,
                 ],
-                at: [index(out, 4, "scores")?, u32::try_from(workgroups).map_err(|_| too_large("hypotheses"))?, 0, 0],
+                at: [index(out, 4, "scores")?, 0, 0, 0],
                 ..d.params
             });
             outs.push(out);
-            workgroups += d.records.len();
         }
         Ok(BatchLayout {
             yaw_points,
@@ -717,7 +713,6 @@ impl<'p> BatchLayout<'p> {
             bounds,
             weights,
             scores,
-            workgroups,
         })
     }
 
@@ -735,8 +730,8 @@ impl<'p> BatchLayout<'p> {
 }
 
 /// One batch on the GPU: uploads its lattice points, records, boundaries, weights and dispatch records into
-/// pooled buffers, builds its tables (three dispatches) and scores every hypothesis (one dispatch), submits
-/// once and reads the scores back once.
+/// pooled buffers, builds its tables (three dispatches) and scores its hypotheses (one dispatch per record,
+/// all through one bind group), submits once and reads the scores back once.
 fn run_batch(
     ctx: &GpuContext,
     engine: &FastEngine,
@@ -746,10 +741,12 @@ fn run_batch(
 ) -> Result<Vec<Vec<f32>>> {
     let started = std::time::Instant::now();
     let mut mark = started;
-    // The pooled buffers are this batch's until its scores are read back.
-    let mut pool = ctx.pool.lock().unwrap_or_else(|p| p.into_inner());
     let storage_align = ctx.limits.min_storage_buffer_offset_alignment;
     let layout = BatchLayout::new(engine, dispatches, points_of_yaw, storage_align)?;
+    // The pooled buffers are this batch's until its scores are read back. Calls on other threads (other
+    // engines of the frame) pack their batches meanwhile; nothing below runs rayon work, so a thread that
+    // holds the lock never steals a task that waits for it.
+    let mut pool = ctx.pool.lock().unwrap_or_else(|p| p.into_inner());
     times.points += split(&mut mark);
     let max_size = ctx.limits.max_buffer_size;
     let mut pooled = |label: &'static str, usage: wgpu::BufferUsages, bytes: u64| {
@@ -757,14 +754,17 @@ fn run_batch(
     };
     let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST;
     let point_bytes = (layout.point_count * std::mem::size_of::<TablePoint>()) as u64;
-    let params_bytes = std::mem::size_of_val(layout.params.as_slice()) as u64;
+    // The dispatch records, each at a multiple of the uniform-offset alignment.
+    let record_size = std::mem::size_of::<FastParams>() as u64;
+    let record_stride = record_size.next_multiple_of(u64::from(ctx.limits.min_uniform_buffer_offset_alignment));
+    let params_bytes = record_stride * layout.params.len() as u64;
     let lattice_buffer = pooled("fast lattice points", storage, point_bytes);
     // Pooled, so not zero: the table range is cleared on the GPU before the scatter adds into it.
     let table_buffer = pooled("fast tables", storage, layout.tables.len);
     let record_buffer = pooled("fast records", storage, layout.records.len);
     let bound_buffer = pooled("fast bounds", storage, layout.bounds.len);
     let weight_buffer = pooled("fast weights", storage, layout.weights.len);
-    let params_buffer = pooled("fast params", storage, params_bytes);
+    let params_buffer = pooled("fast params", wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST, params_bytes);
     let out_buffer = pooled("fast scores", storage, layout.scores.len);
     let staging =
         pooled("fast scores staging", wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST, layout.scores.len);
@@ -796,7 +796,12 @@ fn run_batch(
             ctx.queue.write_buffer(&weight_buffer, at, bytemuck::cast_slice(d.weights));
         }
     }
-    ctx.queue.write_buffer(&params_buffer, 0, bytemuck::cast_slice(&layout.params));
+    let mut records_bytes = vec![0u8; params_bytes as usize];
+    for (n, record) in layout.params.iter().enumerate() {
+        let at = n * record_stride as usize;
+        records_bytes[at..at + record_size as usize].copy_from_slice(bytemuck::bytes_of(record));
+    }
+    ctx.queue.write_buffer(&params_buffer, 0, &records_bytes);
     times.uploads += split(&mut mark);
     // The tables: three phases (scatter, rows, columns), each one dispatch over all the batch's tables
     // (workgroup z: the table), in pieces of at most TABLES_PER_DISPATCH tables.
@@ -821,7 +826,7 @@ fn run_batch(
     let scoring = ctx.bind_group_ranges(
         kernel,
         &[
-            (&params_buffer, 0, params_bytes),
+            (&params_buffer, 0, record_size),
             (&table_buffer, 0, layout.tables.len.max(4)),
             (&record_buffer, 0, layout.records.len.max(4)),
             (&bound_buffer, 0, layout.bounds.len.max(4)),
@@ -840,9 +845,14 @@ fn run_batch(
         ctx.encode_layered_dispatches(&mut encoder, kernel, &jobs, timer.as_ref().map(|t| (t, index as u32)))?;
     }
     // One workgroup per hypothesis: the 1-D convention with 64 invocations per hypothesis.
-    let invocations = u32::try_from(layout.workgroups * kernel.invocations_per_workgroup() as usize)
-        .map_err(|_| Error::Gpu("fast_scores: a batch of more than 2³² invocations".into()))?;
-    ctx.encode_layered_dispatches(&mut encoder, kernel, &[(&scoring, invocations, 1)], timer.as_ref().map(|t| (t, 3)))?;
+    let jobs: Vec<(u32, u32)> = dispatches
+        .iter()
+        .enumerate()
+        .map(|(n, d)| {
+            ((n as u64 * record_stride) as u32, (d.records.len() * kernel.invocations_per_workgroup() as usize) as u32)
+        })
+        .collect();
+    ctx.encode_dispatches_at(&mut encoder, kernel, &scoring, &jobs, timer.as_ref().map(|t| (t, 3)))?;
     if let Some(timer) = &timer {
         timer.resolve(&mut encoder);
     }
@@ -933,9 +943,12 @@ pub fn fast_scores_reference_jobs(
             let at = (layout.passes[d.pass].expect("placed") / 4) as usize;
             weights[at..at + d.weights.len()].copy_from_slice(d.weights);
         }
-        let writes: Vec<Vec<(usize, f32)>> = (0..layout.workgroups)
+        // Every workgroup of every dispatch: (dispatch, hypothesis).
+        let workgroups: Vec<(usize, usize)> =
+            dispatches.iter().enumerate().flat_map(|(n, d)| (0..d.records.len()).map(move |h| (n, h))).collect();
+        let writes: Vec<Vec<(usize, f32)>> = workgroups
             .into_par_iter()
-            .map(|g| fast_scores_main(&layout.params, &table, &records, &bounds, &weights, g))
+            .map(|(n, h)| fast_scores_main(&layout.params[n], &table, &records, &bounds, &weights, h))
             .collect();
         let mut out = vec![0.0f32; (layout.scores.len / 4) as usize];
         for (at, value) in writes.into_iter().flatten() {
@@ -949,34 +962,17 @@ pub fn fast_scores_reference_jobs(
 /// largest a device may ask for).
 const TWIN_ALIGN: u32 = 256;
 
-/// The shader's `dispatch_of`: the record that workgroup `g` belongs to (binary search over their first
-/// workgroups).
-fn dispatch_of(dispatches: &[FastParams], g: usize) -> usize {
-    let (mut lo, mut hi) = (0usize, dispatches.len());
-    while hi - lo > 1 {
-        let mid = (lo + hi) / 2;
-        if dispatches[mid].at[1] as usize <= g {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-    }
-    lo
-}
-
-/// The shader's `main` for workgroup `g` (all 64 invocations, then the reduction): the writes invocation 0
-/// makes, as (index in `out`, value). Written to read like `shaders/fast_scores.wgsl`; its `vec4`s are
+/// The shader's `main` for workgroup `h` of the dispatch of record `params` (all 64 invocations, then the
+/// reduction): the writes invocation 0 makes, as (index in `out`, value). Written to read like `shaders/fast_scores.wgsl`; its `vec4`s are
 /// `[_; 4]` here, `table` and `weights` are indexed in `vec4` units through [`vec4_at`].
 pub fn fast_scores_main(
-    dispatches: &[FastParams],
+    params: &FastParams,
     table: &[u32],
     records: &[FastRecord],
     bounds: &[u32],
     weights: &[f32],
-    g: usize,
+    h: usize,
 ) -> Vec<(usize, f32)> {
-    let params = &dispatches[dispatch_of(dispatches, g)];
-    let h = g - params.at[1] as usize;
     let [nx, ny, nz, _] = params.grid.map(|v| v as usize);
     let weight_count = params.job[1] as usize;
     let groups = params.job[2];

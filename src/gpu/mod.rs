@@ -62,6 +62,9 @@ pub const PRIMARY_BACKENDS: wgpu::Backends =
 pub enum BufferBinding {
     /// `var<uniform>`.
     Uniform,
+    /// `var<uniform>` bound with a dynamic offset: one bind group serves many dispatches, each with its own
+    /// record of a shared buffer (set by [`GpuContext::encode_dispatches_at`]).
+    UniformDynamic,
     /// `var<storage, read>`.
     StorageRead,
     /// `var<storage, read_write>`.
@@ -109,11 +112,11 @@ impl Kernel {
                 visibility: wgpu::ShaderStages::COMPUTE,
                 ty: wgpu::BindingType::Buffer {
                     ty: match binding {
-                        BufferBinding::Uniform => wgpu::BufferBindingType::Uniform,
+                        BufferBinding::Uniform | BufferBinding::UniformDynamic => wgpu::BufferBindingType::Uniform,
                         BufferBinding::StorageRead => wgpu::BufferBindingType::Storage { read_only: true },
                         BufferBinding::StorageReadWrite => wgpu::BufferBindingType::Storage { read_only: false },
                     },
-                    has_dynamic_offset: false,
+                    has_dynamic_offset: matches!(binding, BufferBinding::UniformDynamic),
                     min_binding_size: None,
                 },
                 count: None,
@@ -500,6 +503,32 @@ impl GpuContext {
         self.encode_layered_dispatches(encoder, kernel, &layered, timer)
     }
 
+    /// Records one compute pass of `kernel` (a 1-D kernel, whose binding 0 is a
+    /// [`BufferBinding::UniformDynamic`]) with one dispatch per job `(dynamic offset, invocations)`, all
+    /// through `bind_group`; the pass is timed as pass `index` of `timer` when there is one.
+    pub fn encode_dispatches_at(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        kernel: &Kernel,
+        bind_group: &wgpu::BindGroup,
+        jobs: &[(u32, u32)],
+        timer: Option<(&PassTimer, u32)>,
+    ) -> Result<()> {
+        let grids = jobs
+            .iter()
+            .map(|&(_, invocations)| self.workgroup_grid(invocations.div_ceil(kernel.workgroup_size[0])))
+            .collect::<Result<Vec<_>>>()?;
+        let mut pass = begin_pass(encoder, kernel, timer);
+        for (&(offset, _), [x, y, z]) in jobs.iter().zip(grids) {
+            if x == 0 {
+                continue;
+            }
+            pass.set_bind_group(0, bind_group, &[offset]);
+            pass.dispatch_workgroups(x, y, z);
+        }
+        Ok(())
+    }
+
     /// Records one compute pass of `kernel` (a 1-D kernel) with one dispatch per job `(bind group,
     /// invocations, layers)`: the 1-D grid of the invocations (see the module doc), repeated `layers` times
     /// along workgroup z (at most `max_compute_workgroups_per_dimension`), so that one dispatch does the same
@@ -532,14 +561,7 @@ impl GpuContext {
                 Ok([x, y, layers])
             })
             .collect::<Result<Vec<_>>>()?;
-        let timestamp_writes = timer.map(|(timer, index)| wgpu::ComputePassTimestampWrites {
-            query_set: &timer.queries,
-            beginning_of_pass_write_index: Some(2 * index),
-            end_of_pass_write_index: Some(2 * index + 1),
-        });
-        let mut pass =
-            encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(kernel.label), timestamp_writes });
-        pass.set_pipeline(&kernel.pipeline);
+        let mut pass = begin_pass(encoder, kernel, timer);
         for ((bind_group, _, _), [x, y, z]) in jobs.iter().zip(grids) {
             if x == 0 || z == 0 {
                 continue;
@@ -680,6 +702,23 @@ impl GpuContext {
         staging.unmap();
         Ok(values)
     }
+}
+
+/// Begins a compute pass of `kernel` with its pipeline set, timed as pass `index` of `timer` when there is one.
+fn begin_pass<'e>(
+    encoder: &'e mut wgpu::CommandEncoder,
+    kernel: &Kernel,
+    timer: Option<(&PassTimer, u32)>,
+) -> wgpu::ComputePass<'e> {
+    let timestamp_writes = timer.map(|(timer, index)| wgpu::ComputePassTimestampWrites {
+        query_set: &timer.queries,
+        beginning_of_pass_write_index: Some(2 * index),
+        end_of_pass_write_index: Some(2 * index + 1),
+    });
+    let mut pass =
+        encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(kernel.label), timestamp_writes });
+    pass.set_pipeline(&kernel.pipeline);
+    pass
 }
 
 /// GPU timestamps at the beginning and end of a few compute passes (a diagnostic for the debug log).
