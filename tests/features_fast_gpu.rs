@@ -213,3 +213,34 @@ fn several_jobs_in_one_call_equal_one_call_each() {
         assert_scores_match(&together[n], &engine.scores(job.hypotheses, job.weights), &magnitude, &format!("job {n}"));
     }
 }
+
+#[test]
+fn concurrent_calls_on_one_context_equal_the_calls_one_after_the_other() {
+    // `detect` runs its engines' calls on several threads at once, sharing the context's buffer pool (each
+    // batch holds it from its uploads to its read-back) and its error scopes (thread-local). Four calls on
+    // two engines (other grids, other weights), run concurrently and then in turn, small batches forcing
+    // several per call: the same bits either way, and the pool reused between them.
+    let Some(ctx) = context() else { return };
+    let window = synthetic_window("bed");
+    let layouts = [FeatureLayout::default(), FeatureLayout::new([3, 1, 3], true, Groups::ALL).unwrap()];
+    let engines: Vec<FastEngine> =
+        layouts.iter().map(|l| FastEngine::new(&window.scene, l, FastOptions::default())).collect();
+    let hyps = sample(&window, 200);
+    let weights: Vec<Vec<Vec<f32>>> = (0..4).map(|n| random_weights(&layouts[n % 2], 1 + n, 40 + n as u64)).collect();
+    let chunking = FastChunking { max_chunk: 64, max_batch_bytes: 16 << 20 };
+    let call = |n: usize| {
+        let job = FastJob { hypotheses: &hyps, weights: &weights[n] };
+        fast_scores_gpu_jobs(&ctx, &engines[n % 2], &[job], chunking).unwrap().pop().unwrap()
+    };
+    let concurrent: Vec<Vec<f32>> = std::thread::scope(|s| {
+        let handles: Vec<_> = (0..4).map(|n| s.spawn(move || call(n))).collect();
+        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    for (n, got) in concurrent.iter().enumerate() {
+        assert_eq!(bits(got), bits(&call(n)), "call {n}: concurrent vs one after the other");
+        let twin = fast_scores_reference(&engines[n % 2], &hyps, &weights[n], chunking).unwrap();
+        let abs_weights: Vec<Vec<f32>> = weights[n].iter().map(|w| w.iter().map(|x| x.abs()).collect()).collect();
+        let magnitude = engines[n % 2].scores(&hyps, &abs_weights);
+        assert_scores_match(got, &twin, &magnitude, &format!("call {n}: concurrent GPU vs CPU twin"));
+    }
+}
