@@ -585,8 +585,9 @@ fn model_detections(
     };
     let nms =
         NmsOptions { iou_threshold: options.nms_iou, max_detections: Some(options.max_per_category), top_k: None };
-    // The box NMS compares is the detection's own (`Detection::cuboid`), as `nms_detections` compares it.
-    let kept = suppress_in_order(order, |n| detection(n).cuboid(), &nms);
+    // The hypothesis's cuboid is the detection's (`Detection::cuboid` stores and returns its fields), the box
+    // `nms_detections` compares; no detection is made for a candidate the NMS drops.
+    let kept = suppress_in_order(order, |n| hypotheses[n].cuboid(scene), &nms);
     Ok(kept.into_iter().map(detection).collect())
 }
 

@@ -85,7 +85,7 @@ fn gpu_tables_equal_the_cpu_tables_on_a_real_and_a_synthetic_frame() {
 fn tables_built_together_equal_each_built_alone() {
     // Several tables of several yaws in one buffer, at offsets that are not zero, with the yaws' points
     // packed one after the other (as a batch of the scoring path builds them): each table's words must be
-    // those of the table built alone, by the twins and on the GPU, and the gaps between them stay zero.
+    // those of the CPU's LayerTable, built by the twins and on the GPU, and the gaps between them stay zero.
     let frame = synth::generate_frame(5, 0, &SynthOptions::small(160, 120)).unwrap().frame;
     let window = window(&frame, "chair");
     let engine = FastEngine::new(&window.scene, &FeatureLayout::default(), FastOptions::default());
@@ -112,7 +112,8 @@ fn tables_built_together_equal_each_built_alone() {
         let (lattice, span) = (engine.lattice(yaw), engine.table_span_of(hyp));
         let params = table_params_at(lattice, span, 0, words as u32, first_point[yaw]);
         tables.push(params);
-        alone.push((words, build_table_reference(lattice, span)));
+        // The CPU's own LayerTable (`LayerTable::build`), not the twins.
+        alone.push((words, engine.table_words_of(hyp)));
         words += table_words(&params) + 5; // and a gap after each
     }
     let twin = build_tables_reference(&tables, &points, words);

@@ -567,7 +567,7 @@ pub fn fast_scores_gpu_jobs(
         })?;
         let total = started.elapsed().as_secs_f64();
         log::debug!(
-            "fast_scores time: {total:.4} s in all (grouping {:.4}, packing {:.4}, placing scores {:.4}, view {:.4}): {:.4} s preparing batches (lattice points {:.4}, buffers {:.4}, \
+            "fast_scores time: {total:.4} s in all (grouping {:.4}, packing {:.4}, placing scores {:.4}, view {:.4}): {:.4} s preparing batches (layout {:.4}, waiting for the pool {:.4}, buffers {:.4}, \
              uploads {:.4}, bind groups {:.4}, encoding {:.4}), {:.4} s submitting and waiting for the GPU and the \
              read-back (GPU passes: scatter {:.4}, rows {:.4}, columns {:.4}, scoring {:.4}), {:.4} s on the CPU \
              (packing, view)",
@@ -577,6 +577,7 @@ pub fn fast_scores_gpu_jobs(
             run_times.view,
             batch_times.prepare,
             batch_times.points,
+            batch_times.pool_wait,
             batch_times.buffers,
             batch_times.uploads,
             batch_times.bind_groups,
@@ -743,11 +744,12 @@ fn run_batch(
     let mut mark = started;
     let storage_align = ctx.limits.min_storage_buffer_offset_alignment;
     let layout = BatchLayout::new(engine, dispatches, points_of_yaw, storage_align)?;
+    times.points += split(&mut mark);
     // The pooled buffers are this batch's until its scores are read back. Calls on other threads (other
     // engines of the frame) pack their batches meanwhile; nothing below runs rayon work, so a thread that
     // holds the lock never steals a task that waits for it.
     let mut pool = ctx.pool.lock().unwrap_or_else(|p| p.into_inner());
-    times.points += split(&mut mark);
+    times.pool_wait += split(&mut mark);
     let max_size = ctx.limits.max_buffer_size;
     let mut pooled = |label: &'static str, usage: wgpu::BufferUsages, bytes: u64| {
         pool.buffer(&ctx.device, label, usage, bytes, max_size)
@@ -873,7 +875,10 @@ fn run_batch(
 #[derive(Default)]
 struct BatchTimes {
     prepare: f64,
+    /// The batch's layout (and the lattice points it converts).
     points: f64,
+    /// Waiting for the buffer pool while another call's batch holds it.
+    pool_wait: f64,
     buffers: f64,
     uploads: f64,
     bind_groups: f64,

@@ -482,25 +482,14 @@ impl GpuContext {
         kernel: &Kernel,
         jobs: &[(wgpu::BindGroup, u32)],
     ) -> Result<()> {
-        self.encode_dispatches_timed(encoder, kernel, jobs, None)
+        let layered: Vec<(&wgpu::BindGroup, u32, u32)> = jobs.iter().map(|(b, n)| (b, *n, 1)).collect();
+        self.encode_layered_dispatches(encoder, kernel, &layered, None)
     }
 
     /// A timer of up to `passes` compute passes on the GPU, when the device has timestamp queries and the
     /// debug log is on (it costs a query set and a read-back); `None` otherwise.
     pub fn pass_timer(&self, passes: u32) -> Option<PassTimer> {
         (self.timestamps && log::log_enabled!(log::Level::Debug)).then(|| PassTimer::new(self, passes))
-    }
-
-    /// [`GpuContext::encode_dispatches`], the pass timed as pass `index` of `timer` when there is one.
-    pub fn encode_dispatches_timed(
-        &self,
-        encoder: &mut wgpu::CommandEncoder,
-        kernel: &Kernel,
-        jobs: &[(wgpu::BindGroup, u32)],
-        timer: Option<(&PassTimer, u32)>,
-    ) -> Result<()> {
-        let layered: Vec<(&wgpu::BindGroup, u32, u32)> = jobs.iter().map(|(b, n)| (b, *n, 1)).collect();
-        self.encode_layered_dispatches(encoder, kernel, &layered, timer)
     }
 
     /// Records one compute pass of `kernel` (a 1-D kernel, whose binding 0 is a
@@ -514,10 +503,8 @@ impl GpuContext {
         jobs: &[(u32, u32)],
         timer: Option<(&PassTimer, u32)>,
     ) -> Result<()> {
-        let grids = jobs
-            .iter()
-            .map(|&(_, invocations)| self.workgroup_grid(invocations.div_ceil(kernel.workgroup_size[0])))
-            .collect::<Result<Vec<_>>>()?;
+        let grids =
+            jobs.iter().map(|&(_, invocations)| self.grid_1d(kernel, invocations)).collect::<Result<Vec<_>>>()?;
         let mut pass = begin_pass(encoder, kernel, timer);
         for (&(offset, _), [x, y, z]) in jobs.iter().zip(grids) {
             if x == 0 {
@@ -541,12 +528,6 @@ impl GpuContext {
         jobs: &[(&wgpu::BindGroup, u32, u32)],
         timer: Option<(&PassTimer, u32)>,
     ) -> Result<()> {
-        if kernel.workgroup_size[1] != 1 || kernel.workgroup_size[2] != 1 {
-            return Err(Error::Gpu(format!(
-                "kernel '{}' has workgroup size {:?}; a 1-D dispatch needs y = z = 1",
-                kernel.label, kernel.workgroup_size
-            )));
-        }
         let max_layers = self.limits.max_compute_workgroups_per_dimension;
         let grids = jobs
             .iter()
@@ -557,7 +538,7 @@ impl GpuContext {
                         kernel.label
                     )));
                 }
-                let [x, y, _] = self.workgroup_grid(invocations.div_ceil(kernel.workgroup_size[0]))?;
+                let [x, y, _] = self.grid_1d(kernel, invocations)?;
                 Ok([x, y, layers])
             })
             .collect::<Result<Vec<_>>>()?;
@@ -570,6 +551,18 @@ impl GpuContext {
             pass.dispatch_workgroups(x, y, z);
         }
         Ok(())
+    }
+
+    /// The workgroup grid of a 1-D dispatch of `invocations` invocations of `kernel` (a 1-D kernel: workgroup
+    /// y = z = 1; an error otherwise).
+    fn grid_1d(&self, kernel: &Kernel, invocations: u32) -> Result<[u32; 3]> {
+        if kernel.workgroup_size[1] != 1 || kernel.workgroup_size[2] != 1 {
+            return Err(Error::Gpu(format!(
+                "kernel '{}' has workgroup size {:?}; a 1-D dispatch needs y = z = 1",
+                kernel.label, kernel.workgroup_size
+            )));
+        }
+        self.workgroup_grid(invocations.div_ceil(kernel.workgroup_size[0]))
     }
 
     /// Workgroup counts (x, y, 1) covering at least `workgroups` workgroups with x and y within
@@ -586,22 +579,7 @@ impl GpuContext {
         bind_group: &wgpu::BindGroup,
         invocations: u32,
     ) -> Result<()> {
-        if kernel.workgroup_size[1] != 1 || kernel.workgroup_size[2] != 1 {
-            return Err(Error::Gpu(format!(
-                "kernel '{}' has workgroup size {:?}; a 1-D dispatch needs y = z = 1",
-                kernel.label, kernel.workgroup_size
-            )));
-        }
-        let [x, y, z] = self.workgroup_grid(invocations.div_ceil(kernel.workgroup_size[0]))?;
-        if x == 0 {
-            return Ok(());
-        }
-        let mut pass = encoder
-            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(kernel.label), timestamp_writes: None });
-        pass.set_pipeline(&kernel.pipeline);
-        pass.set_bind_group(0, bind_group, &[]);
-        pass.dispatch_workgroups(x, y, z);
-        Ok(())
+        self.encode_layered_dispatches(encoder, kernel, &[(bind_group, invocations, 1)], None)
     }
 
     /// Dispatches `kernel` over `invocations` invocations, then reads the first `count` elements of
