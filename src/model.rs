@@ -25,8 +25,9 @@
 //! best slice's height. A version-1 file has no `surface`; a build that reads only version 1 refuses a
 //! version-2 file instead of silently ignoring its surface.
 //!
-//! The raw score of a hypothesis is `weights · φ + bias`; detection drops hypotheses whose raw score is
-//! below `threshold`. With a `calibration` ([`crate::calibration`]), a detection's reported `score` is
+//! The raw score of a hypothesis is `weights · φ + bias`; detection of an uncalibrated model drops
+//! hypotheses whose raw score is below `threshold` (a calibrated model is cut at a calibrated probability
+//! by default, [`crate::detect::DEFAULT_MIN_PROBABILITY`]). With a `calibration` ([`crate::calibration`]), a detection's reported `score` is
 //! the calibrated probability `σ(a·raw + b)` and `raw_score` keeps the raw one. The structural SVM puts the "no object" answer at score 0 and asks true boxes to score ≥ 1
 //! and wrong ones ≤ −1 (up to slack), so the default threshold 0 reports exactly the boxes the model
 //! prefers to "no object". Evaluation wants the whole precision–recall curve: run `detect --min-score -1`
@@ -60,7 +61,7 @@ pub const MODEL_FORMAT: &str = "cog-gpu-model";
 pub const MODEL_VERSION: u32 = 1;
 /// The version of a model with latent support surfaces (see the module doc).
 pub const MODEL_VERSION_SURFACES: u32 = 2;
-/// Default detection threshold (see the module doc).
+/// Default raw-score cut of a model without a calibration (see the module doc).
 pub const DEFAULT_THRESHOLD: f32 = 0.0;
 
 /// Which feature implementation a model was trained with (and is scored with).

@@ -148,6 +148,45 @@ fn a_minimum_probability_keeps_exactly_the_detections_at_or_above_it() {
     }
 }
 
+/// The default cut: a calibrated model keeps exactly the detections whose calibrated probability is at
+/// least `DEFAULT_MIN_PROBABILITY` (its raw `threshold` ignored), a model without a calibration those whose
+/// raw score is at least its `threshold` — both against detecting down to any score and cutting afterwards.
+#[test]
+fn the_default_cut_is_a_probability_for_a_calibrated_model_and_the_raw_threshold_otherwise() {
+    use cog_gpu::calibration::Calibration;
+    use cog_gpu::detect::DEFAULT_MIN_PROBABILITY;
+    let frame = Frame::read(SAMPLE, DepthSource::Raw).unwrap();
+    let mut model = density_model(FeaturePath::Fast, 0.3);
+    let everything = DetectOptions { min_score: Some(f32::MIN), ..DetectOptions::default() };
+    let raw = detect_frame(&frame, std::slice::from_ref(&model), Backend::Cpu, &everything).unwrap().detections;
+    assert!(raw.len() >= 4, "{} detections", raw.len());
+    assert!(raw[0].score > raw[1].score && raw[1].score > raw[2].score, "{raw:?}");
+    // Uncalibrated: reported scores are raw; the cut is the model's threshold, between the best two.
+    model.threshold = 0.5 * (raw[0].score + raw[1].score);
+    let kept =
+        detect_frame(&frame, std::slice::from_ref(&model), Backend::Cpu, &DetectOptions::default()).unwrap().detections;
+    assert_eq!(kept, raw[..1].to_vec());
+    // Calibrated so that probability 10⁻³ falls between the second and the third raw score: a = 1,
+    // b = logit(10⁻³) − (z₂ + z₃)/2. The raw threshold (which would keep one) no longer applies.
+    let midpoint = 0.5 * (f64::from(raw[1].score) + f64::from(raw[2].score));
+    let p = f64::from(DEFAULT_MIN_PROBABILITY);
+    model.calibration = Some(Calibration {
+        a: 1.0,
+        b: (p / (1.0 - p)).ln() - midpoint,
+        detections: 0,
+        true_positives: 0,
+        iou: 0.25,
+        data: String::new(),
+        frames: 0,
+    });
+    let all = detect_frame(&frame, std::slice::from_ref(&model), Backend::Cpu, &everything).unwrap().detections;
+    let expected: Vec<_> = all.iter().filter(|d| d.score >= DEFAULT_MIN_PROBABILITY).cloned().collect();
+    assert_eq!(expected.len(), 2, "probabilities {:?}", all.iter().map(|d| d.score).collect::<Vec<_>>());
+    let kept =
+        detect_frame(&frame, std::slice::from_ref(&model), Backend::Cpu, &DetectOptions::default()).unwrap().detections;
+    assert_eq!(kept, expected);
+}
+
 fn binary() -> &'static str {
     env!("CARGO_BIN_EXE_cog-gpu")
 }

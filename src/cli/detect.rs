@@ -55,13 +55,14 @@ pub struct Args {
     /// Detections kept per category and frame.
     #[arg(long, default_value_t = 20, value_parser = options::at_least_one)]
     pub max_per_category: usize,
-    /// Drop detections whose raw score (w·φ + bias, before calibration) is below this (overrides the
-    /// models' thresholds).
+    /// Drop detections whose raw score (w·φ + bias, before calibration) is below this, for every model
+    /// (instead of the default cut, see --min-probability).
     #[arg(long, allow_hyphen_values = true, conflicts_with = "min_probability")]
     pub min_score: Option<f32>,
     /// Keep the detections whose first-stage calibrated probability (the reported `score` before the
-    /// cascade) is at least P, in (0, 1), instead of the models' raw-score thresholds; every model must be
-    /// calibrated.
+    /// cascade) is at least P, in (0, 1); every model must be calibrated. Default: 0.001 for every
+    /// calibrated model (all shipped ones; README, "Detection"), a model without a calibration cut at its
+    /// own raw `threshold`.
     #[arg(long, value_name = "P")]
     pub min_probability: Option<f32>,
     /// Small objects are searched on the support surfaces of the detections of the surface categories
