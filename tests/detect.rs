@@ -185,6 +185,9 @@ fn the_default_cut_is_a_probability_for_a_calibrated_model_and_the_raw_threshold
     let kept =
         detect_frame(&frame, std::slice::from_ref(&model), Backend::Cpu, &DetectOptions::default()).unwrap().detections;
     assert_eq!(kept, expected);
+    // `detect --help` states the same default.
+    let help = String::from_utf8(run(&["detect", "--help"]).stdout).unwrap();
+    assert!(help.contains(&format!("Default: {DEFAULT_MIN_PROBABILITY} for every calibrated model")), "{help}");
 }
 
 fn binary() -> &'static str {
