@@ -97,6 +97,7 @@ use crate::eval::{average_precision, true_positives_in_input_order, Detection, F
 use crate::frame::Object;
 use crate::geometry::{footprint_overlap_area, intersection_volume, polygon_contains, Cuboid};
 use crate::learn::binary_svm::{balanced_costs, train_linear_svm, LinearSvm};
+use crate::model::Model;
 use glam::{Vec2, Vec3};
 
 /// The `format` field of a cascade file.
@@ -285,6 +286,13 @@ pub struct CascadeTraining {
     /// The detections directory and the first-stage models that produced it.
     pub detections: String,
     pub iou: f32,
+    /// The calibration of every first-stage model the cascade was trained with, by category. A stage adds
+    /// its context score to its model's raw score and every context feature reads calibrated
+    /// probabilities, so the cascade holds only for these models: a retrained (hence recalibrated) model
+    /// changes its calibration, and [`Cascade::check_models`] refuses it. Empty in files written before
+    /// it was recorded (then nothing can be checked).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub calibrations: BTreeMap<String, Calibration>,
 }
 
 /// A trained cascade: the context categories (feature order) and a second stage per category.
@@ -305,6 +313,51 @@ impl Cascade {
         let cascade: Cascade = serde_json::from_str(&text).map_err(|e| Error::invalid(path, e.to_string()))?;
         cascade.check().map_err(|problem| Error::invalid(path, problem))?;
         Ok(cascade)
+    }
+
+    /// Errors unless every model of a category the cascade recorded a calibration for
+    /// ([`CascadeTraining::calibrations`]) carries that calibration (the same `a` and `b`): a cascade
+    /// applied to other first-stage models than its own would rescore with scores on another scale.
+    /// Models of other categories, and cascades that recorded nothing, pass.
+    pub fn check_models(&self, models: &[Model]) -> Result<()> {
+        for model in models {
+            let Some(trained) = self.training.calibrations.get(&model.category) else { continue };
+            let same = model.calibration.as_ref().is_some_and(|c| c.a == trained.a && c.b == trained.b);
+            if !same {
+                let loaded = model
+                    .calibration
+                    .as_ref()
+                    .map_or("no calibration".to_string(), |c| format!("calibration a = {}, b = {}", c.a, c.b));
+                return Err(Error::Input(format!(
+                    "the cascade was trained with another '{}' model (calibration a = {}, b = {}; the loaded \
+                     model has {loaded}): retrain the cascade on this model's detections (cog-gpu cascade)",
+                    model.category, trained.a, trained.b
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// Errors unless every detection of a category with a recorded calibration
+    /// ([`CascadeTraining::calibrations`]) has the score that calibration gives its raw score (within
+    /// 10⁻⁵ relative, for files written by other builds): detections of another model than the cascade's
+    /// (as [`Cascade::check_models`] refuses for `detect`), found in the files `rescore` reads.
+    fn check_scores(&self, detections: &[Detection]) -> Result<()> {
+        for d in detections {
+            let (Some(calibration), Some(raw)) = (self.training.calibrations.get(&d.category), d.raw_score) else {
+                continue;
+            };
+            let expected = calibration.probability(raw);
+            if (d.score - expected).abs() > 1e-5 * d.score.abs().max(expected.abs()) {
+                return Err(Error::Input(format!(
+                    "a '{}' detection has score {} where the cascade's '{}' model gives its raw score {raw} \
+                     the probability {expected}: the detections come from another model than the one the \
+                     cascade was trained with (retrain the cascade on them: cog-gpu cascade)",
+                    d.category, d.score, d.category
+                )));
+            }
+        }
+        Ok(())
     }
 
     pub fn write(&self, path: &Path) -> Result<()> {
@@ -346,6 +399,7 @@ impl Cascade {
     /// be the first stage's, calibrated (`raw_score` present) and not rescored.
     pub fn rescore(&self, detections: &mut [Detection], room: Option<&Room>) -> Result<()> {
         check_first_stage(detections)?;
+        self.check_scores(detections)?;
         let set = self.feature_set().ok_or_else(|| Error::Input(format!("unknown feature set '{}'", self.features)))?;
         let features = frame_context_features(detections, &self.categories, room, set);
         let rescored: Vec<Option<(f32, f32)>> = (0..detections.len())

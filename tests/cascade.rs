@@ -350,6 +350,47 @@ fn cascade_files_round_trip_and_are_checked() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// `Cascade::check_models` refuses a model whose calibration is not the one the cascade recorded (a
+/// retrained model), names it, and passes the recorded calibration, a category it recorded nothing for,
+/// and a cascade that recorded nothing (files written before the record).
+#[test]
+fn a_cascade_refuses_first_stage_models_it_was_not_trained_with() {
+    use cog_gpu::calibration::Calibration;
+    let shipped = concat!(env!("CARGO_MANIFEST_DIR"), "/assets/models");
+    let models =
+        cog_gpu::model::read_models_dir(std::path::Path::new(shipped), Some(&names(&["bed", "table"]))).unwrap();
+    let calibration = |a: f64, b: f64| Calibration {
+        a,
+        b,
+        detections: 10,
+        true_positives: 2,
+        iou: 0.25,
+        data: String::new(),
+        frames: 1,
+    };
+    let mut cascade = Cascade {
+        format: cog_gpu::cascade::FORMAT.into(),
+        version: cog_gpu::cascade::VERSION,
+        features: FEATURES.into(),
+        categories: names(&["bed", "table"]),
+        stages: BTreeMap::new(),
+        training: CascadeTraining::default(),
+    };
+    cascade.check_models(&models).unwrap();
+    let bed = models.iter().find(|m| m.category == "bed").unwrap().calibration.clone().unwrap();
+    cascade.training.calibrations.insert("bed".into(), bed.clone());
+    cascade.check_models(&models).unwrap();
+    cascade.training.calibrations.insert("bed".into(), calibration(bed.a, bed.b + 0.5));
+    let err = cascade.check_models(&models).unwrap_err().to_string();
+    assert!(err.contains("another 'bed' model"), "{err}");
+    // A model without a calibration is not the recorded one either.
+    cascade.training.calibrations.insert("bed".into(), bed);
+    let mut uncalibrated = models.clone();
+    uncalibrated.iter_mut().for_each(|m| m.calibration = None);
+    let err = cascade.check_models(&uncalibrated).unwrap_err().to_string();
+    assert!(err.contains("'bed'") && err.contains("no calibration"), "{err}");
+}
+
 #[test]
 fn cli_trains_a_cascade_and_rescores_files() {
     let tmp = tempfile::tempdir().unwrap();
@@ -363,7 +404,20 @@ fn cli_trains_a_cascade_and_rescores_files() {
     }
     let cascade_file = tmp.path().join("cascade.json");
     let run = |args: &[&str]| Command::new(env!("CARGO_BIN_EXE_cog-gpu")).args(args).output().unwrap();
-    let models = concat!(env!("CARGO_MANIFEST_DIR"), "/assets/models");
+    // The shipped bed and table models with the calibrations that made the constructed scores (tables
+    // σ(raw), the bed 0.9 at raw 2: a = 1, b = ln 9 − 2), as `cascade --models` expects the models that
+    // made its detections.
+    let shipped = concat!(env!("CARGO_MANIFEST_DIR"), "/assets/models");
+    let models_dir = tmp.path().join("first-stage-models");
+    std::fs::create_dir_all(&models_dir).unwrap();
+    for (category, b) in [("bed", 9f64.ln() - 2.0), ("table", 0.0)] {
+        let text = std::fs::read_to_string(format!("{shipped}/{category}.json")).unwrap();
+        let mut model: serde_json::Value = serde_json::from_str(&text).unwrap();
+        model["calibration"]["a"] = 1.0.into();
+        model["calibration"]["b"] = b.into();
+        std::fs::write(models_dir.join(format!("{category}.json")), model.to_string()).unwrap();
+    }
+    let models = models_dir.to_str().unwrap();
     let train = |detections: &std::path::Path| {
         run(&[
             "cascade",
@@ -387,6 +441,10 @@ fn cli_trains_a_cascade_and_rescores_files() {
     let cascade = Cascade::read(&cascade_file).unwrap();
     assert_eq!(cascade.categories, names(&["bed", "table"]));
     assert_eq!(cascade.training.frames, 30);
+    // The cascade records the calibrations of the models it was trained with.
+    let recorded: Vec<(&str, f64, f64)> =
+        cascade.training.calibrations.iter().map(|(c, k)| (c.as_str(), k.a, k.b)).collect();
+    assert_eq!(recorded, [("bed", 1.0, 9f64.ln() - 2.0), ("table", 1.0, 0.0)]);
     // A models directory may hold the cascade (and a layout model): they are not detector models.
     let dir = tmp.path().join("models");
     std::fs::create_dir_all(&dir).unwrap();
@@ -422,6 +480,25 @@ fn cli_trains_a_cascade_and_rescores_files() {
     assert!(tables.iter().all(|d| d.context_score.is_some() && d.first_stage_score.is_some()));
     // The real table (x = 4) now outranks the piece of the bed.
     assert!(tables[0].centre[0] > 3.0, "{tables:?}");
+
+    // Files whose scores another calibration made (a bed at 0.5 for raw 2) are refused, the file named.
+    let other = tmp.path().join("other-model");
+    std::fs::create_dir_all(&other).unwrap();
+    let mut detections = frame(0).detections;
+    detections[0].score = 0.5;
+    FrameDetections { frame: "f00".into(), detections }.write(&other.join("f00.json")).unwrap();
+    let out = run(&[
+        "rescore",
+        "--detections",
+        other.to_str().unwrap(),
+        "--out",
+        tmp.path().join("other-rescored").to_str().unwrap(),
+        "--cascade",
+        cascade_file.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("f00.json") && err.contains("another model than the one the cascade"), "{err}");
 
     // Rescoring in place would lose the first-stage files: refused. Rescored files are not cascade input.
     let out = run(&["rescore", "--detections", first.to_str().unwrap(), "--out", first.to_str().unwrap()]);

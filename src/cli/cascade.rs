@@ -78,6 +78,8 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         frames,
         detections: held_out.detections.display().to_string(),
         iou: held_out.iou,
+        // Checked above: every model is calibrated.
+        calibrations: models.iter().filter_map(|m| Some((m.category.clone(), m.calibration.clone()?))).collect(),
     };
     log::info!("training the second stage of {} categories on {frames} frames", categories.len());
     let (cascade, results) = train_cascade(&inputs, &categories, held_out.iou, training, args.features.into())?;

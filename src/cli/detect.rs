@@ -264,6 +264,10 @@ pub(super) fn cascade_for(
         );
         return Ok(None);
     }
+    if let Err(mismatch) = cascade.check_models(models) {
+        log::warn!("{}: not applied (first-stage scores reported): {mismatch}", path.display());
+        return Ok(None);
+    }
     let missing: Vec<&str> =
         cascade.categories.iter().filter(|c| !models.iter().any(|m| &m.category == *c)).map(String::as_str).collect();
     if !missing.is_empty() {
