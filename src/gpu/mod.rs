@@ -52,6 +52,9 @@ use crate::error::{Error, Result};
 /// Cap on the buffer-size limits requested from the adapter: some drivers report several GiB, and a
 /// kernel sized to that would allocate more memory than a shared machine should give one job.
 pub const MAX_BUFFER_BYTES: u64 = 1 << 30;
+/// How long a read-back waits for its map callback once the GPU is idle ([`GpuContext::wait_for_mapping`]):
+/// the callback normally runs within the poll or milliseconds after it, on another polling thread.
+const MAP_WAIT: std::time::Duration = std::time::Duration::from_secs(30);
 
 /// The backends cog-gpu ever uses (never GL, see the module doc).
 pub const PRIMARY_BACKENDS: wgpu::Backends =
@@ -631,6 +634,33 @@ impl GpuContext {
         self.read_buffer_through(encoder, buffer, count, &staging)
     }
 
+    /// Waits until the map callback behind `mapped` has run. Another thread polling the same device (the
+    /// engines' fast-path calls run concurrently, and so do tests sharing one context) may collect this
+    /// mapping's callback and run it after this thread's `poll` has already returned with the GPU idle,
+    /// so one poll is not enough: poll, then wait briefly for the callback, and again, up to
+    /// [`MAP_WAIT`].
+    fn wait_for_mapping(
+        &self,
+        mapped: &std::sync::mpsc::Receiver<std::result::Result<(), wgpu::BufferAsyncError>>,
+    ) -> Result<std::result::Result<(), wgpu::BufferAsyncError>> {
+        let started = std::time::Instant::now();
+        loop {
+            self.device
+                .poll(wgpu::PollType::wait_indefinitely())
+                .map_err(|e| Error::Gpu(format!("waiting for the GPU: {e}")))?;
+            match mapped.recv_timeout(std::time::Duration::from_millis(10)) {
+                Ok(status) => return Ok(status),
+                Err(std::sync::mpsc::RecvTimeoutError::Timeout) if started.elapsed() < MAP_WAIT => continue,
+                Err(_) => {
+                    return Err(Error::Gpu(format!(
+                        "the read-back buffer was not mapped {} s after the GPU went idle",
+                        MAP_WAIT.as_secs()
+                    )))
+                }
+            }
+        }
+    }
+
     /// [`GpuContext::read_buffer_after`] through the given `MAP_READ | COPY_DST` staging buffer (a pooled one,
     /// at least as large as what is read; it is unmapped again before this returns).
     pub fn read_buffer_through<T: bytemuck::Pod>(
@@ -654,19 +684,14 @@ impl GpuContext {
         let copy_bytes = bytes.next_multiple_of(wgpu::COPY_BUFFER_ALIGNMENT).min(buffer.size()).min(staging.size());
         encoder.copy_buffer_to_buffer(buffer, 0, staging, 0, Some(copy_bytes));
         self.queue.submit([encoder.finish()]);
-        let mapped: Arc<Mutex<Option<std::result::Result<(), wgpu::BufferAsyncError>>>> = Arc::default();
-        let sink = Arc::clone(&mapped);
+        let (sink, mapped) = std::sync::mpsc::channel();
         staging.map_async(wgpu::MapMode::Read, ..copy_bytes, move |r| {
-            *sink.lock().unwrap_or_else(|p| p.into_inner()) = Some(r)
+            // The receiver is gone only after this call gave up; nothing is left to tell.
+            let _ = sink.send(r);
         });
-        self.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| Error::Gpu(format!("waiting for the GPU: {e}")))?;
-        let status = mapped.lock().unwrap_or_else(|p| p.into_inner()).take();
-        match status {
-            Some(Ok(())) => {}
-            Some(Err(e)) => return Err(Error::Gpu(format!("mapping the read-back buffer: {e}"))),
-            None => return Err(Error::Gpu("the read-back buffer was not mapped after the GPU went idle".into())),
+        match self.wait_for_mapping(&mapped)? {
+            Ok(()) => {}
+            Err(e) => return Err(Error::Gpu(format!("mapping the read-back buffer: {e}"))),
         }
         let values = {
             let view = staging
