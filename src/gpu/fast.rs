@@ -576,7 +576,7 @@ pub fn fast_scores_gpu_jobs(
             run_times.place,
             run_times.view,
             batch_times.prepare,
-            batch_times.points,
+            batch_times.layout,
             batch_times.pool_wait,
             batch_times.buffers,
             batch_times.uploads,
@@ -744,7 +744,7 @@ fn run_batch(
     let mut mark = started;
     let storage_align = ctx.limits.min_storage_buffer_offset_alignment;
     let layout = BatchLayout::new(engine, dispatches, points_of_yaw, storage_align)?;
-    times.points += split(&mut mark);
+    times.layout += split(&mut mark);
     // The pooled buffers are this batch's until its scores are read back. Calls on other threads (other
     // engines of the frame) pack their batches meanwhile; nothing below runs rayon work, so a thread that
     // holds the lock never steals a task that waits for it.
@@ -851,9 +851,14 @@ fn run_batch(
         .iter()
         .enumerate()
         .map(|(n, d)| {
-            ((n as u64 * record_stride) as u32, (d.records.len() * kernel.invocations_per_workgroup() as usize) as u32)
+            let offset = u32::try_from(n as u64 * record_stride);
+            let invocations = u32::try_from(d.records.len() * kernel.invocations_per_workgroup() as usize);
+            match (offset, invocations) {
+                (Ok(offset), Ok(invocations)) => Ok((offset, invocations)),
+                _ => Err(Error::Gpu("fast_scores: a dispatch record offset or size beyond 2³²".into())),
+            }
         })
-        .collect();
+        .collect::<Result<_>>()?;
     ctx.encode_dispatches_at(&mut encoder, kernel, &scoring, &jobs, timer.as_ref().map(|t| (t, 3)))?;
     if let Some(timer) = &timer {
         timer.resolve(&mut encoder);
@@ -876,7 +881,7 @@ fn run_batch(
 struct BatchTimes {
     prepare: f64,
     /// The batch's layout (and the lattice points it converts).
-    points: f64,
+    layout: f64,
     /// Waiting for the buffer pool while another call's batch holds it.
     pool_wait: f64,
     buffers: f64,
