@@ -402,3 +402,39 @@ fn bench_detect_finds_the_gpu_and_cpu_paths_agree() {
     assert_eq!(report["gpu_vs_cpu"]["frames_compared"], 1);
     assert!(report["paths"]["gpu"]["frames"][0]["detections"].as_u64().unwrap() > 0);
 }
+
+fn path_detection(category: &str, centre: [f32; 3], size: [f32; 3], score: f32) -> cog_gpu::eval::Detection {
+    let cuboid = cog_gpu::geometry::Cuboid::new(glam::Vec3::from(centre), glam::Vec3::from(size), 0.0);
+    cog_gpu::eval::Detection::new(category, &cuboid, score)
+}
+
+#[test]
+fn path_comparison_allows_reordered_near_ties_and_alternate_sizes_only() {
+    use cog_gpu::detect::{compare_paths, PATH_SCORE_TOLERANCE};
+    let door = |depth: f32, score: f32| path_detection("door", [0.1, 1.8, -0.3], [0.82, depth, 2.1], score);
+    let chair = |score: f32| path_detection("chair", [1.0, 2.0, -0.8], [0.5, 0.5, 0.9], score);
+    let base = vec![vec![chair(0.5), door(0.093, 0.5)], vec![chair(0.2)]];
+    // Identical: same, nothing alternate.
+    let same = compare_paths(&base, &base);
+    assert!(same.same && same.near_tie_alternates == 0 && same.frames_compared == 2, "{same:?}");
+    // Two scores within rounding of each other in the other order (the backends order by score), and a
+    // near-tie alternate: the same door centre with another depth, its score within the tolerance.
+    let nudge = 0.5 * (1.0 + 0.5 * PATH_SCORE_TOLERANCE);
+    let other = vec![vec![door(0.096, nudge), chair(0.5)], vec![chair(0.2)]];
+    let agreement = compare_paths(&base, &other);
+    assert!(agreement.same, "{agreement:?}");
+    assert_eq!(agreement.near_tie_alternates, 1);
+    assert!(agreement.max_relative_score_difference > 0.0);
+    // Differences that are not near ties: a score beyond the tolerance, a moved centre, another
+    // category, a missing detection — each makes its frame different.
+    let beyond = 0.5 + 2.0 * PATH_SCORE_TOLERANCE;
+    let moved = path_detection("door", [0.2, 1.8, -0.3], [0.82, 0.093, 2.1], 0.5);
+    let renamed = path_detection("sofa", [0.1, 1.8, -0.3], [0.82, 0.093, 2.1], 0.5);
+    for changed in
+        [vec![chair(0.5), door(0.093, beyond)], vec![chair(0.5), moved], vec![chair(0.5), renamed], vec![chair(0.5)]]
+    {
+        let agreement = compare_paths(&base, &[changed.clone(), vec![chair(0.2)]]);
+        assert!(!agreement.same, "{changed:?}");
+        assert_eq!(agreement.frames_different, 1, "{changed:?}");
+    }
+}

@@ -32,17 +32,12 @@ use super::detect::{
 };
 use super::GlobalOptions;
 use cog_gpu::backend::Backend;
-use cog_gpu::detect::{detect_preprocessed_timed, DetectOptions, DetectStages, Stopwatch};
+use cog_gpu::detect::{compare_paths, detect_preprocessed_timed, DetectOptions, DetectStages, Stopwatch};
 use cog_gpu::eval::Detection;
 use cog_gpu::features::Preprocessed;
 use cog_gpu::frame::{DepthSource, Frame};
 use cog_gpu::gpu::fast::use_kernel_on;
 use cog_gpu::model::read_models_dir;
-
-/// Relative score difference (over max(|score|, 1)) within which two paths' detections count as the same.
-pub const SCORE_TOLERANCE: f32 = 1e-5;
-/// Centre, size and yaw difference within which two paths' boxes count as the same (metres, radians).
-pub const BOX_TOLERANCE: f32 = 1e-4;
 
 /// One frame's stage times on one path.
 #[derive(Clone, Debug, Default, serde::Serialize)]
@@ -123,7 +118,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         detections_per_path.push(detections);
     }
     let agreement = match detections_per_path.as_slice() {
-        [gpu_found, cpu_found] => Some(agreement(gpu_found, cpu_found)),
+        [gpu_found, cpu_found] => Some(json!(compare_paths(gpu_found, cpu_found))),
         _ => None,
     };
     let report = json!({
@@ -212,35 +207,6 @@ fn mean_times(times: &[FrameTimes]) -> serde_json::Value {
     let score_s: f64 = times.iter().map(|t| t.stages.score_s).sum();
     mean.insert("hypotheses_per_s".into(), json!(hypotheses / score_s.max(f64::MIN_POSITIVE)));
     serde_json::Value::Object(mean)
-}
-
-/// Whether two paths detected the same boxes (same order, categories, boxes within [`BOX_TOLERANCE`],
-/// scores within [`SCORE_TOLERANCE`] relative), frame by frame.
-fn agreement(a: &[Vec<Detection>], b: &[Vec<Detection>]) -> serde_json::Value {
-    let mut max_score_difference = 0.0f32;
-    let mut different_frames = 0usize;
-    for (x, y) in a.iter().zip(b) {
-        let same_boxes = x.len() == y.len()
-            && x.iter().zip(y).all(|(p, q)| {
-                let close = |u: &[f32], v: &[f32]| u.iter().zip(v).all(|(s, t)| (s - t).abs() <= BOX_TOLERANCE);
-                p.category == q.category
-                    && close(&p.centre, &q.centre)
-                    && close(&p.size, &q.size)
-                    && close(&[p.yaw], &[q.yaw])
-            });
-        let difference =
-            x.iter().zip(y).map(|(p, q)| (p.score - q.score).abs() / p.score.abs().max(1.0)).fold(0.0f32, f32::max);
-        max_score_difference = max_score_difference.max(difference);
-        if !same_boxes || difference > SCORE_TOLERANCE {
-            different_frames += 1;
-        }
-    }
-    json!({
-        "frames_compared": a.len().min(b.len()),
-        "frames_different": different_frames,
-        "max_relative_score_difference": max_score_difference,
-        "same": different_frames == 0,
-    })
 }
 
 /// The text report: one row of mean stage seconds per path, and the GPU/CPU ratio.

@@ -76,14 +76,34 @@ pub struct HypothesisRecord {
     pub _pad2: i32,
 }
 
-impl HypothesisRecord {
-    pub fn new(scene: &FeatureScene, layout: &FeatureLayout, hyp: &Hypothesis) -> HypothesisRecord {
+/// The expanded box of a hypothesis in its yaw's rotated frame as its voxels see it: the part of
+/// [`HypothesisRecord`] that the fast path needs (it has no use for the view cosine, which takes the whole
+/// cuboid to compute, so its hot loops make only this).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ExpandedBox {
+    /// Low corner (s, t, z).
+    pub lo: [f32; 3],
+    /// Voxel size along (s, t, z).
+    pub cell: [f32; 3],
+    /// Extent along (s, t, z).
+    pub extent: Vec3,
+}
+
+impl ExpandedBox {
+    pub fn new(layout: &FeatureLayout, hyp: &Hypothesis) -> ExpandedBox {
         let grid = layout.grid();
         let expansion = layout.expansion();
         let extent = Vec3::new(hyp.size.x * expansion[0], hyp.size.y * expansion[1], hyp.size.z * expansion[2]);
         let centre_z = hyp.bottom + 0.5 * hyp.size.z;
         let lo = [hyp.centre.x - 0.5 * extent.x, hyp.centre.y - 0.5 * extent.y, centre_z - 0.5 * extent.z];
         let cell = [0, 1, 2].map(|a| extent[a] / grid[a] as f32);
+        ExpandedBox { lo, cell, extent }
+    }
+}
+
+impl HypothesisRecord {
+    pub fn new(scene: &FeatureScene, layout: &FeatureLayout, hyp: &Hypothesis) -> HypothesisRecord {
+        let ExpandedBox { lo, cell, extent } = ExpandedBox::new(layout, hyp);
         HypothesisRecord {
             lo,
             view_x: view_cosine(&hyp.cuboid(scene)),

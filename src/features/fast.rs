@@ -43,9 +43,9 @@ use std::time::Instant;
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::cpu::{cog_frame, cog_position, dot, view_cosine, HypothesisRecord};
+use super::cpu::{cog_frame, cog_position, dot, view_cosine, ExpandedBox};
 use super::feature_layout::{
-    view_features, FeatureLayout, COG, COG_BINS, COG_EPSILON, DENSITY, NORMALS, PER_VOXEL, VIEW,
+    view_features, FeatureLayout, COG, COG_BINS, COG_EPSILON, DENSITY, MAX_COLUMNS, NORMALS, PER_VOXEL, VIEW,
 };
 use super::hypotheses::Hypothesis;
 use super::preprocess::NORMAL_BINS;
@@ -377,13 +377,14 @@ impl<'a> FastEngine<'a> {
     fn for_each_voxel_sums(
         &self,
         table: &LayerTable,
-        record: &HypothesisRecord,
+        expanded: &ExpandedBox,
         lattice: &YawLattice,
         mut visit: impl FnMut([usize; 3], &[u32; CHANNELS]),
     ) {
         let g = self.layout.grid();
         let (nx, ny) = (g[0] as usize, g[1] as usize);
-        let [xs, ys] = voxel_boundaries(&g, record, lattice);
+        let boundaries = voxel_boundaries(&g, expanded, lattice);
+        let (xs, ys) = (boundaries.xs(), boundaries.ys());
         // The (nx+1)×(ny+1) boundary corners of one layer are shared by its voxels; they are read in place
         // from the table (copying them out first cost ~15 % of the fast path in memcpy).
         for k in 0..g[2] as usize {
@@ -417,19 +418,19 @@ impl<'a> FastEngine<'a> {
     /// of every voxel of `hyp`, indexed by ℓ ([`FeatureLayout::voxel_index`]). For tests and debugging.
     pub fn voxel_sums(&self, hyp: &Hypothesis) -> Vec<[u32; CHANNELS]> {
         let table = self.table(key_of(hyp));
-        let record = HypothesisRecord::new(self.scene, &self.layout, hyp);
+        let expanded = ExpandedBox::new(&self.layout, hyp);
         let mut out = vec![[0u32; CHANNELS]; self.layout.voxel_count()];
-        self.for_each_voxel_sums(&table, &record, &self.lattices[hyp.yaw_index as usize], |[i, j, k], sums| {
+        self.for_each_voxel_sums(&table, &expanded, &self.lattices[hyp.yaw_index as usize], |[i, j, k], sums| {
             out[self.layout.voxel_index(i as u32, j as u32, k as u32)] = *sums;
         });
         out
     }
 
-    /// Step 3's cell boundaries of a hypothesis (`record` of a hypothesis of yaw `yaw_index`): voxel i
-    /// along s covers the lattice cells `xs[i]..xs[i+1]`, voxel j along t `ys[j]..ys[j+1]` — the indices
-    /// the scoring uses, exposed for the GPU twin.
-    pub(crate) fn voxel_boundaries(&self, record: &HypothesisRecord, yaw_index: u16) -> [Vec<usize>; 2] {
-        voxel_boundaries(&self.layout.grid(), record, &self.lattices[yaw_index as usize])
+    /// Step 3's cell boundaries of a hypothesis (`expanded`, the box of a hypothesis of yaw `yaw_index`):
+    /// voxel i along s covers the lattice cells `xs[i]..xs[i+1]`, voxel j along t `ys[j]..ys[j+1]` — the
+    /// indices the scoring uses, exposed for the GPU path and its twin.
+    pub(crate) fn voxel_boundaries(&self, expanded: &ExpandedBox, yaw_index: u16) -> VoxelBoundaries {
+        voxel_boundaries(&self.layout.grid(), expanded, &self.lattices[yaw_index as usize])
     }
 
     /// COG fixed-point units per unit of gradient magnitude.
@@ -441,7 +442,7 @@ impl<'a> FastEngine<'a> {
     /// voxel (empty voxels are all zeros, as in the exact path).
     fn hypothesis(&self, table: &LayerTable, hyp: &Hypothesis, mut visit: impl FnMut(usize, &[f32; PER_VOXEL])) {
         let grid: &YawGrid = &self.scene.yaws[hyp.yaw_index as usize];
-        let record = HypothesisRecord::new(self.scene, &self.layout, hyp);
+        let record = ExpandedBox::new(&self.layout, hyp);
         let m = grid.camera_from_rotated;
         let [fx, fy, _, _] = self.scene.pre.camera.intrinsics;
         let [vs, vt, vz] = record.cell;
@@ -527,21 +528,50 @@ pub fn dot_lanes(a: &[f32], b: &[f32]) -> f32 {
     ((lanes[0] + lanes[4]) + (lanes[1] + lanes[5])) + ((lanes[2] + lanes[6]) + (lanes[3] + lanes[7]))
 }
 
+/// Boundaries along one axis: at most [`MAX_COLUMNS`] voxels (the layout's limit on nx·ny), so one more.
+const MAX_BOUNDARIES: usize = MAX_COLUMNS as usize + 1;
+
+/// Step 3's cell boundaries of one hypothesis (see [`voxel_boundaries`]), kept on the stack: they are made
+/// for every hypothesis scored, on the CPU path and when the GPU path packs its records.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct VoxelBoundaries {
+    xs: [usize; MAX_BOUNDARIES],
+    ys: [usize; MAX_BOUNDARIES],
+    /// nx + 1, ny + 1.
+    counts: [usize; 2],
+}
+
+impl VoxelBoundaries {
+    /// The `nx + 1` boundaries along s.
+    pub(crate) fn xs(&self) -> &[usize] {
+        &self.xs[..self.counts[0]]
+    }
+
+    /// The `ny + 1` boundaries along t.
+    pub(crate) fn ys(&self) -> &[usize] {
+        &self.ys[..self.counts[1]]
+    }
+}
+
 /// Step 3's membership rule: voxel i along s covers the lattice cells `xs[i]..xs[i+1]` (those whose centre
 /// lies in it), likewise `ys` along t; `nx + 1` and `ny + 1` boundaries.
-fn voxel_boundaries(g: &[u32; 3], record: &HypothesisRecord, lattice: &YawLattice) -> [Vec<usize>; 2] {
-    let boundaries = |axis: usize, n: usize| -> Vec<usize> {
-        (0..=n)
-            .map(|i| {
-                let face = record.lo[axis] + i as f32 * record.cell[axis];
-                // Ties (a cell centre on a face, common: centres and sizes are round numbers)
-                // go to the voxel above the face, robustly against rounding.
-                let first = ceil_to_i64((face - lattice.origin[axis]) / lattice.cell - 0.5 - TIE_CELLS);
-                first.clamp(0, lattice.cells[axis] as i64) as usize
-            })
-            .collect()
+fn voxel_boundaries(g: &[u32; 3], expanded: &ExpandedBox, lattice: &YawLattice) -> VoxelBoundaries {
+    let boundary = |axis: usize, i: usize| -> usize {
+        let face = expanded.lo[axis] + i as f32 * expanded.cell[axis];
+        // Ties (a cell centre on a face, common: centres and sizes are round numbers)
+        // go to the voxel above the face, robustly against rounding.
+        let first = ceil_to_i64((face - lattice.origin[axis]) / lattice.cell - 0.5 - TIE_CELLS);
+        first.clamp(0, lattice.cells[axis] as i64) as usize
     };
-    [boundaries(0, g[0] as usize), boundaries(1, g[1] as usize)]
+    let counts = [g[0] as usize + 1, g[1] as usize + 1];
+    let mut boundaries = VoxelBoundaries { xs: [0; MAX_BOUNDARIES], ys: [0; MAX_BOUNDARIES], counts };
+    for (i, x) in boundaries.xs[..counts[0]].iter_mut().enumerate() {
+        *x = boundary(0, i);
+    }
+    for (j, y) in boundaries.ys[..counts[1]].iter_mut().enumerate() {
+        *y = boundary(1, j);
+    }
+    boundaries
 }
 
 pub(crate) fn key_of(hyp: &Hypothesis) -> TableKey {

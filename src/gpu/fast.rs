@@ -20,7 +20,7 @@
 //!
 //! Per hypothesis the CPU packs a [`FastRecord`] (low corner and voxel size of the expanded box) and the
 //! `nx + 1 + ny + 1` voxel-boundary cell indices, computed by the engine's own membership rule
-//! (`FastEngine::voxel_boundaries`, the function its scoring uses), so cell membership is identical by
+//! (`FastEngine::voxel_boundaries`, the function its scoring uses; no view cosine, no allocation per hypothesis), so cell membership is identical by
 //! construction. The shader runs one workgroup of 64 invocations per hypothesis; invocation `lid` takes the
 //! voxels `ℓ = lid + 64·r` in the layout's
 //! order, differences four table corners with wrapping `u32` arithmetic (exact, as on the CPU), finalises
@@ -30,8 +30,10 @@
 //! results are bit-identical run to run.
 //!
 //! **Choice: the view features are added on the CPU** ([`FastEngine`]'s own `view`, 12 numbers per
-//! hypothesis), after the voxel part comes back, in the same order as `FastEngine::scores` (voxels first,
-//! then view). This keeps `exp` out of the shader and the view part identical to the CPU path.
+//! hypothesis): their dot products with the weights are computed while the hypotheses are packed (in
+//! parallel, while earlier batches run on the GPU) and added to the voxel part when it comes back, in the
+//! order of `FastEngine::scores` (voxels first, then view). This keeps `exp` out of the shader and the
+//! view part identical to the CPU path.
 //!
 //! A table larger than the storage-binding limit (128 MiB on lavapipe; ~40 MB for a 10 m × 10 m room at
 //! the default lattice) is an [`Error::Gpu`]; callers fall back to the CPU path.
@@ -58,7 +60,7 @@ use super::fast_tables::{
 };
 use super::{BufferBinding, GpuContext, KernelSpec};
 use crate::error::{Error, Result};
-use crate::features::cpu::{dot, HypothesisRecord};
+use crate::features::cpu::{dot, ExpandedBox};
 use crate::features::fast::{group_by_table, FastEngine, LayerTable, TableKey, TableSpan, CHANNELS};
 use crate::features::feature_layout::{FeatureLayout, COG, COG_BINS, COG_EPSILON, NORMALS, PER_VOXEL, VIEW};
 use crate::features::preprocess::NORMAL_BINS;
@@ -195,8 +197,6 @@ type JobMembers = Vec<(usize, Vec<usize>)>;
 struct PackedGroup {
     yaw_index: usize,
     span: TableSpan,
-    /// Words of the table.
-    table_words: usize,
     /// The table, when built on the CPU.
     table: Option<LayerTable>,
     chunks: Vec<PackedChunk>,
@@ -209,6 +209,9 @@ struct PackedChunk {
     members: Vec<usize>,
     records: Vec<FastRecord>,
     bounds: Vec<u32>,
+    /// Per member and weight vector of its job, the view part of the score (`w[view] · view(h)`), when the
+    /// layout has view features; empty otherwise.
+    views: Vec<f32>,
 }
 
 impl PackedGroup {
@@ -222,50 +225,119 @@ impl PackedGroup {
         max_chunk: usize,
         build_table: bool,
     ) -> Self {
-        let scene = engine.scene();
         let layout = engine.layout();
         let g = layout.grid();
         let bounds_per_hyp = (g[0] + g[1] + 2) as usize;
+        let view_offset = layout.groups.view.then(|| layout.view_offset());
         let mut chunks = Vec::new();
         for (job, job_members) in members {
             for part in job_members.chunks(max_chunk.max(1)) {
-                let mut records = Vec::with_capacity(part.len());
-                let mut bounds = Vec::with_capacity(part.len() * bounds_per_hyp);
-                for &n in part {
-                    let record = HypothesisRecord::new(scene, layout, &jobs[*job].hypotheses[n]);
-                    let [xs, ys] = engine.voxel_boundaries(&record, key.yaw_index);
-                    bounds.extend(xs.iter().chain(&ys).map(|&c| c as u32));
-                    records.push(FastRecord {
-                        lo: [record.lo[0], record.lo[1], record.lo[2], 0.0],
-                        cell: [record.cell[0], record.cell[1], record.cell[2], 0.0],
-                    });
-                }
-                chunks.push(PackedChunk { job: *job, members: part.to_vec(), records, bounds });
+                // Hypotheses in parallel (groups differ in size by orders of magnitude, so a group per
+                // thread left most threads idle while the largest groups packed).
+                let mut records = vec![FastRecord::default(); part.len()];
+                let mut bounds = vec![0u32; part.len() * bounds_per_hyp];
+                records.par_iter_mut().zip(bounds.par_chunks_mut(bounds_per_hyp)).zip(part).for_each(
+                    |((record, bounds), &n)| {
+                        let expanded = ExpandedBox::new(layout, &jobs[*job].hypotheses[n]);
+                        let boundaries = engine.voxel_boundaries(&expanded, key.yaw_index);
+                        for (slot, &c) in bounds.iter_mut().zip(boundaries.xs().iter().chain(boundaries.ys())) {
+                            *slot = c as u32;
+                        }
+                        let ExpandedBox { lo, cell, .. } = expanded;
+                        *record = FastRecord { lo: [lo[0], lo[1], lo[2], 0.0], cell: [cell[0], cell[1], cell[2], 0.0] };
+                    },
+                );
+                // The view part of each score here too, off the call's critical path (it was a pass over all
+                // hypotheses after the last batch came back).
+                let weights = jobs[*job].weights;
+                let views = match view_offset {
+                    Some(offset) if !weights.is_empty() => {
+                        view_parts(engine, jobs[*job].hypotheses, part, weights, offset)
+                    }
+                    _ => Vec::new(),
+                };
+                chunks.push(PackedChunk { job: *job, members: part.to_vec(), records, bounds, views });
             }
         }
         let span = engine.table_span(key);
-        let [row, rows] = engine.lattice(key.yaw_index as usize).table_stride();
-        PackedGroup {
-            yaw_index: key.yaw_index as usize,
-            span,
-            table_words: span.layers * rows * row * CHANNELS,
-            table: build_table.then(|| engine.table(key)),
-            chunks,
-        }
+        PackedGroup { yaw_index: key.yaw_index as usize, span, table: build_table.then(|| engine.table(key)), chunks }
     }
 
-    /// Bytes this group adds to a batch's arenas (`scores_per_hypothesis[job]` outputs per hypothesis).
-    fn bytes(&self, scores_per_hypothesis: &[usize]) -> u64 {
-        let chunks: usize = self
-            .chunks
-            .iter()
-            .map(|c| {
-                std::mem::size_of_val(c.records.as_slice())
-                    + 4 * (c.bounds.len() + c.members.len() * scores_per_hypothesis[c.job])
-            })
-            .sum();
-        (4 * self.table_words + chunks) as u64
+    /// Bytes the group of `key` with `members` adds to a batch's arenas (`scores_per_hypothesis[job]`
+    /// outputs per hypothesis): its table, and per member its record, boundaries and scores. Known before
+    /// the group is packed, so batches are planned first ([`plan_batches`]).
+    fn bytes(engine: &FastEngine, key: TableKey, members: &JobMembers, scores_per_hypothesis: &[usize]) -> u64 {
+        let g = engine.layout().grid();
+        let bounds_per_hyp = (g[0] + g[1] + 2) as usize;
+        let span = engine.table_span(key);
+        let [row, rows] = engine.lattice(key.yaw_index as usize).table_stride();
+        let table_words = span.layers * rows * row * CHANNELS;
+        let per_member =
+            |job: usize| std::mem::size_of::<FastRecord>() + 4 * (bounds_per_hyp + scores_per_hypothesis[job]);
+        let members: usize = members.iter().map(|(job, m)| m.len() * per_member(*job)).sum();
+        (4 * table_words + members) as u64
     }
+}
+
+/// Cuts `groups` (in order) into batches of at most `max_batch_bytes` each (a group larger than that alone),
+/// as ranges of group indices.
+fn plan_batches(
+    engine: &FastEngine,
+    groups: &[(TableKey, JobMembers)],
+    scores_per_hypothesis: &[usize],
+    max_batch_bytes: u64,
+) -> Vec<std::ops::Range<usize>> {
+    let mut batches = Vec::new();
+    let (mut first, mut bytes) = (0, 0u64);
+    for (n, (key, members)) in groups.iter().enumerate() {
+        let group_bytes = PackedGroup::bytes(engine, *key, members, scores_per_hypothesis);
+        if n > first && bytes + group_bytes > max_batch_bytes {
+            batches.push(first..n);
+            (first, bytes) = (n, 0);
+        }
+        bytes += group_bytes;
+    }
+    if first < groups.len() {
+        batches.push(first..groups.len());
+    }
+    batches
+}
+
+/// The view parts of the scores of `members` (indices into `hypotheses`): per member and weight vector,
+/// `w[offset..offset + VIEW] · view(h)`. Consecutive members often share a centre (the window pushes a
+/// centre's sizes one after the other), and the view features depend on the centre and the yaw only
+/// (`view_cosine`: the horizontal direction from the centre to the camera, and the front), so a run of
+/// members with one centre computes them once — the same numbers, by the same operations.
+fn view_parts(
+    engine: &FastEngine,
+    hypotheses: &[Hypothesis],
+    members: &[usize],
+    weights: &[Vec<f32>],
+    offset: usize,
+) -> Vec<f32> {
+    const PIECE: usize = 256;
+    let count = weights.len();
+    let mut views = vec![0.0f32; members.len() * count];
+    views.par_chunks_mut(PIECE * count).zip(members.par_chunks(PIECE)).for_each(|(rows, piece)| {
+        let mut last: Option<((u16, [u32; 2]), usize)> = None;
+        for (k, &n) in piece.iter().enumerate() {
+            let hyp = &hypotheses[n];
+            let key = (hyp.yaw_index, [hyp.centre.x.to_bits(), hyp.centre.y.to_bits()]);
+            let (done, rest) = rows.split_at_mut(k * count);
+            let row = &mut rest[..count];
+            match last {
+                Some((seen, at)) if seen == key => row.copy_from_slice(&done[at * count..(at + 1) * count]),
+                _ => {
+                    let view = engine.view(hyp);
+                    for (v, w) in row.iter_mut().zip(weights) {
+                        *v = dot(&w[offset..offset + VIEW], &view);
+                    }
+                    last = Some((key, k));
+                }
+            }
+        }
+    });
+    views
 }
 
 /// Checks a job's weights and hypotheses against the engine.
@@ -307,18 +379,23 @@ fn padded_passes(layout: &FeatureLayout, weights: &[Vec<f32>]) -> Vec<Vec<f32>> 
 
 /// Packs every dispatch of every job and hands them to `execute` one batch at a time (GPU: one submission
 /// per batch; CPU twin: each dispatch in turn), which returns each dispatch's `records.len() × weight count`
-/// voxel scores; adds the view part on the CPU and returns, per job, `scores[h·W + w]`. Jobs whose
+/// voxel scores; adds the view part (computed on the CPU while packing) and returns, per job, `scores[h·W + w]`. Jobs whose
 /// hypotheses share a table (same yaw, bottom and height) share its group: the table is built once. The
 /// dispatches, and so the scores, do not depend on how they are batched or which other jobs come along.
-/// Table groups are packed (records computed, tables built on the CPU when `build_tables`) in parallel, a
-/// few per thread at a time, so that at most about one batch of tables is held.
+/// Batches are planned from the groups' sizes first ([`plan_batches`]); a batch's groups are packed
+/// (records, boundaries and view parts computed, tables built on the CPU when `build_tables`) in parallel,
+/// and **the next batch is packed while the last one executes** (`rayon::join`: the packing of a call's
+/// next batch used to wait for its last batch's GPU work and read-back), so at most two batches are held.
+/// Nothing blocks a rayon thread on work that needs another one (a thread waiting in the join helps with
+/// the other half; a batch's execution waits only on the GPU and on a pool set, whose holder does no rayon
+/// work while it holds it).
 fn run(
     engine: &FastEngine,
     jobs: &[FastJob],
     chunking: FastChunking,
     build_tables: bool,
     times: &mut RunTimes,
-    mut execute: impl FnMut(&[FastDispatch]) -> Result<Vec<Vec<f32>>>,
+    mut execute: impl FnMut(&[FastDispatch]) -> Result<Vec<Vec<f32>>> + Send,
 ) -> Result<Vec<Vec<f32>>> {
     let layout = engine.layout();
     layout.validate()?;
@@ -360,7 +437,7 @@ fn run(
             at: [0; 4],
         }
     };
-    let mut flush = |batch: &[PackedGroup], scores: &mut [Vec<f32>]| -> Result<()> {
+    let mut flush = |batch: &[PackedGroup], scores: &mut [Vec<f32>], times: &mut RunTimes| -> Result<()> {
         let mut dispatches = Vec::new();
         let mut owners = Vec::new();
         let mut chunk_index = 0;
@@ -398,7 +475,13 @@ fn run(
             let job_scores = &mut scores[chunk.job];
             for (slot, &n) in chunk.members.iter().enumerate() {
                 for w in 0..count {
-                    job_scores[n * w_total + pass * MAX_WEIGHTS + w] = out[slot * count + w];
+                    let column = pass * MAX_WEIGHTS + w;
+                    // Voxel part, then the view part: the order of `FastEngine::scores`.
+                    let voxel_part = out[slot * count + w];
+                    job_scores[n * w_total + column] = match chunk.views.get(slot * w_total + column) {
+                        Some(view) => voxel_part + view,
+                        None => voxel_part,
+                    };
                 }
             }
         }
@@ -419,58 +502,35 @@ fn run(
     }
     times.group += grouping.elapsed().as_secs_f64();
     let groups: Vec<(TableKey, JobMembers)> = by_key.into_iter().collect();
-    let mut batch: Vec<PackedGroup> = Vec::new();
-    let mut batch_bytes = 0u64;
-    for window in groups.chunks(2 * rayon::current_num_threads().max(1)) {
+    let plan = plan_batches(engine, &groups, &w_totals, chunking.max_batch_bytes);
+    let pack = |range: &std::ops::Range<usize>| -> (Vec<PackedGroup>, f64) {
         let packing = std::time::Instant::now();
-        let packed: Vec<PackedGroup> = window
+        let packed = groups[range.clone()]
             .par_iter()
             .map(|(key, members)| PackedGroup::new(engine, jobs, *key, members, chunking.max_chunk, build_tables))
             .collect();
-        times.pack += packing.elapsed().as_secs_f64();
-        for group in packed {
-            let bytes = group.bytes(&w_totals);
-            if !batch.is_empty() && batch_bytes + bytes > chunking.max_batch_bytes {
-                flush(&batch, &mut scores)?;
-                batch.clear();
-                batch_bytes = 0;
-            }
-            batch_bytes += bytes;
-            batch.push(group);
-        }
+        (packed, packing.elapsed().as_secs_f64())
+    };
+    let mut current = plan.first().map(pack);
+    for range in plan.iter().skip(1).map(Some).chain([None]) {
+        let Some((batch, pack_seconds)) = current.take() else { break };
+        times.pack += pack_seconds;
+        let (next, executed) = rayon::join(|| range.map(pack), || flush(&batch, &mut scores, times));
+        executed?;
+        current = next;
     }
-    if !batch.is_empty() {
-        flush(&batch, &mut scores)?;
-    }
-    let viewing = std::time::Instant::now();
-    if layout.groups.view {
-        let offset = layout.view_offset();
-        for (job, job_scores) in jobs.iter().zip(scores.iter_mut()) {
-            let w_total = job.weights.len();
-            if w_total == 0 {
-                continue;
-            }
-            job_scores.par_chunks_mut(w_total).zip(job.hypotheses.par_iter()).for_each(|(row, hyp)| {
-                let view = engine.view(hyp);
-                for (score, w) in row.iter_mut().zip(job.weights) {
-                    *score += dot(&w[offset..offset + VIEW], &view);
-                }
-            });
-        }
-    }
-    times.view += viewing.elapsed().as_secs_f64();
     Ok(scores)
 }
 
-/// Seconds of the parts of [`run`] (for the debug log): grouping the hypotheses by table, packing the groups, executing the batches,
-/// placing their scores, and the view features.
+/// Seconds of the parts of [`run`] (for the debug log): grouping the hypotheses by table, packing the
+/// groups (records, boundaries and the view parts of the scores), executing the batches, placing their
+/// scores.
 #[derive(Default)]
 struct RunTimes {
     group: f64,
     pack: f64,
     execute: f64,
     place: f64,
-    view: f64,
 }
 
 /// Fused fast-path scores on the GPU, `scores[h·W + w] = weights[w] · φ(h)`, the layout of
@@ -567,14 +627,15 @@ pub fn fast_scores_gpu_jobs(
         })?;
         let total = started.elapsed().as_secs_f64();
         log::debug!(
-            "fast_scores time: {total:.4} s in all (grouping {:.4}, packing {:.4}, placing scores {:.4}, view {:.4}): {:.4} s preparing batches (layout {:.4}, waiting for the pool {:.4}, buffers {:.4}, \
-             uploads {:.4}, bind groups {:.4}, encoding {:.4}), {:.4} s submitting and waiting for the GPU and the \
-             read-back (GPU passes: scatter {:.4}, rows {:.4}, columns {:.4}, scoring {:.4}), {:.4} s on the CPU \
-             (packing, view)",
+            "fast_scores time: {total:.4} s in all: grouping {:.4}, packing with the view parts {:.4} (while earlier \
+             batches execute), placing scores {:.4}; batches {:.4}: preparing {:.4} (layout {:.4}, waiting for the \
+             pool {:.4}, buffers {:.4}, uploads {:.4}, bind groups {:.4}, encoding {:.4}), submitting and waiting \
+             for the GPU and the read-back {:.4} (GPU passes: scatter {:.4}, rows {:.4}, columns {:.4}, scoring \
+             {:.4})",
             run_times.group,
             run_times.pack,
             run_times.place,
-            run_times.view,
+            run_times.execute,
             batch_times.prepare,
             batch_times.layout,
             batch_times.pool_wait,
@@ -587,7 +648,6 @@ pub fn fast_scores_gpu_jobs(
             batch_times.gpu[1],
             batch_times.gpu[2],
             batch_times.gpu[3],
-            total - batch_times.prepare - batch_times.wait
         );
         log::debug!(
             "fast_scores: {} jobs, {} hypotheses, {} tables ({:.1} MB) built on the GPU, {dispatch_count} scoring \
@@ -748,7 +808,7 @@ fn run_batch(
     // The pooled buffers are this batch's until its scores are read back. Calls on other threads (other
     // engines of the frame) pack their batches meanwhile; nothing below runs rayon work, so a thread that
     // holds the lock never steals a task that waits for it.
-    let mut pool = ctx.pool.lock().unwrap_or_else(|p| p.into_inner());
+    let mut pool = ctx.pool();
     times.pool_wait += split(&mut mark);
     let max_size = ctx.limits.max_buffer_size;
     let mut pooled = |label: &'static str, usage: wgpu::BufferUsages, bytes: u64| {
@@ -775,35 +835,50 @@ fn run_batch(
     let mut phase_params = Arena::new(storage_align);
     let phase_at: [u64; 3] = [(); 3].map(|_| phase_params.place((layout.groups.len() * table_params_size) as u64));
     let table_params_buffer = pooled("fast table params", storage, phase_params.len);
+    // Everything the batch uploads, laid out as in its destination buffers, region after region, in one
+    // pooled upload buffer: one copy per destination buffer.
+    let mut regions = Arena::new(wgpu::COPY_BUFFER_ALIGNMENT as u32);
+    let region_sizes =
+        [point_bytes, phase_params.len, layout.records.len, layout.bounds.len, layout.weights.len, params_bytes]
+            .map(|bytes| bytes.next_multiple_of(wgpu::COPY_BUFFER_ALIGNMENT));
+    let [point_region, phase_region, record_region, bound_region, weight_region, params_region] =
+        region_sizes.map(|bytes| regions.place(bytes));
+    let upload = ctx.mapped_upload(&mut pool, "fast uploads", regions.len)?;
     times.buffers += split(&mut mark);
-    for (first, points) in layout.yaw_points.iter().flatten() {
-        let at = (first * std::mem::size_of::<TablePoint>()) as u64;
-        ctx.queue.write_buffer(&lattice_buffer, at, bytemuck::cast_slice(points));
-    }
-    for (step, &at) in phase_at.iter().enumerate() {
-        let step_params: Vec<TableParams> = layout.groups.iter().map(|g| g.params[step]).collect();
-        ctx.queue.write_buffer(&table_params_buffer, at, bytemuck::cast_slice(&step_params));
-    }
-    // Each chunk's records and boundaries and each pass's weights once (dispatches share them).
-    let mut chunk_written = vec![false; layout.chunks.len()];
-    let mut pass_written = vec![false; layout.passes.len()];
-    for d in dispatches {
-        if !std::mem::replace(&mut chunk_written[d.chunk], true) {
-            let (record, bound) = layout.chunks[d.chunk];
-            ctx.queue.write_buffer(&record_buffer, record, bytemuck::cast_slice(d.records));
-            ctx.queue.write_buffer(&bound_buffer, bound, bytemuck::cast_slice(d.bounds));
+    {
+        let mut image = upload
+            .get_mapped_range_mut(..regions.len.max(4))
+            .map_err(|e| Error::Gpu(format!("writing the mapped upload buffer: {e}")))?;
+        let mut put = |region: u64, at: u64, bytes: &[u8]| {
+            let start = (region + at) as usize;
+            image.slice(start..start + bytes.len()).copy_from_slice(bytes);
+        };
+        for (first, points) in layout.yaw_points.iter().flatten() {
+            put(point_region, (first * std::mem::size_of::<TablePoint>()) as u64, bytemuck::cast_slice(points));
         }
-        if !std::mem::replace(&mut pass_written[d.pass], true) {
-            let at = layout.passes[d.pass].expect("placed with its dispatch");
-            ctx.queue.write_buffer(&weight_buffer, at, bytemuck::cast_slice(d.weights));
+        for (step, &at) in phase_at.iter().enumerate() {
+            let step_params: Vec<TableParams> = layout.groups.iter().map(|g| g.params[step]).collect();
+            put(phase_region, at, bytemuck::cast_slice(&step_params));
+        }
+        // Each chunk's records and boundaries and each pass's weights once (dispatches share them).
+        let mut chunk_written = vec![false; layout.chunks.len()];
+        let mut pass_written = vec![false; layout.passes.len()];
+        for d in dispatches {
+            if !std::mem::replace(&mut chunk_written[d.chunk], true) {
+                let (record, bound) = layout.chunks[d.chunk];
+                put(record_region, record, bytemuck::cast_slice(d.records));
+                put(bound_region, bound, bytemuck::cast_slice(d.bounds));
+            }
+            if !std::mem::replace(&mut pass_written[d.pass], true) {
+                let at = layout.passes[d.pass].expect("placed with its dispatch");
+                put(weight_region, at, bytemuck::cast_slice(d.weights));
+            }
+        }
+        for (n, record) in layout.params.iter().enumerate() {
+            put(params_region, n as u64 * record_stride, bytemuck::bytes_of(record));
         }
     }
-    let mut records_bytes = vec![0u8; params_bytes as usize];
-    for (n, record) in layout.params.iter().enumerate() {
-        let at = n * record_stride as usize;
-        records_bytes[at..at + record_size as usize].copy_from_slice(bytemuck::bytes_of(record));
-    }
-    ctx.queue.write_buffer(&params_buffer, 0, &records_bytes);
+    pool.unmap_upload("fast uploads", &upload);
     times.uploads += split(&mut mark);
     // The tables: three phases (scatter, rows, columns), each one dispatch over all the batch's tables
     // (workgroup z: the table), in pieces of at most TABLES_PER_DISPATCH tables.
@@ -838,6 +913,19 @@ fn run_batch(
     );
     times.bind_groups += split(&mut mark);
     let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(kernel.label) });
+    let destinations = [
+        (&lattice_buffer, point_region),
+        (&table_params_buffer, phase_region),
+        (&record_buffer, record_region),
+        (&bound_buffer, bound_region),
+        (&weight_buffer, weight_region),
+        (&params_buffer, params_region),
+    ];
+    for ((buffer, region), bytes) in destinations.into_iter().zip(region_sizes) {
+        if bytes > 0 {
+            encoder.copy_buffer_to_buffer(&upload, region, buffer, 0, Some(bytes));
+        }
+    }
     let timer = ctx.pass_timer(4);
     encoder.clear_buffer(&table_buffer, 0, Some(layout.tables.len.next_multiple_of(wgpu::COPY_BUFFER_ALIGNMENT)));
     // Each dispatch is its own usage scope (WebGPU): a phase sees the previous phase's writes.

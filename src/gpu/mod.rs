@@ -42,7 +42,7 @@ pub mod features;
 pub mod room_layout;
 
 use std::borrow::Cow;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 
 use wgpu::util::DeviceExt;
@@ -207,9 +207,35 @@ pub struct GpuContext {
     /// Whether the device has timestamp queries (asked for when the adapter offers them): kernels may then
     /// time their compute passes on the GPU for the debug log ([`GpuContext::pass_timer`]).
     pub timestamps: bool,
-    /// Buffers kept from one batch to the next (see [`BufferPool`]); a kernel holds the lock from its
-    /// uploads to its read-back, so that two callers never share a buffer in flight.
-    pub pool: Mutex<BufferPool>,
+    /// Sets of buffers kept from one batch to the next (see [`BufferPool`]), [`pool_slots`] of them: a
+    /// kernel holds one set's lock ([`GpuContext::pool`]) from its uploads to its read-back, so that two
+    /// callers never share a buffer in flight, while a caller holding another set uploads its batch as the
+    /// GPU runs the first one's.
+    pub pools: Vec<Mutex<BufferPool>>,
+    /// Which set a caller waits for when every set is taken (round robin).
+    next_pool: AtomicUsize,
+}
+
+/// Default number of [`BufferPool`] sets of a context ([`pool_slots`]).
+pub const DEFAULT_POOL_SLOTS: usize = 2;
+
+/// The number of [`BufferPool`] sets a new context keeps: `COG_GPU_POOL_SLOTS` (1–8) when set, else
+/// [`DEFAULT_POOL_SLOTS`]. One set serialises batches from upload to read-back; two let one batch's
+/// uploads overlap another's GPU work (chosen on an H200: see the README's "The fast path"). Each set grows
+/// to the largest batch it has held, so the GPU memory kept grows with the count.
+pub fn pool_slots() -> Result<usize> {
+    parse_pool_slots(std::env::var("COG_GPU_POOL_SLOTS").ok().as_deref())
+}
+
+/// [`pool_slots`] of the variable's value (`None`: unset).
+fn parse_pool_slots(value: Option<&str>) -> Result<usize> {
+    match value {
+        None => Ok(DEFAULT_POOL_SLOTS),
+        Some(text) => match text.trim().parse::<usize>() {
+            Ok(n) if (1..=8).contains(&n) => Ok(n),
+            _ => Err(Error::Input(format!("COG_GPU_POOL_SLOTS is '{text}': expected a whole number from 1 to 8"))),
+        },
+    }
 }
 
 /// Grow-only buffers by role, reused across batches and frames instead of created (and zeroed by wgpu)
@@ -217,6 +243,9 @@ pub struct GpuContext {
 #[derive(Default)]
 pub struct BufferPool {
     buffers: Vec<(&'static str, wgpu::BufferUsages, wgpu::Buffer)>,
+    /// Labels of the upload buffers (`MAP_WRITE`) unmapped by [`BufferPool::unmap_upload`] and not mapped
+    /// since (wgpu 30 cannot be asked a buffer's map state).
+    unmapped_uploads: Vec<&'static str>,
 }
 
 impl BufferPool {
@@ -244,13 +273,24 @@ impl BufferPool {
             label: Some(label),
             size: grown.next_multiple_of(wgpu::COPY_BUFFER_ALIGNMENT),
             usage,
-            mapped_at_creation: false,
+            // An upload buffer starts mapped, ready for its first batch ([`GpuContext::mapped_upload`]).
+            mapped_at_creation: usage.contains(wgpu::BufferUsages::MAP_WRITE),
         });
         match slot {
             Some(n) => self.buffers[n].2 = buffer.clone(),
             None => self.buffers.push((label, usage, buffer.clone())),
         }
+        self.unmapped_uploads.retain(|l| *l != label);
         buffer
+    }
+
+    /// Unmaps the upload buffer `buffer` of `label` (from [`GpuContext::mapped_upload`]) before the
+    /// submission that copies from it; the next `mapped_upload` maps it again.
+    pub fn unmap_upload(&mut self, label: &'static str, buffer: &wgpu::Buffer) {
+        buffer.unmap();
+        if !self.unmapped_uploads.contains(&label) {
+            self.unmapped_uploads.push(label);
+        }
     }
 }
 
@@ -379,7 +419,19 @@ impl GpuContext {
         device.on_uncaptured_error(Arc::new(|e: wgpu::Error| log::error!("GPU error outside a checked scope: {e}")));
         device.set_device_lost_callback(|reason, message| log::error!("GPU device lost ({reason:?}): {message}"));
         let kernels = Kernels::new(&device)?;
-        Ok(GpuContext { instance, adapter, device, queue, info, limits, kernels, timestamps, pool: Mutex::default() })
+        let pools = (0..pool_slots()?).map(|_| Mutex::default()).collect();
+        Ok(GpuContext {
+            instance,
+            adapter,
+            device,
+            queue,
+            info,
+            limits,
+            kernels,
+            timestamps,
+            pools,
+            next_pool: AtomicUsize::new(0),
+        })
     }
 
     /// One line for logs: adapter name, backend, device type and driver.
@@ -639,26 +691,68 @@ impl GpuContext {
     /// mapping's callback and run it after this thread's `poll` has already returned with the GPU idle,
     /// so one poll is not enough: poll, then wait briefly for the callback, and again, up to
     /// [`MAP_WAIT`].
+    ///
+    /// `submission` is the submission the mapping waits for: the poll blocks until it is done, not until
+    /// the latest one (another caller's batch may be running on another pool set). `None`: the buffer is in
+    /// no unfinished submission, so a non-blocking poll maps it.
     fn wait_for_mapping(
         &self,
         mapped: &std::sync::mpsc::Receiver<std::result::Result<(), wgpu::BufferAsyncError>>,
+        submission: Option<&wgpu::SubmissionIndex>,
     ) -> Result<std::result::Result<(), wgpu::BufferAsyncError>> {
         let started = std::time::Instant::now();
         loop {
-            self.device
-                .poll(wgpu::PollType::wait_indefinitely())
-                .map_err(|e| Error::Gpu(format!("waiting for the GPU: {e}")))?;
+            let until = match submission {
+                Some(index) => wgpu::PollType::Wait { submission_index: Some(index.clone()), timeout: None },
+                None => wgpu::PollType::Poll,
+            };
+            self.device.poll(until).map_err(|e| Error::Gpu(format!("waiting for the GPU: {e}")))?;
             match mapped.recv_timeout(std::time::Duration::from_millis(10)) {
                 Ok(status) => return Ok(status),
                 Err(std::sync::mpsc::RecvTimeoutError::Timeout) if started.elapsed() < MAP_WAIT => continue,
                 Err(_) => {
                     return Err(Error::Gpu(format!(
-                        "the read-back buffer was not mapped {} s after the GPU went idle",
+                        "a buffer to map was not mapped {} s after the GPU went idle",
                         MAP_WAIT.as_secs()
                     )))
                 }
             }
         }
+    }
+
+    /// One of the context's [`BufferPool`] sets, locked: the first free one, else (all taken) the next in
+    /// turn, waiting for it.
+    pub fn pool(&self) -> std::sync::MutexGuard<'_, BufferPool> {
+        for pool in &self.pools {
+            match pool.try_lock() {
+                Ok(guard) => return guard,
+                Err(std::sync::TryLockError::Poisoned(p)) => return p.into_inner(),
+                Err(std::sync::TryLockError::WouldBlock) => {}
+            }
+        }
+        let turn = self.next_pool.fetch_add(1, Ordering::Relaxed) % self.pools.len();
+        self.pools[turn].lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// `pool`'s upload buffer (`MAP_WRITE | COPY_SRC`, label `label`) of at least `bytes`, mapped for
+    /// writing: the batch writes its inputs into it, unmaps it and copies them into its storage buffers in
+    /// its own submission. Unlike `queue.write_buffer`, which makes a fresh staging buffer per call (new
+    /// host memory, page faults), its pages are reused batch after batch. It is re-mapped here: its last
+    /// submission has completed (the pool set's holder waited for its read-back), so one poll maps it.
+    pub fn mapped_upload(&self, pool: &mut BufferPool, label: &'static str, bytes: u64) -> Result<wgpu::Buffer> {
+        let usage = wgpu::BufferUsages::MAP_WRITE | wgpu::BufferUsages::COPY_SRC;
+        let upload = pool.buffer(&self.device, label, usage, bytes, self.limits.max_buffer_size);
+        if pool.unmapped_uploads.contains(&label) {
+            pool.unmapped_uploads.retain(|l| *l != label);
+            let (sink, mapped) = std::sync::mpsc::channel();
+            upload.map_async(wgpu::MapMode::Write, .., move |r| {
+                let _ = sink.send(r);
+            });
+            if let Err(e) = self.wait_for_mapping(&mapped, None)? {
+                return Err(Error::Gpu(format!("mapping the upload buffer: {e}")));
+            }
+        }
+        Ok(upload)
     }
 
     /// [`GpuContext::read_buffer_after`] through the given `MAP_READ | COPY_DST` staging buffer (a pooled one,
@@ -683,13 +777,13 @@ impl GpuContext {
         }
         let copy_bytes = bytes.next_multiple_of(wgpu::COPY_BUFFER_ALIGNMENT).min(buffer.size()).min(staging.size());
         encoder.copy_buffer_to_buffer(buffer, 0, staging, 0, Some(copy_bytes));
-        self.queue.submit([encoder.finish()]);
+        let submission = self.queue.submit([encoder.finish()]);
         let (sink, mapped) = std::sync::mpsc::channel();
         staging.map_async(wgpu::MapMode::Read, ..copy_bytes, move |r| {
             // The receiver is gone only after this call gave up; nothing is left to tell.
             let _ = sink.send(r);
         });
-        match self.wait_for_mapping(&mapped)? {
+        match self.wait_for_mapping(&mapped, Some(&submission))? {
             Ok(()) => {}
             Err(e) => return Err(Error::Gpu(format!("mapping the read-back buffer: {e}"))),
         }
@@ -809,6 +903,18 @@ impl ErrorScopes {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn pool_slots_default_to_two_and_take_one_to_eight() {
+        assert_eq!(parse_pool_slots(None).unwrap(), DEFAULT_POOL_SLOTS);
+        assert_eq!(DEFAULT_POOL_SLOTS, 2);
+        assert_eq!(parse_pool_slots(Some("1")).unwrap(), 1);
+        assert_eq!(parse_pool_slots(Some(" 8 ")).unwrap(), 8);
+        for bad in ["0", "9", "two", "", "-1", "2.5"] {
+            let message = parse_pool_slots(Some(bad)).unwrap_err().to_string();
+            assert!(message.contains("COG_GPU_POOL_SLOTS") && message.contains(&format!("'{bad}'")), "{message}");
+        }
+    }
 
     #[test]
     fn grid_stays_in_one_row_below_the_limit() {
