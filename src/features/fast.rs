@@ -392,18 +392,19 @@ impl<'a> FastEngine<'a> {
                 for i in 0..nx {
                     // Empty voxels are common (boxes around objects): test the count, from the compact
                     // table of counts, before reading the 36-word entries.
+                    let [x0, x1, y0, y1] = [xs[i], xs[i + 1], ys[j], ys[j + 1]].map(|c| c as usize);
                     let count = table
-                        .count(k, xs[i + 1], ys[j + 1])
-                        .wrapping_sub(table.count(k, xs[i], ys[j + 1]))
-                        .wrapping_sub(table.count(k, xs[i + 1], ys[j]))
-                        .wrapping_add(table.count(k, xs[i], ys[j]));
+                        .count(k, x1, y1)
+                        .wrapping_sub(table.count(k, x0, y1))
+                        .wrapping_sub(table.count(k, x1, y0))
+                        .wrapping_add(table.count(k, x0, y0));
                     if count == 0 {
                         continue;
                     }
-                    let high = table.entry(k, xs[i + 1], ys[j + 1]);
-                    let left = table.entry(k, xs[i], ys[j + 1]);
-                    let low = table.entry(k, xs[i + 1], ys[j]);
-                    let both = table.entry(k, xs[i], ys[j]);
+                    let high = table.entry(k, x1, y1);
+                    let left = table.entry(k, x0, y1);
+                    let low = table.entry(k, x1, y0);
+                    let both = table.entry(k, x0, y0);
                     let mut sums = [0u32; CHANNELS];
                     for ch in 0..CHANNELS {
                         sums[ch] = high[ch].wrapping_sub(left[ch]).wrapping_sub(low[ch]).wrapping_add(both[ch]);
@@ -442,19 +443,19 @@ impl<'a> FastEngine<'a> {
     /// voxel (empty voxels are all zeros, as in the exact path).
     fn hypothesis(&self, table: &LayerTable, hyp: &Hypothesis, mut visit: impl FnMut(usize, &[f32; PER_VOXEL])) {
         let grid: &YawGrid = &self.scene.yaws[hyp.yaw_index as usize];
-        let record = ExpandedBox::new(&self.layout, hyp);
+        let expanded = ExpandedBox::new(&self.layout, hyp);
         let m = grid.camera_from_rotated;
         let [fx, fy, _, _] = self.scene.pre.camera.intrinsics;
-        let [vs, vt, vz] = record.cell;
+        let [vs, vt, vz] = expanded.cell;
         let face_areas = [vt * vz, vs * vz, vs * vt];
         let groups = self.layout.groups;
         let inv_cog_scale = 1.0 / self.cog_scale;
         let lattice = &self.lattices[hyp.yaw_index as usize];
-        self.for_each_voxel_sums(table, &record, lattice, |[i, j, k], sums| {
+        self.for_each_voxel_sums(table, &expanded, lattice, |[i, j, k], sums| {
             let centre = Vec3::new(
-                record.lo[0] + (i as f32 + 0.5) * vs,
-                record.lo[1] + (j as f32 + 0.5) * vt,
-                record.lo[2] + (k as f32 + 0.5) * vz,
+                expanded.lo[0] + (i as f32 + 0.5) * vs,
+                expanded.lo[1] + (j as f32 + 0.5) * vt,
+                expanded.lo[2] + (k as f32 + 0.5) * vz,
             );
             let p = m * centre;
             let mut values = [0.0f32; PER_VOXEL];
@@ -528,47 +529,55 @@ pub fn dot_lanes(a: &[f32], b: &[f32]) -> f32 {
     ((lanes[0] + lanes[4]) + (lanes[1] + lanes[5])) + ((lanes[2] + lanes[6]) + (lanes[3] + lanes[7]))
 }
 
-/// Boundaries along one axis: at most [`MAX_COLUMNS`] voxels (the layout's limit on nx·ny), so one more.
-const MAX_BOUNDARIES: usize = MAX_COLUMNS as usize + 1;
+/// Boundaries of one hypothesis, both axes: `nx + 1 + ny + 1 ≤ nx·ny + 3 ≤` [`MAX_COLUMNS`]` + 3` (for
+/// positive integers, `nx + ny ≤ nx·ny + 1`).
+const MAX_BOUNDARIES: usize = MAX_COLUMNS as usize + 3;
 
-/// Step 3's cell boundaries of one hypothesis (see [`voxel_boundaries`]), kept on the stack: they are made
-/// for every hypothesis scored, on the CPU path and when the GPU path packs its records.
+/// Step 3's cell boundaries of one hypothesis (see [`voxel_boundaries`]): the `nx + 1` along s, then the
+/// `ny + 1` along t, in one small array on the stack — they are made for every hypothesis scored, on the
+/// CPU path and when the GPU path packs its records (two vectors per hypothesis before).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct VoxelBoundaries {
-    xs: [usize; MAX_BOUNDARIES],
-    ys: [usize; MAX_BOUNDARIES],
+    cells: [u32; MAX_BOUNDARIES],
     /// nx + 1, ny + 1.
     counts: [usize; 2],
 }
 
 impl VoxelBoundaries {
     /// The `nx + 1` boundaries along s.
-    pub(crate) fn xs(&self) -> &[usize] {
-        &self.xs[..self.counts[0]]
+    pub(crate) fn xs(&self) -> &[u32] {
+        &self.cells[..self.counts[0]]
     }
 
     /// The `ny + 1` boundaries along t.
-    pub(crate) fn ys(&self) -> &[usize] {
-        &self.ys[..self.counts[1]]
+    pub(crate) fn ys(&self) -> &[u32] {
+        &self.cells[self.counts[0]..self.counts[0] + self.counts[1]]
+    }
+
+    /// Both, s first: the GPU record's order.
+    pub(crate) fn all(&self) -> &[u32] {
+        &self.cells[..self.counts[0] + self.counts[1]]
     }
 }
 
 /// Step 3's membership rule: voxel i along s covers the lattice cells `xs[i]..xs[i+1]` (those whose centre
 /// lies in it), likewise `ys` along t; `nx + 1` and `ny + 1` boundaries.
 fn voxel_boundaries(g: &[u32; 3], expanded: &ExpandedBox, lattice: &YawLattice) -> VoxelBoundaries {
-    let boundary = |axis: usize, i: usize| -> usize {
+    let boundary = |axis: usize, i: usize| -> u32 {
         let face = expanded.lo[axis] + i as f32 * expanded.cell[axis];
         // Ties (a cell centre on a face, common: centres and sizes are round numbers)
         // go to the voxel above the face, robustly against rounding.
         let first = ceil_to_i64((face - lattice.origin[axis]) / lattice.cell - 0.5 - TIE_CELLS);
-        first.clamp(0, lattice.cells[axis] as i64) as usize
+        // A lattice has far fewer than 2³² cells along an axis (its table would not fit in memory).
+        first.clamp(0, lattice.cells[axis] as i64) as u32
     };
     let counts = [g[0] as usize + 1, g[1] as usize + 1];
-    let mut boundaries = VoxelBoundaries { xs: [0; MAX_BOUNDARIES], ys: [0; MAX_BOUNDARIES], counts };
-    for (i, x) in boundaries.xs[..counts[0]].iter_mut().enumerate() {
+    let mut boundaries = VoxelBoundaries { cells: [0; MAX_BOUNDARIES], counts };
+    let (xs, rest) = boundaries.cells.split_at_mut(counts[0]);
+    for (i, x) in xs.iter_mut().enumerate() {
         *x = boundary(0, i);
     }
-    for (j, y) in boundaries.ys[..counts[1]].iter_mut().enumerate() {
+    for (j, y) in rest[..counts[1]].iter_mut().enumerate() {
         *y = boundary(1, j);
     }
     boundaries

@@ -240,9 +240,7 @@ impl PackedGroup {
                     |((record, bounds), &n)| {
                         let expanded = ExpandedBox::new(layout, &jobs[*job].hypotheses[n]);
                         let boundaries = engine.voxel_boundaries(&expanded, key.yaw_index);
-                        for (slot, &c) in bounds.iter_mut().zip(boundaries.xs().iter().chain(boundaries.ys())) {
-                            *slot = c as u32;
-                        }
+                        bounds.copy_from_slice(boundaries.all());
                         let ExpandedBox { lo, cell, .. } = expanded;
                         *record = FastRecord { lo: [lo[0], lo[1], lo[2], 0.0], cell: [cell[0], cell[1], cell[2], 0.0] };
                     },
