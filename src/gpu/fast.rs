@@ -267,9 +267,8 @@ impl PackedGroup {
     fn bytes(engine: &FastEngine, key: TableKey, members: &JobMembers, scores_per_hypothesis: &[usize]) -> u64 {
         let g = engine.layout().grid();
         let bounds_per_hyp = (g[0] + g[1] + 2) as usize;
-        let span = engine.table_span(key);
-        let [row, rows] = engine.lattice(key.yaw_index as usize).table_stride();
-        let table_words = span.layers * rows * row * CHANNELS;
+        let lattice = engine.lattice(key.yaw_index as usize);
+        let table_words = table_words(&table_params(lattice, engine.table_span(key), 0));
         let per_member =
             |job: usize| std::mem::size_of::<FastRecord>() + 4 * (bounds_per_hyp + scores_per_hypothesis[job]);
         let members: usize = members.iter().map(|(job, m)| m.len() * per_member(*job)).sum();
