@@ -2,7 +2,8 @@
 //! cubical region assignment of hand-placed points, the summed-area IoU against the direct count, the
 //! hypotheses' 80 % rule, the orientation features against their closed form, the wall leaks against a
 //! direct count, front walls and reach features beyond the points of a room larger than the sensor's range,
-//! the floor and ceiling snapped to constructed planes, the model file,
+//! the floor and ceiling snapped to constructed planes, the COG of a wall seen square on against its
+//! hand-computed bins, the edge-orientation alignment against a chord-built reference, the model file,
 //! and the PLY writer read back.
 
 use cog_gpu::frame::RoomLayout;
@@ -11,10 +12,11 @@ use cog_gpu::ply::{write_ply, LineSet};
 use cog_gpu::room_layout::baseline::dominant_orientation;
 use cog_gpu::room_layout::free_space::{free_space_counts, free_space_iou, YawFreeSpace};
 use cog_gpu::room_layout::learn::yaw_difference_mod_90;
-use cog_gpu::room_layout::orientation::orientation_features;
+use cog_gpu::room_layout::orientation::{edge_alignment, edge_orientation_features, orientation_features};
 use cog_gpu::room_layout::voxels::{
-    box_features, cubical_region, features, front_plane_evidence, manhattan_region, Discretisation, ScoringTables,
-    YawCells, BOX_FEATURES, LAYERS, ORIENTATION_FEATURES, REACH_FEATURES, WALL_LEAK_FEATURES,
+    box_features, cubical_region, features, front_plane_evidence, manhattan_region, CogPoint, Descriptor,
+    Discretisation, ScoringTables, YawCells, BOX_FEATURES, COG_BINS, EDGE_FEATURES, LAYERS, ORIENTATION_FEATURES,
+    REACH_FEATURES, WALL_LEAK_FEATURES,
 };
 use cog_gpu::room_layout::{
     missing_rays, orientation_yaw, room_axes, snap_floor_and_ceiling, to_mm, LayoutScene, RoomBox, MIN_ROOM_HEIGHT,
@@ -87,7 +89,6 @@ fn only_the_space_in_view_counts() {
 
 /// A frame-like scene: the camera of `wide_camera`, points on the walls of a 4 × 6 m room.
 fn room_scene() -> LayoutScene {
-    let (camera, image_size) = wide_camera();
     let mut points = Vec::new();
     let mut normals = Vec::new();
     for i in 0..80 {
@@ -104,7 +105,20 @@ fn room_scene() -> LayoutScene {
             normals.push(Vec3::Z);
         }
     }
-    LayoutScene { camera, image_size, points, normals, floor: -1.5, ceiling: 1.0, stride: 1, missing_rays: Vec::new() }
+    let gradients = vec![Vec2::ZERO; points.len()];
+    scene_of(points, normals, gradients, 1.0, Vec::new())
+}
+
+/// A scene seen by `wide_camera`, floor at −1.5 m, every pixel sampled.
+fn scene_of(
+    points: Vec<Vec3>,
+    normals: Vec<Vec3>,
+    gradients: Vec<Vec2>,
+    ceiling: f32,
+    missing_rays: Vec<Vec3>,
+) -> LayoutScene {
+    let (camera, image_size) = wide_camera();
+    LayoutScene { camera, image_size, points, normals, gradients, floor: -1.5, ceiling, stride: 1, missing_rays }
 }
 
 /// Index of the orientation with yaw `degrees` (panics when there is none: a test set-up error).
@@ -182,10 +196,10 @@ fn cubical_regions_of_hand_placed_points() {
 #[test]
 fn features_of_a_constructed_room_put_wall_points_in_their_bands() {
     let scene = room_scene();
-    let cells = YawCells::new(&scene, YAW_ZERO);
+    let cells = YawCells::new(&scene, YAW_ZERO, false);
     assert_eq!(cells.total_points as usize, scene.points.len());
     let truth = RoomBox { yaw_index: YAW_ZERO as u32, u0: -2000, u1: 2000, v0: 0, v1: 5000 };
-    let phi = features(Discretisation::Manhattan, &cells, &truth);
+    let phi = features(MANHATTAN, &cells, &truth);
     assert_eq!(phi.len(), 288 + BOX_FEATURES);
     let voxel_part = &phi[..288];
     // The voxel part sums to 1 (every point is in exactly one region, layer and class).
@@ -202,7 +216,7 @@ fn features_of_a_constructed_room_put_wall_points_in_their_bands() {
     assert_eq!(phi[288 + ORIENTATION_FEATURES..], [0.0; WALL_LEAK_FEATURES + REACH_FEATURES]);
     // A room 1 m too narrow on the left puts the left wall's points outside, in region 9.
     let narrow = RoomBox { u0: -1000, ..truth };
-    let phi = features(Discretisation::Manhattan, &cells, &narrow);
+    let phi = features(MANHATTAN, &cells, &narrow);
     let left_exterior: f32 =
         (0..LAYERS).flat_map(|l| (0..4).map(move |c| (9 * LAYERS + l) * 4 + c)).map(|i| phi[i]).sum();
     assert!(left_exterior * n > 1500.0, "{}", left_exterior * n);
@@ -210,33 +224,182 @@ fn features_of_a_constructed_room_put_wall_points_in_their_bands() {
     assert!(phi[288 + ORIENTATION_FEATURES + 1] > 0.43, "{}", phi[288 + ORIENTATION_FEATURES + 1]);
 }
 
+/// The Manhattan descriptor without COG (the first tests' features).
+const MANHATTAN: Descriptor = Descriptor { discretisation: Discretisation::Manhattan, cog: false, edges: false };
+
+/// Both discretisations, each without and with COG.
+fn all_descriptors() -> Vec<Descriptor> {
+    [Discretisation::Manhattan, Discretisation::Cubical]
+        .map(|d| [false, true].map(|cog| Descriptor::new(d, cog, cog)))
+        .concat()
+}
+
 #[test]
 fn scoring_tables_give_the_dot_product_with_the_features() {
     // The scene turned by 14°, so that the orientation features differ between orientations (the cells of
-    // `hypotheses` carry them) and the orientation term of the score is tested too.
-    let scene = turned(&room_scene(), 14.0);
-    let (cells, _) = cog_gpu::room_layout::hypotheses(&scene);
+    // `hypotheses` carry them) and the orientation term of the score is tested too; gradients with no
+    // structure, so that every COG bin is used.
+    let mut scene = turned(&room_scene(), 14.0);
+    scene.gradients =
+        (0..scene.points.len()).map(|i| Vec2::new((i as f32 * 0.37).sin(), (i as f32 * 0.11).cos()) * 0.5).collect();
+    let (cells, _) = cog_gpu::room_layout::hypotheses(&scene, true, true);
     assert!(cells.iter().any(|c| c.orientation != cells[0].orientation));
-    for disc in [Discretisation::Manhattan, Discretisation::Cubical] {
-        let w: Vec<f64> = (0..disc.dim()).map(|i| ((i * 37 % 101) as f64 - 50.0) / 7.0).collect();
-        let tables = ScoringTables::new(disc, &cells, &w);
+    assert!(cells.iter().any(|c| c.edge_orientation != cells[0].edge_orientation));
+    for desc in all_descriptors() {
+        let w: Vec<f64> = (0..desc.dim()).map(|i| ((i * 37 % 101) as f64 - 50.0) / 7.0).collect();
+        let tables = ScoringTables::new(desc, &cells, &w);
         let boxes = [
             RoomBox { yaw_index: orientation_at(14.0) as u32, u0: -2000, u1: 2000, v0: 0, v1: 5000 },
             RoomBox { yaw_index: orientation_at(-30.0) as u32, u0: -2600, u1: 1500, v0: -300, v1: 4000 },
         ];
         let scores = cog_gpu::room_layout::voxels::scores_cpu(&cells, &tables, &boxes);
         for (b, s) in boxes.iter().zip(scores) {
-            let phi = features(disc, &cells[b.yaw_index as usize], b);
-            assert_eq!(phi.len(), disc.voxel_dim() + BOX_FEATURES);
-            let start = disc.voxel_dim();
+            let phi = features(desc, &cells[b.yaw_index as usize], b);
+            let extra = if desc.edges { EDGE_FEATURES } else { 0 };
+            assert_eq!(phi.len(), desc.voxel_dim() + desc.cog_dim() + BOX_FEATURES + extra);
+            let start = desc.voxel_dim() + desc.cog_dim();
             assert_eq!(phi[start..start + ORIENTATION_FEATURES], cells[b.yaw_index as usize].orientation);
+            if desc.edges {
+                assert_eq!(phi[start + BOX_FEATURES..], cells[b.yaw_index as usize].edge_orientation);
+            }
+            if desc.cog {
+                // The COG part holds the gradients inside the room (not all zero).
+                assert!(phi[desc.voxel_dim()..start].iter().any(|&x| x > 0.0), "{desc:?}");
+            }
             let dot: f64 = phi.iter().zip(&w).map(|(&x, &w)| x as f64 * w).sum();
             // Fixed point: each cell's contribution and the box features' term are rounded to 1/scale.
             let cells_of_yaw = cells[b.yaw_index as usize].centres.len() as f64;
             let total = tables.total(&cells[b.yaw_index as usize], b, s) as f64 / tables.scale;
-            assert!((total - dot).abs() < 1e-5 + (cells_of_yaw + 1.0) / tables.scale, "{disc:?} {b:?}");
+            assert!((total - dot).abs() < 1e-5 + (cells_of_yaw + 1.0) / tables.scale, "{desc:?} {b:?}");
         }
     }
+}
+
+#[test]
+fn cog_of_a_wall_ahead_falls_in_the_hand_computed_bins() {
+    // The front wall y = 5 m seen square on (camera at the origin looking along +y, focal length 1 px): the
+    // wall's horizontal axis a = x projects to the image direction (0.2, 0) and the vertical to (0, −0.2)
+    // at every point of the wall. A horizontal image gradient (a vertical edge) is a gradient along a:
+    // angle 0, all of it in bin 0. A vertical image gradient (a horizontal edge) is a gradient along the
+    // vertical: 90°, half-way between bins 4 (80°) and 5 (100°). The wall's plane is spanned by a (plane
+    // 0); plane 1 (spanned by b = y, the viewing direction) is seen edge-on there and gets nothing.
+    let mut scene = room_scene();
+    let (a, b) = room_axes(YAW_ZERO);
+    let ahead = Vec3::new(0.0, 5.0, 0.0);
+    let vertical_edge = CogPoint::new(&scene, ahead, Vec2::new(0.8, 0.0), a, b);
+    assert_eq!(vertical_edge.bin0[0], 0);
+    assert!((vertical_edge.shares[0][0] - 0.8).abs() < 1e-5 && vertical_edge.shares[0][1].abs() < 1e-5);
+    assert_eq!(vertical_edge.shares[1], [0.0; 2]);
+    let horizontal_edge = CogPoint::new(&scene, ahead, Vec2::new(0.0, 0.6), a, b);
+    assert_eq!(horizontal_edge.bin0[0], 4);
+    for share in horizontal_edge.shares[0] {
+        assert!((share - 0.3).abs() < 1e-4, "{:?}", horizontal_edge.shares);
+    }
+    assert_eq!(horizontal_edge.layer as usize, 3); // z = 0 is 1.5 m above the floor of a 2.5 m room: layer 3
+                                                   // The whole room with horizontal edges on the front wall only (its 2 000 points; every other point has no
+                                                   // gradient): the room's COG features are the front band's (region 4) bins 4 and 5, half of the frame's
+                                                   // gradient magnitude each, whatever the layer; every other COG feature is 0.
+    scene.gradients =
+        scene.normals.iter().map(|&n| if n == Vec3::NEG_Y { Vec2::new(0.0, 0.6) } else { Vec2::ZERO }).collect();
+    let cells = YawCells::new(&scene, YAW_ZERO, true);
+    let desc = Descriptor::new(Discretisation::Manhattan, true, false);
+    let truth = RoomBox { yaw_index: YAW_ZERO as u32, u0: -2000, u1: 2000, v0: 0, v1: 5000 };
+    let phi = features(desc, &cells, &truth);
+    assert_eq!(phi.len(), 288 + 12 * LAYERS * COG_BINS + BOX_FEATURES);
+    let front_band = |bin: usize| -> f32 { (0..LAYERS).map(|l| phi[desc.cog_index(4, l, bin)]).sum() };
+    assert!(
+        (front_band(4) - 0.5).abs() < 1e-4 && (front_band(5) - 0.5).abs() < 1e-4,
+        "{} {}",
+        front_band(4),
+        front_band(5)
+    );
+    let cog_total: f32 = phi[288..288 + desc.cog_dim()].iter().sum();
+    assert!((cog_total - 1.0).abs() < 1e-5, "{cog_total}");
+    // The cubical descriptor puts them in its cells along the front wall (j = 3: regions 12–15), on its
+    // front-face plane (plane 0 as well); its cuboid must hold the wall's cells (centres at v = 5025 mm).
+    let cubical = Descriptor::new(Discretisation::Cubical, true, false);
+    let phi = features(cubical, &cells, &RoomBox { v1: 5050, ..truth });
+    let back_rows: f32 = (0..12)
+        .flat_map(|r| (0..LAYERS).flat_map(move |l| (0..COG_BINS).map(move |k| (r, l, k))))
+        .map(|(r, l, k)| phi[cubical.cog_index(r, l, k)])
+        .sum();
+    assert_eq!(back_rows, 0.0);
+    let front_row: f32 = (12..16)
+        .flat_map(|r| (0..LAYERS).map(move |l| (r, l)))
+        .map(|(r, l)| phi[cubical.cog_index(r, l, 4)] + phi[cubical.cog_index(r, l, 5)])
+        .sum();
+    assert!((front_row - 1.0).abs() < 1e-4, "{front_row}");
+}
+
+#[test]
+fn edges_along_the_room_axes_align_with_their_own_orientation() {
+    // Lines along the room's axes, drawn on the left wall (x = −2 m) at six heights, from 1 to 5 m ahead:
+    // each point's gradient is perpendicular to its line's image, which the test takes from the projection
+    // of two points 1 m apart on the 3D line (an independent construction of the projected axis: a 3D line
+    // projects to a straight line, and the long chord keeps the f32 rounding of pixel positions small). At yaw 0
+    // every edge runs along the axis b: its alignment is 1 and the sum is the total gradient magnitude, for
+    // any power; turned orientations align less, and the features peak at yaw 0 (1 and 1). The vertical
+    // edges of the same wall (gradients along the image's rows) are left out: they add nothing anywhere.
+    let (camera, _) = wide_camera();
+    let (mut points, mut normals, mut gradients) = (Vec::new(), Vec::new(), Vec::new());
+    for h in 0..6 {
+        for i in 0..40 {
+            let p = Vec3::new(-2.0, 1.0 + 0.1 * i as f32, -1.4 + 0.45 * h as f32);
+            let (q0, q1) = (camera.project(p).unwrap(), camera.project(p + Vec3::Y).unwrap());
+            let along = (q1 - q0).normalize();
+            points.push(p);
+            normals.push(Vec3::X);
+            gradients.push(Vec2::new(-along.y, along.x) * 0.5);
+            // A vertical edge at the same point: its image runs along the projected vertical.
+            let (v0, v1) = (camera.project(p).unwrap(), camera.project(p + Vec3::Z).unwrap());
+            let up = (v1 - v0).normalize();
+            points.push(p);
+            normals.push(Vec3::X);
+            gradients.push(Vec2::new(-up.y, up.x) * 0.7);
+        }
+    }
+    let scene = scene_of(points, normals, gradients, 1.5, Vec::new());
+    let along_b_total = 240.0 * 0.5;
+    for power in [8, 64] {
+        let alignment = edge_alignment(&scene, power);
+        assert!(
+            (alignment[YAW_ZERO] - along_b_total).abs() < 1e-3 * along_b_total,
+            "{} {:?}",
+            alignment[YAW_ZERO],
+            &alignment[YAW_ZERO - 3..YAW_ZERO + 4]
+        );
+        for (k, &x) in alignment.iter().enumerate() {
+            if k != YAW_ZERO {
+                assert!(x < alignment[YAW_ZERO], "power {power}: orientation {k} {x}");
+            }
+        }
+        // Every orientation against a reference built from chords: the image direction of a room axis at a
+        // point is the chord from the point's image to the image of the point 1 m along the axis.
+        for (k, &x) in alignment.iter().enumerate() {
+            let (a, b) = room_axes(k);
+            let reference: f64 = scene
+                .points
+                .iter()
+                .zip(&scene.gradients)
+                .filter(|(_, g)| g.x.abs() < 0.6) // the b-edges (the vertical edges have g = (0.7, 0))
+                .map(|(&p, &g)| {
+                    let q = camera.project(p).unwrap();
+                    let chord = |d: Vec2| (camera.project(p + d.extend(0.0)).unwrap() - q).normalize();
+                    let edge = Vec2::new(-g.y, g.x).normalize();
+                    let along = edge.dot(chord(a)).abs().max(edge.dot(chord(b)).abs()) as f64;
+                    g.length() as f64 * along.powi(power)
+                })
+                .sum();
+            assert!((x - reference).abs() < 2e-3 * along_b_total, "power {power}, orientation {k}: {x} vs {reference}");
+        }
+        // 10° off, the lines recede to another vanishing point: a clearly lower alignment.
+        assert!(alignment[orientation_at(10.0)] < 0.95 * alignment[YAW_ZERO], "power {power}");
+    }
+    let features = edge_orientation_features(&scene);
+    assert_eq!(features[YAW_ZERO], [1.0, 1.0]);
+    // No gradient at all: every feature 0.
+    let flat = LayoutScene { gradients: vec![Vec2::ZERO; scene.points.len()], ..scene };
+    assert!(edge_orientation_features(&flat).iter().all(|f| *f == [0.0; EDGE_FEATURES]));
 }
 
 /// `scene` turned about the vertical axis by `degrees` (points and normals).
@@ -253,7 +416,7 @@ fn turned(scene: &LayoutScene, degrees: f32) -> LayoutScene {
 fn wall_leaks_count_the_points_beyond_each_wall() {
     let scene = turned(&room_scene(), -20.0);
     let k = orientation_at(-20.0);
-    let cells = YawCells::new(&scene, k);
+    let cells = YawCells::new(&scene, k, false);
     let (a, b) = room_axes(k);
     // The cell centre of each point, directly (5 cm cells centred at 50·i + 25 mm).
     let centre = |mm: i32| mm.div_euclid(50) * 50 + 25;
@@ -370,7 +533,7 @@ fn summed_area_iou_equals_the_direct_count() {
 #[test]
 fn hypotheses_hold_eighty_percent_and_include_the_room() {
     let scene = room_scene();
-    let (cells, boxes) = cog_gpu::room_layout::hypotheses(&scene);
+    let (cells, boxes) = cog_gpu::room_layout::hypotheses(&scene, false, false);
     assert!(!boxes.is_empty());
     for b in &boxes {
         let inside = cells[b.yaw_index as usize].points_inside(b);
@@ -396,7 +559,7 @@ fn the_front_wall_reaches_beyond_the_farthest_points() {
     let (points, normals): (Vec<Vec3>, Vec<Vec3>) =
         full.points.iter().zip(&full.normals).filter(|(p, _)| p.y < 3.0).map(|(p, n)| (*p, *n)).unzip();
     let scene = LayoutScene { points, normals, ..full };
-    let (cells, boxes) = cog_gpu::room_layout::hypotheses(&scene);
+    let (cells, boxes) = cog_gpu::room_layout::hypotheses(&scene, false, false);
     let at_yaw_zero: Vec<&RoomBox> = boxes.iter().filter(|b| b.yaw_index as usize == YAW_ZERO).collect();
     assert_eq!(cells[YAW_ZERO].farthest_front(), 3000);
     // Front walls at the farthest edge and 0.5, 1 and 2 m beyond it, all among the hypotheses.
@@ -444,7 +607,6 @@ fn the_front_wall_reaches_beyond_the_farthest_points() {
 #[test]
 fn front_plane_evidence_counts_the_rays_through_the_plane_by_hand() {
     // Camera at the origin looking along +y; floor −1.5 m, ceiling 1.0 m; the plane y = 4 m.
-    let (camera, image_size) = wide_camera();
     let mut points = Vec::new();
     // 10 points of a wall on the plane (crossing, near), 5 of a chair at 2 m (crossing, not near),
     // 3 floor points at 2 m (their rays pass below the floor at the plane: not crossing).
@@ -456,7 +618,8 @@ fn front_plane_evidence_counts_the_rays_through_the_plane_by_hand() {
     // above the ceiling (z = 4 > 1).
     let mut missing_rays = vec![Vec3::new(0.0, 1.0, 0.1); 6];
     missing_rays.extend([Vec3::new(0.0, -1.0, 0.0), Vec3::new(0.3, -1.0, 0.0), Vec3::new(0.0, 1.0, 1.0)]);
-    let scene = LayoutScene { camera, image_size, points, normals, floor: -1.5, ceiling: 1.0, stride: 1, missing_rays };
+    let gradients = vec![Vec2::ZERO; points.len()];
+    let scene = scene_of(points, normals, gradients, 1.0, missing_rays);
     let crossing = 10.0 + 5.0 + 6.0;
     assert_eq!(front_plane_evidence(&scene, Vec2::Y, 4.0), [6.0 / crossing, 10.0 / crossing]);
     // At 4.6 m the wall's points are 0.6 m short of the plane: not near.

@@ -66,6 +66,26 @@ fn train_layout_eval_and_detect_end_to_end() {
     assert_eq!(model["version"], 3);
     assert_eq!(model["provenance"]["data_seed"], 5);
 
+    // With the image-gradient features: 648 COG weights after the voxel weights, 2 edge weights at the end;
+    // the file says so and `layout` follows it.
+    ok(&["train-layout", "--data", &p("data"), "--out", &p("cog.json"), "--max-iterations", "3", "--cog", "--edges"]);
+    let cog_model = json(&dir.path().join("cog.json"));
+    assert_eq!(cog_model["weights"].as_array().unwrap().len(), 288 + 648 + 16 + 2);
+    assert_eq!((cog_model["cog"].as_bool(), cog_model["edges"].as_bool()), (Some(true), Some(true)));
+    ok(&["layout", &p("data"), "--model", &p("cog.json"), "--out", &p("cog-out"), "--no-overlay"]);
+    assert_eq!(json(&dir.path().join("cog-out/synth-000000.json"))["layout"]["method"], "manhattan+cog+edges");
+    // A file without the fields (written before them) is a model without them; with a wrong weight count
+    // for what it claims, it is refused.
+    let mut old = model.clone();
+    old.as_object_mut().unwrap().remove("cog");
+    old.as_object_mut().unwrap().remove("edges");
+    std::fs::write(dir.path().join("old.json"), old.to_string()).unwrap();
+    ok(&["layout", &p("data"), "--model", &p("old.json"), "--out", &p("old-out"), "--no-overlay"]);
+    assert_eq!(json(&dir.path().join("old-out/synth-000000.json"))["layout"]["method"], "manhattan");
+    old["edges"] = Value::Bool(true);
+    std::fs::write(dir.path().join("claims-edges.json"), old.to_string()).unwrap();
+    rejected(&["layout", &p("data"), "--model", &p("claims-edges.json"), "--out", &p("x")], "claims-edges.json");
+
     ok(&["layout", &p("data"), "--model", &p("layout.json"), "--out", &p("out"), "--ply"]);
     let frame = "synth-000000";
     let record = json(&dir.path().join(format!("out/{frame}.json")));

@@ -15,7 +15,9 @@ use cog_gpu::gpu::room_layout::{
     DISCRETISATION_CUBICAL, DISCRETISATION_MANHATTAN,
 };
 use cog_gpu::gpu::{self, GpuContext};
-use cog_gpu::room_layout::voxels::{scores_cpu, Discretisation, ScoringTables, BAND_MM, CUBICAL_SPLITS, NO_REGION};
+use cog_gpu::room_layout::voxels::{
+    scores_cpu, Descriptor, Discretisation, ScoringTables, BAND_MM, CUBICAL_SPLITS, NO_REGION,
+};
 use cog_gpu::room_layout::{hypotheses, LayoutScene};
 use common::{wgsl_const, wgsl_struct_size};
 
@@ -41,11 +43,14 @@ fn real_frame() -> Frame {
 #[test]
 fn kernel_twin_and_reference_agree_on_a_real_frame() {
     let scene = LayoutScene::from_frame(&real_frame()).unwrap();
-    let (cells, boxes) = hypotheses(&scene);
+    let (cells, boxes) = hypotheses(&scene, true, true);
     assert!(boxes.len() > 50, "{} hypotheses", boxes.len());
     let gpu = gpu_or_skip("kernel_twin_and_reference_agree_on_a_real_frame");
-    for disc in [Discretisation::Manhattan, Discretisation::Cubical] {
-        // Weights with both signs and no structure, so that every region and class matters.
+    let descriptors = [Discretisation::Manhattan, Discretisation::Cubical]
+        .into_iter()
+        .flat_map(|d| [false, true].map(|cog| Descriptor::new(d, cog, cog)));
+    for disc in descriptors {
+        // Weights with both signs and no structure, so that every region, class and COG bin matters.
         let w: Vec<f64> = (0..disc.dim()).map(|i| ((i * 7919 % 211) as f64 - 105.0) / 13.0).collect();
         let tables = ScoringTables::new(disc, &cells, &w);
         let reference = scores_cpu(&cells, &tables, &boxes);

@@ -1,4 +1,4 @@
-//! `cog-gpu train-layout --data DIR --out FILE [--discretisation manhattan|cubical] [--c C] [--eps E]
+//! `cog-gpu train-layout --data DIR --out FILE [--discretisation manhattan|cubical] [--cog] [--edges] [--c C] [--eps E]
 //! [--max-iterations N] [--limit N]`: trains a room-layout model (`cog_gpu::room_layout::learn`) on every
 //! frame under DIR with a room annotation and writes it with its provenance (the command line, the data
 //! directory and its `manifest.json` seed when it has one, frame and hypothesis counts, solver figures).
@@ -11,7 +11,7 @@ use cog_gpu::frame::{Dataset, DepthSource, Frame};
 use cog_gpu::learn::{train, SsvmOptions};
 use cog_gpu::room_layout::learn::{LayoutExample, LayoutOracle};
 use cog_gpu::room_layout::model::LayoutModel;
-use cog_gpu::room_layout::voxels::Discretisation;
+use cog_gpu::room_layout::voxels::{Descriptor, Discretisation};
 use cog_gpu::room_layout::LayoutScene;
 use rayon::prelude::*;
 use serde_json::json;
@@ -29,6 +29,13 @@ pub struct Args {
     /// Feature cells: the paper's Manhattan voxels or the cubical comparison.
     #[arg(long, value_enum, default_value = "manhattan")]
     pub discretisation: DiscretisationArg,
+    /// Add COG histograms (image gradients on the wall planes) to every voxel cell (README, "Room layout").
+    #[arg(long)]
+    pub cog: bool,
+    /// Add the edge-orientation features (image edges aligned with the room's projected axes; README,
+    /// "Room layout").
+    #[arg(long)]
+    pub edges: bool,
     /// Regularisation constant C of eq. 4.
     #[arg(long, default_value_t = 10.0, value_parser = options::positive)]
     pub c: f64,
@@ -59,22 +66,22 @@ impl From<DiscretisationArg> for Discretisation {
 }
 
 /// One training example from a frame directory, or `None` without a room annotation.
-fn example(dir: &std::path::Path) -> anyhow::Result<Option<LayoutExample>> {
+fn example(dir: &std::path::Path, descriptor: Descriptor) -> anyhow::Result<Option<LayoutExample>> {
     let frame = Frame::read(dir, DepthSource::Raw)?;
     let Some(truth) = frame.layout.clone() else { return Ok(None) };
     let scene = LayoutScene::from_frame(&frame)?;
-    Ok(Some(LayoutExample::new(&frame.name, &scene, &truth)?))
+    Ok(Some(LayoutExample::new(&frame.name, &scene, &truth, descriptor)?))
 }
 
 pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
-    let discretisation: Discretisation = args.discretisation.into();
+    let descriptor = Descriptor::new(args.discretisation.into(), args.cog, args.edges);
     let mut frames = Dataset::open(&args.data)?.frames;
     if let Some(limit) = args.limit {
         frames.truncate(limit);
     }
     let started = Instant::now();
     let results: Vec<anyhow::Result<Option<LayoutExample>>> =
-        frames.par_iter().map(|dir| example(dir).with_context(|| dir.display().to_string())).collect();
+        frames.par_iter().map(|dir| example(dir, descriptor).with_context(|| dir.display().to_string())).collect();
     let mut examples = Vec::new();
     let mut skipped = 0usize;
     for result in results {
@@ -106,7 +113,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         started.elapsed().as_secs_f64(),
         ceiling
     );
-    let oracle = LayoutOracle { discretisation, examples };
+    let oracle = LayoutOracle { descriptor, examples };
     let options =
         SsvmOptions { c: args.c, epsilon: args.eps, max_iterations: args.max_iterations, ..SsvmOptions::default() };
     let solution = train(&oracle, options)?;
@@ -140,7 +147,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         "version": env!("CARGO_PKG_VERSION"),
     });
     let weights = solution.w.iter().map(|&w| w as f32).collect();
-    LayoutModel::new(discretisation, weights, provenance).write(&args.out)?;
+    LayoutModel::new(descriptor, weights, provenance).write(&args.out)?;
     eprintln!("wrote {}", args.out.display());
     Ok(())
 }

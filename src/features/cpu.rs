@@ -147,16 +147,19 @@ pub struct CogFrame {
 /// Stage 2: the COG basis of the voxel whose centre has rotated-frame coordinates `centre`.
 pub fn cog_frame(grid: &YawGrid, intrinsics: [f32; 4], centre: Vec3) -> Option<CogFrame> {
     let m = grid.camera_from_rotated;
-    let p = m * centre;
+    cog_basis(intrinsics, m * centre, m.x_axis, m.z_axis)
+}
+
+/// The COG basis at camera-frame point `p` (x right, y down, z forward) of the 3D orientation bins spanned
+/// by the camera-frame directions `along` (bin 0) and `up`: their image directions there. `None` when `p`
+/// is less than [`MIN_PROJECT_DEPTH`] in front of the camera or the plane is seen edge-on. Shared by the
+/// detector's voxels ([`cog_frame`]) and the room layout's wall planes (`room_layout::voxels`).
+pub fn cog_basis(intrinsics: [f32; 4], p: Vec3, along: Vec3, up: Vec3) -> Option<CogFrame> {
     if p.z < MIN_PROJECT_DEPTH {
         return None;
     }
-    let (fx, fy) = (intrinsics[0], intrinsics[1]);
-    let inv_z2 = 1.0 / (p.z * p.z);
-    let image_direction =
-        |d: Vec3| Vec2::new(fx * (d.x * p.z - p.x * d.z) * inv_z2, fy * (d.y * p.z - p.y * d.z) * inv_z2);
-    let da = image_direction(m.x_axis);
-    let dz = image_direction(m.z_axis);
+    let da = image_direction(intrinsics, p, along);
+    let dz = image_direction(intrinsics, p, up);
     let cross = da.x * dz.y - da.y * dz.x;
     let scale = da.length() * dz.length();
     // Written so that a NaN (degenerate input) also counts as edge-on.
@@ -165,6 +168,14 @@ pub fn cog_frame(grid: &YawGrid, intrinsics: [f32; 4], centre: Vec3) -> Option<C
         return None;
     }
     Some(CogFrame { da, dz })
+}
+
+/// The image direction (pixels per metre, x right, y down) of the camera-frame direction `d` at the
+/// camera-frame point `p` (`p.z` > 0): the derivative of the projection along `d`.
+pub fn image_direction(intrinsics: [f32; 4], p: Vec3, d: Vec3) -> Vec2 {
+    let (fx, fy) = (intrinsics[0], intrinsics[1]);
+    let inv_z2 = 1.0 / (p.z * p.z);
+    Vec2::new(fx * (d.x * p.z - p.x * d.z) * inv_z2, fy * (d.y * p.z - p.y * d.z) * inv_z2)
 }
 
 /// Angle of the line through (x, y) in [0, π): `atan2(y, x) mod π`, with a polynomial arctangent

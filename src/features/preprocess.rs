@@ -46,34 +46,36 @@ pub struct ImageGradients {
 impl ImageGradients {
     pub fn compute(rgb: &image::RgbImage) -> ImageGradients {
         let (w, h) = rgb.dimensions();
-        let raw = rgb.as_raw();
-        let at = |col: u32, row: u32, ch: usize| raw[((row * w + col) * 3) as usize + ch] as f32 * (1.0 / 255.0);
-        let gradients = (0..h)
-            .into_par_iter()
-            .flat_map_iter(|row| {
-                (0..w).map(move |col| {
-                    let (left, right) = (col.saturating_sub(1), (col + 1).min(w - 1));
-                    let (up, down) = (row.saturating_sub(1), (row + 1).min(h - 1));
-                    let mut best = Vec2::ZERO;
-                    let mut best_sq = -1.0f32;
-                    for ch in 0..3 {
-                        let g = Vec2::new(at(right, row, ch) - at(left, row, ch), at(col, down, ch) - at(col, up, ch));
-                        let sq = g.length_squared();
-                        if sq > best_sq {
-                            best_sq = sq;
-                            best = g;
-                        }
-                    }
-                    best
-                })
-            })
-            .collect();
+        let gradients =
+            (0..h).into_par_iter().flat_map_iter(|row| (0..w).map(move |col| pixel_gradient(rgb, col, row))).collect();
         ImageGradients { width: w, height: h, gradients }
     }
 
     pub fn at(&self, col: u32, row: u32) -> Vec2 {
         self.gradients[(row * self.width + col) as usize]
     }
+}
+
+/// The gradient (dx, dy) of one pixel, as [`ImageGradients::compute`] defines it (replicate padding, the
+/// colour channel of the largest magnitude); for callers that need a few pixels, not the whole image (the
+/// room layout's subsampled points).
+pub fn pixel_gradient(rgb: &image::RgbImage, col: u32, row: u32) -> Vec2 {
+    let (w, h) = rgb.dimensions();
+    let raw = rgb.as_raw();
+    let at = |col: u32, row: u32, ch: usize| raw[((row * w + col) * 3) as usize + ch] as f32 * (1.0 / 255.0);
+    let (left, right) = (col.saturating_sub(1), (col + 1).min(w - 1));
+    let (up, down) = (row.saturating_sub(1), (row + 1).min(h - 1));
+    let mut best = Vec2::ZERO;
+    let mut best_sq = -1.0f32;
+    for ch in 0..3 {
+        let g = Vec2::new(at(right, row, ch) - at(left, row, ch), at(col, down, ch) - at(col, up, ch));
+        let sq = g.length_squared();
+        if sq > best_sq {
+            best_sq = sq;
+            best = g;
+        }
+    }
+    best
 }
 
 /// Gradient magnitude `√(dx² + dy²)`.

@@ -16,7 +16,7 @@
 use glam::Vec2;
 
 use super::free_space::YawFreeSpace;
-use super::voxels::{features, Discretisation, ScoringTables, YawCells};
+use super::voxels::{features, Descriptor, ScoringTables, YawCells};
 use super::{hypotheses, orientation_yaw, LayoutScene, RoomBox, ORIENTATIONS};
 use crate::error::{Error, Result};
 use crate::frame::RoomLayout;
@@ -73,8 +73,9 @@ pub fn hypothesis_ious(scene: &LayoutScene, boxes: &[RoomBox], truth: &RoomLayou
 }
 
 impl LayoutExample {
-    pub fn new(name: &str, scene: &LayoutScene, truth: &RoomLayout) -> Result<LayoutExample> {
-        let (cells, boxes) = hypotheses(scene);
+    /// The example of one annotated frame, with what `descriptor`'s features need.
+    pub fn new(name: &str, scene: &LayoutScene, truth: &RoomLayout, descriptor: Descriptor) -> Result<LayoutExample> {
+        let (cells, boxes) = hypotheses(scene, descriptor.cog, descriptor.edges);
         if boxes.is_empty() {
             return Err(Error::Input(format!("frame '{name}': no layout hypotheses")));
         }
@@ -101,7 +102,7 @@ impl LayoutExample {
 
 /// The structural-SVM oracle over layout examples.
 pub struct LayoutOracle {
-    pub discretisation: Discretisation,
+    pub descriptor: Descriptor,
     pub examples: Vec<LayoutExample>,
 }
 
@@ -116,25 +117,25 @@ impl SeparationOracle for LayoutOracle {
     }
 
     fn dim(&self) -> usize {
-        self.discretisation.dim()
+        self.descriptor.dim()
     }
 
     fn ground_truth_features(&self, example: usize) -> Result<Vec<f32>> {
         let e = &self.examples[example];
         let b = &e.boxes[e.truth];
-        Ok(features(self.discretisation, &e.cells[b.yaw_index as usize], b))
+        Ok(features(self.descriptor, &e.cells[b.yaw_index as usize], b))
     }
 
     fn most_violated(&self, example: usize, w: &[f64]) -> Result<Constraint> {
         let e = &self.examples[example];
-        let tables = ScoringTables::new(self.discretisation, &e.cells, w);
+        let tables = ScoringTables::new(self.descriptor, &e.cells, w);
         let scores = super::voxels::scores_cpu(&e.cells, &tables, &e.boxes);
         let totals = tables.totals(&e.cells, &e.boxes, &scores);
         let best = argmax(totals.iter().zip(&e.losses).map(|(&t, &l)| l as f64 + t as f64 / tables.scale));
         let b = &e.boxes[best];
         Ok(Constraint {
             loss: e.losses[best] as f64,
-            features: features(self.discretisation, &e.cells[b.yaw_index as usize], b),
+            features: features(self.descriptor, &e.cells[b.yaw_index as usize], b),
         })
     }
 }

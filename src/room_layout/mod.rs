@@ -71,7 +71,7 @@ pub mod voxels;
 use glam::{Vec2, Vec3};
 
 use crate::error::{Error, Result};
-use crate::features::preprocess::{estimate_normals, NORMAL_NEIGHBOURS};
+use crate::features::preprocess::{estimate_normals, pixel_gradient, NORMAL_NEIGHBOURS};
 use crate::frame::{quantile_of_unsorted, Frame, RoomLayout};
 use crate::geometry::Camera;
 
@@ -156,6 +156,9 @@ pub struct LayoutScene {
     /// Subsampled upright points and their unit normals.
     pub points: Vec<Vec3>,
     pub normals: Vec<Vec3>,
+    /// Image gradient (dx, dy) at each point's pixel ([`crate::features::preprocess::pixel_gradient`]): the
+    /// COG features' input.
+    pub gradients: Vec<Vec2>,
     /// Height quantiles of all the frame's points.
     pub floor: f32,
     pub ceiling: f32,
@@ -188,6 +191,13 @@ impl LayoutScene {
             })
             .collect();
         let points: Vec<Vec3> = keep.iter().map(|&i| cloud.points[i]).collect();
+        let gradients: Vec<Vec2> = keep
+            .iter()
+            .map(|&i| {
+                let [col, row] = cloud.pixels[i];
+                pixel_gradient(&frame.rgb, col, row)
+            })
+            .collect();
         if points.len() < NORMAL_NEIGHBOURS {
             return Err(Error::Input(format!(
                 "frame '{}': {} points (subsampled); the room layout needs at least {NORMAL_NEIGHBOURS}",
@@ -204,6 +214,7 @@ impl LayoutScene {
             image_size: [frame.width(), frame.height()],
             points,
             normals,
+            gradients,
             floor,
             ceiling,
             stride,
@@ -361,23 +372,30 @@ pub fn orientation_hypotheses(scene: &LayoutScene, cells: &voxels::YawCells) -> 
     out
 }
 
-/// Every orientation's binned points (with its orientation features) and hypotheses, orientation by
-/// orientation.
-pub fn hypotheses(scene: &LayoutScene) -> (Vec<voxels::YawCells>, Vec<RoomBox>) {
+/// Every orientation's binned points (with its orientation features, and with the points' COG contributions
+/// when `cog`) and hypotheses, orientation by orientation.
+/// `edges` adds the edge-orientation features ([`orientation::edge_orientation_features`]).
+pub fn hypotheses(scene: &LayoutScene, cog: bool, edges: bool) -> (Vec<voxels::YawCells>, Vec<RoomBox>) {
     use rayon::prelude::*;
     let per_yaw: Vec<(voxels::YawCells, Vec<RoomBox>)> = (0..ORIENTATIONS)
         .into_par_iter()
         .map(|k| {
-            let cells = voxels::YawCells::new(scene, k);
+            let cells = voxels::YawCells::new(scene, k, cog);
             let boxes = orientation_hypotheses(scene, &cells);
             (cells, boxes)
         })
         .collect();
     let evidence = orientation::orientation_features(scene);
+    let edge_evidence = if edges {
+        orientation::edge_orientation_features(scene)
+    } else {
+        vec![[0.0; orientation::EDGE_FEATURES]; ORIENTATIONS]
+    };
     let mut all_cells = Vec::with_capacity(ORIENTATIONS);
     let mut all_boxes = Vec::new();
-    for ((mut cells, boxes), features) in per_yaw.into_iter().zip(evidence) {
+    for (((mut cells, boxes), features), edge_features) in per_yaw.into_iter().zip(evidence).zip(edge_evidence) {
         cells.orientation = features;
+        cells.edge_orientation = edge_features;
         all_cells.push(cells);
         all_boxes.extend(boxes);
     }
@@ -398,11 +416,12 @@ pub fn predict(
     model: &model::LayoutModel,
     score_hypotheses: &ScoreHypotheses,
 ) -> Result<PredictedLayout> {
-    let (cells, boxes) = hypotheses(scene);
+    let descriptor = model.descriptor();
+    let (cells, boxes) = hypotheses(scene, descriptor.cog, descriptor.edges);
     if boxes.is_empty() {
         return Err(Error::Input("no room hypothesis holds 80 % of the points".into()));
     }
-    let tables = voxels::ScoringTables::new(model.discretisation, &cells, &model.weights_f64());
+    let tables = voxels::ScoringTables::new(descriptor, &cells, &model.weights_f64());
     let scores = score_hypotheses(&cells, &tables, &boxes)?;
     if scores.len() != boxes.len() {
         return Err(Error::Input(format!("{} layout scores for {} hypotheses", scores.len(), boxes.len())));

@@ -3,14 +3,18 @@
 //!
 //! ```json
 //! {"format": "cog-gpu-layout-model", "version": 3, "discretisation": "manhattan" | "cubical",
-//!  "weights": [304 or 400 numbers: the voxel weights in the order of room_layout::voxels::feature_index,
-//!              then the 16 box-feature weights of room_layout::voxels::box_features],
+//!  "cog": false | true, "edges": false | true,
+//!  "weights": [304 or 400 numbers without COG, 952 or 1264 with: the voxel weights in the order of
+//!              room_layout::voxels::feature_index, then (with "cog") the COG weights in the order of
+//!              room_layout::voxels::Descriptor::cog_index, then the 16 box-feature weights of
+//!              room_layout::voxels::box_features, then (with "edges") the 2 edge-orientation weights of
+//!              room_layout::orientation::edge_orientation_features],
 //!  "provenance": {free-form: the training command, data, seeds, counts, solver figures}}
 //! ```
 
 use std::path::Path;
 
-use super::voxels::Discretisation;
+use super::voxels::{Descriptor, Discretisation};
 use crate::error::{Error, Result};
 
 pub const FORMAT: &str = "cog-gpu-layout-model";
@@ -26,14 +30,26 @@ pub struct LayoutModel {
     pub format: String,
     pub version: u32,
     pub discretisation: Discretisation,
+    /// COG features after the voxel features (absent in files written before them: false).
+    #[serde(default)]
+    pub cog: bool,
+    /// Edge-orientation features after the box features (absent in files written before them: false).
+    #[serde(default)]
+    pub edges: bool,
     pub weights: Vec<f32>,
     #[serde(default)]
     pub provenance: serde_json::Value,
 }
 
 impl LayoutModel {
-    pub fn new(discretisation: Discretisation, weights: Vec<f32>, provenance: serde_json::Value) -> LayoutModel {
-        LayoutModel { format: FORMAT.into(), version: VERSION, discretisation, weights, provenance }
+    pub fn new(descriptor: Descriptor, weights: Vec<f32>, provenance: serde_json::Value) -> LayoutModel {
+        let Descriptor { discretisation, cog, edges } = descriptor;
+        LayoutModel { format: FORMAT.into(), version: VERSION, discretisation, cog, edges, weights, provenance }
+    }
+
+    /// What the weights are weights of.
+    pub fn descriptor(&self) -> Descriptor {
+        Descriptor::new(self.discretisation, self.cog, self.edges)
     }
 
     /// What is wrong with the model, if anything.
@@ -48,12 +64,12 @@ impl LayoutModel {
                 self.version
             ));
         }
-        let dim = self.discretisation.dim();
+        let dim = self.descriptor().dim();
         if self.weights.len() != dim {
             return Err(format!(
                 "{} weights; a {} layout model has {dim}",
                 self.weights.len(),
-                self.discretisation.name()
+                self.descriptor().name()
             ));
         }
         if let Some(i) = self.weights.iter().position(|w| !w.is_finite() || w.abs() > MAX_WEIGHT) {

@@ -28,9 +28,28 @@
 //! (|n·other horizontal axis| ≥ cos 30°: the orthogonal walls), **horizontal** (|n_z| ≥ cos 30°: floor,
 //! ceiling, table tops) and **other**; for cubical regions relative to the room axes (along a, along b,
 //! horizontal, other). The point density is the sum of the four classes, so a linear model has it without
-//! a separate entry. COG (image gradients) is not used by the layout (not implemented).
+//! a separate entry.
 //! Feature index: `(region·6 + layer)·4 + class`; Manhattan 12·6·4 = 288 voxel dimensions, cubical 16·6·4 =
-//! 384. After them come the [`BOX_FEATURES`] = 16 *box features*, computed per hypothesis on the CPU rather
+//! 384.
+//!
+//! # COG (optional, [`Descriptor::cog`]; paper: the layout model "utilizes our COG descriptor")
+//! The paper's COG (§3.3: 9 unsigned orientation bins laid on a plane of the voxel, projected into the image
+//! where the gradient is, the magnitude split between the two nearest bins) adapted to the room: per point
+//! (its pixel's gradient, `crate::features::preprocess::pixel_gradient`), the bins lie on a **wall plane**
+//! through the point — plane 0 spanned by the room axis `a` and the vertical (the front and back walls),
+//! plane 1 by `b` and the vertical (the left and right walls) — projected at the point itself (not at a
+//! voxel centre: a room's cells are metres wide), with the detector's arithmetic
+//! (`crate::features::cpu::cog_basis` and `cog_position`). A Manhattan region takes the histogram on its
+//! wall's plane (front/back regions 0, 2, 4, 6, 8, 10: plane 0; left/right: plane 1), so "horizontal" and
+//! "vertical" mean the same on every wall of every room; a cubical region on the cuboid's front face (plane
+//! 0), as the detector's voxels. A plane seen edge-on at a point gets nothing from it. **Normalisation**
+//! (our choice): the sums are divided by the frame's total gradient magnitude `Σ|g|` over its points
+//! (contrast-invariant across frames), not by each cell's own norm as the paper's `φ/√(‖φ‖² + ε)` — a
+//! per-cell norm is not linear in the points, and the scoring below needs each ground cell's contribution
+//! to be independent of the rest of the hypothesis. Feature index `voxel_dim + (region·6 + layer)·9 + bin`
+//! ([`Descriptor::cog_index`]): 648 dimensions for Manhattan voxels, 864 for cubical.
+//!
+//! After them come the [`BOX_FEATURES`] = 16 *box features*, computed per hypothesis on the CPU rather
 //! than summed by the kernel: the 3 orientation features of [`super::orientation`] (the same for every
 //! hypothesis of one orientation), then 4 **wall leaks**, per wall (front, left, back, right)
 //! `sqrt(n_w / N)` with `n_w` the points whose cell centre lies more than the band (150 mm) beyond the wall's
@@ -48,7 +67,7 @@
 //! let it prefer any of the four distances, and the products with the evidence let that preference depend
 //! on whether the plane of the farthest points was seen (small `m`, or points on it: `n`) or not (`m` near
 //! 1, `n` near 0); the square root of `n` because a seen wall near the range gives `n` of only 0.05–0.27.
-//! 304 and 400 dimensions in all.
+//! 304 and 400 dimensions in all without COG, 952 and 1 264 with.
 //!
 //! # Scoring (the GPU kernel's twin)
 //! `score(h) = w·φ(h)` is a sum over cells of a per-(cell, region) contribution, tabulated once per frame
@@ -61,8 +80,11 @@
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
-pub use super::orientation::ORIENTATION_FEATURES;
+pub use super::orientation::{EDGE_FEATURES, ORIENTATION_FEATURES};
 use super::{room_axes, to_mm, LayoutScene, RoomBox};
+use crate::features::cpu::{cog_basis, cog_position};
+pub use crate::features::feature_layout::COG_BINS;
+use crate::features::preprocess::gradient_magnitude;
 
 /// Wall-leak features per hypothesis (see the module doc).
 pub const WALL_LEAK_FEATURES: usize = 4;
@@ -155,6 +177,113 @@ impl Discretisation {
     }
 }
 
+/// The wall planes a COG histogram is taken on (see the module doc): plane 0 is spanned by the room axis `a`
+/// and the vertical (the front and back walls), plane 1 by `b` and the vertical (the left and right walls).
+pub const COG_PLANES: usize = 2;
+
+/// What a layout model's feature vector holds: the voxel discretisation, whether the COG histograms follow
+/// the voxel features, and whether the edge-orientation features
+/// ([`super::orientation::edge_orientation_features`]) follow the box features (see the module doc). Models
+/// without them (format version 3 files written before them lack the fields) are read with both false.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Descriptor {
+    pub discretisation: Discretisation,
+    pub cog: bool,
+    pub edges: bool,
+}
+
+impl Descriptor {
+    pub fn new(discretisation: Discretisation, cog: bool, edges: bool) -> Descriptor {
+        Descriptor { discretisation, cog, edges }
+    }
+
+    pub fn regions(self) -> u32 {
+        self.discretisation.regions()
+    }
+
+    /// Length of the voxel (point-count) part of the feature vector.
+    pub fn voxel_dim(self) -> usize {
+        self.discretisation.voxel_dim()
+    }
+
+    /// Length of the COG part (0 without COG): regions × layers × [`COG_BINS`].
+    pub fn cog_dim(self) -> usize {
+        if self.cog {
+            self.regions() as usize * LAYERS * COG_BINS
+        } else {
+            0
+        }
+    }
+
+    /// Index of the first box feature.
+    pub fn box_start(self) -> usize {
+        self.voxel_dim() + self.cog_dim()
+    }
+
+    /// Length of the feature vector: voxel features, COG features, the box features, then the edge-orientation
+    /// features.
+    pub fn dim(self) -> usize {
+        self.box_start() + BOX_FEATURES + if self.edges { EDGE_FEATURES } else { 0 }
+    }
+
+    /// `manhattan` or `cubical`, then `+cog` and `+edges` for what the model adds.
+    pub fn name(self) -> String {
+        let (cog, edges) = (if self.cog { "+cog" } else { "" }, if self.edges { "+edges" } else { "" });
+        format!("{}{cog}{edges}", self.discretisation.name())
+    }
+
+    /// The COG plane of region `region` (see the module doc): a Manhattan region's wall's plane, for cubical
+    /// voxels the cuboid's front face (plane 0, as the detector's voxels).
+    pub fn cog_plane(self, region: u32) -> usize {
+        match self.discretisation {
+            Discretisation::Manhattan => (region % 2) as usize,
+            Discretisation::Cubical => 0,
+        }
+    }
+
+    /// Index of (region, layer, COG bin) in the feature vector.
+    pub fn cog_index(self, region: u32, layer: usize, bin: usize) -> usize {
+        self.voxel_dim() + (region as usize * LAYERS + layer) * COG_BINS + bin
+    }
+}
+
+/// One point's COG contribution in one orientation (see the module doc): its height layer, and per COG
+/// plane the lower of its two orientation bins and the gradient magnitude's shares of the two (0 where the
+/// plane is seen edge-on).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct CogPoint {
+    pub layer: u8,
+    pub bin0: [u8; COG_PLANES],
+    pub shares: [[f32; 2]; COG_PLANES],
+}
+
+impl CogPoint {
+    /// The COG contribution of the point `p` (upright) with image gradient `g`, for room axes `a`, `b`.
+    pub fn new(scene: &LayoutScene, p: Vec3, g: Vec2, a: Vec2, b: Vec2) -> CogPoint {
+        let camera = &scene.camera;
+        let (at, up) = (camera.to_camera(p), camera.to_camera(Vec3::Z));
+        let magnitude = gradient_magnitude(g);
+        let mut out = CogPoint { layer: layer(p.z, scene.floor, scene.ceiling) as u8, ..CogPoint::default() };
+        for (plane, axis) in [a, b].into_iter().enumerate() {
+            if let Some(frame) = cog_basis(camera.intrinsics, at, camera.to_camera(axis.extend(0.0)), up) {
+                let (bin0, frac) = cog_position(&frame, g.x, g.y);
+                out.bin0[plane] = bin0 as u8;
+                out.shares[plane] = [(1.0 - frac) * magnitude, frac * magnitude];
+            }
+        }
+        out
+    }
+
+    /// Adds `norm ×` this point's histogram on `plane` to `out[index(bin)]` (with `index` the feature index
+    /// of a bin) — the one accumulation that features and tables share.
+    fn accumulate(&self, plane: usize, norm: f64, mut add: impl FnMut(usize, usize, f64)) {
+        let bin0 = self.bin0[plane] as usize;
+        let [s0, s1] = self.shares[plane];
+        add(self.layer as usize, bin0, s0 as f64 * norm);
+        add(self.layer as usize, (bin0 + 1) % COG_BINS, s1 as f64 * norm);
+    }
+}
+
 /// Manhattan region of a cell centre (see the module doc). Twin of `manhattan_region` in the shader.
 pub fn manhattan_region(u: i32, v: i32, b: &RoomBox) -> u32 {
     let d = [b.v1 - v, u - b.u0, v - b.v0, b.u1 - u];
@@ -233,9 +362,19 @@ pub struct YawCells {
     /// The orientation's features ([`super::orientation::orientation_features`]): filled by
     /// [`super::hypotheses`], which sees every orientation; 0 from [`YawCells::new`] alone.
     pub orientation: [f32; ORIENTATION_FEATURES],
+    /// The orientation's edge-orientation features ([`super::orientation::edge_orientation_features`]): filled
+    /// by [`super::hypotheses`] when asked for; 0 otherwise.
+    pub edge_orientation: [f32; EDGE_FEATURES],
     /// [`front_plane_evidence`] at [`YawCells::farthest_front`]: `[missing, near]`, whether the sensor saw
     /// the plane of the farthest points in front.
     pub front_evidence: [f32; 2],
+    /// With COG ([`YawCells::new`]'s `cog`): the points' [`CogPoint`]s grouped by cell, cell `c`'s at
+    /// `cog_points[cog_offsets[c] .. cog_offsets[c + 1]]`; both empty without.
+    pub cog_offsets: Vec<u32>,
+    pub cog_points: Vec<CogPoint>,
+    /// `1 / Σ|g|` over the frame's points (0 when the image has no gradient): COG features are fractions of
+    /// the frame's gradient magnitude.
+    pub cog_norm: f64,
     /// Dense summed-area table of point counts over cells `origin .. origin + size`, `(size + 1)²` entries.
     origin: [i32; 2],
     size: [usize; 2],
@@ -243,37 +382,52 @@ pub struct YawCells {
 }
 
 impl YawCells {
-    pub fn new(scene: &LayoutScene, yaw_index: usize) -> YawCells {
+    /// Bins the points for orientation `yaw_index`; `cog` adds their [`CogPoint`]s (a model with COG
+    /// features needs them; they cost time and memory, so the others go without).
+    pub fn new(scene: &LayoutScene, yaw_index: usize, cog: bool) -> YawCells {
         let (a, b) = room_axes(yaw_index);
-        let mut keyed: Vec<([i32; 2], usize)> = scene
+        let mut keyed: Vec<([i32; 2], usize, usize)> = scene
             .points
             .iter()
             .zip(&scene.normals)
-            .map(|(p, n)| {
+            .enumerate()
+            .map(|(i, (p, n))| {
                 let cell = [cell_index(to_mm(p.truncate().dot(b))), cell_index(to_mm(p.truncate().dot(a)))];
                 let bin = layer(p.z, scene.floor, scene.ceiling) * NORMAL_CLASSES + normal_class(*n, a, b) as usize;
-                (cell, bin)
+                (cell, bin, i)
             })
             .collect();
         keyed.sort_unstable();
         let mut centres: Vec<[i32; 2]> = Vec::new();
         let mut bins: Vec<[u16; CELL_BINS]> = Vec::new();
-        for &([j, i], bin) in &keyed {
+        let (mut cog_offsets, mut cog_points) = (Vec::new(), Vec::new());
+        for &([j, i], bin, point) in &keyed {
             let centre = [cell_centre(i), cell_centre(j)];
             if centres.last() != Some(&centre) {
                 centres.push(centre);
                 bins.push([0; CELL_BINS]);
+                if cog {
+                    cog_offsets.push(cog_points.len() as u32);
+                }
             }
             let last = bins.len() - 1;
             bins[last][bin] = bins[last][bin].saturating_add(1);
+            if cog {
+                cog_points.push(CogPoint::new(scene, scene.points[point], scene.gradients[point], a, b));
+            }
         }
+        if cog {
+            cog_offsets.push(cog_points.len() as u32);
+        }
+        let magnitude: f64 = scene.gradients.iter().map(|&g| gradient_magnitude(g) as f64).sum();
+        let cog_norm = if cog && magnitude > 0.0 { 1.0 / magnitude } else { 0.0 };
         let (lo_i, hi_i) = keyed.iter().fold((i32::MAX, i32::MIN), |(lo, hi), k| (lo.min(k.0[1]), hi.max(k.0[1])));
         let (lo_j, hi_j) = (keyed.first().map_or(0, |k| k.0[0]), keyed.last().map_or(0, |k| k.0[0]));
         let origin = if keyed.is_empty() { [0, 0] } else { [lo_i, lo_j] };
         let size = if keyed.is_empty() { [0, 0] } else { [(hi_i - lo_i + 1) as usize, (hi_j - lo_j + 1) as usize] };
         let stride = size[0] + 1;
         let mut table = vec![0u32; stride * (size[1] + 1)];
-        for &([j, i], _) in &keyed {
+        for &([j, i], _, _) in &keyed {
             table[(j - origin[1] + 1) as usize * stride + (i - origin[0] + 1) as usize] += 1;
         }
         for row in 1..=size[1] {
@@ -289,12 +443,24 @@ impl YawCells {
             bins,
             total_points: keyed.len() as u32,
             orientation: [0.0; ORIENTATION_FEATURES],
+            edge_orientation: [0.0; EDGE_FEATURES],
+            cog_offsets,
+            cog_points,
+            cog_norm,
             origin,
             size,
             table,
         };
         cells.front_evidence = front_plane_evidence(scene, b, cells.farthest_front() as f32 / 1000.0);
         cells
+    }
+
+    /// The [`CogPoint`]s of occupied cell `cell` (none without COG).
+    pub fn cog_of_cell(&self, cell: usize) -> &[CogPoint] {
+        match (self.cog_offsets.get(cell), self.cog_offsets.get(cell + 1)) {
+            (Some(&lo), Some(&hi)) => &self.cog_points[lo as usize..hi as usize],
+            _ => &[],
+        }
     }
 
     /// Points whose cell centre lies inside the box's footprint (walls inclusive).
@@ -389,11 +555,12 @@ pub fn front_plane_evidence(scene: &LayoutScene, b: Vec2, front_m: f32) -> [f32;
     }
 }
 
-/// The feature vector `φ(h)` of one hypothesis (see the module doc), length `disc.dim()`.
-pub fn features(disc: Discretisation, cells: &YawCells, room_box: &RoomBox) -> Vec<f32> {
-    let mut out = vec![0f64; disc.dim()];
+/// The feature vector `φ(h)` of one hypothesis (see the module doc), length `desc.dim()`.
+pub fn features(desc: Descriptor, cells: &YawCells, room_box: &RoomBox) -> Vec<f32> {
+    let disc = desc.discretisation;
+    let mut out = vec![0f64; desc.dim()];
     let norm = 1.0 / cells.total_points.max(1) as f64;
-    for (centre, bins) in cells.centres.iter().zip(&cells.bins) {
+    for (cell, (centre, bins)) in cells.centres.iter().zip(&cells.bins).enumerate() {
         let region = disc.region(centre[0], centre[1], room_box);
         if region == NO_REGION {
             continue;
@@ -405,10 +572,22 @@ pub fn features(disc: Discretisation, cells: &YawCells, room_box: &RoomBox) -> V
                 out[index] += count as f64 * norm;
             }
         }
+        if desc.cog {
+            for point in cells.cog_of_cell(cell) {
+                point.accumulate(desc.cog_plane(region), cells.cog_norm, |layer, bin, x| {
+                    out[desc.cog_index(region, layer, bin)] += x
+                });
+            }
+        }
     }
-    let voxel_dim = disc.voxel_dim();
+    let first_box = desc.box_start();
     for (j, x) in box_features(cells, room_box).into_iter().enumerate() {
-        out[voxel_dim + j] = x;
+        out[first_box + j] = x;
+    }
+    if desc.edges {
+        for (j, &x) in cells.edge_orientation.iter().enumerate() {
+            out[first_box + BOX_FEATURES + j] = x as f64;
+        }
     }
     out.into_iter().map(|x| x as f32).collect()
 }
@@ -455,12 +634,15 @@ pub struct ScoringTables {
     /// Real score = integer score / `scale`.
     pub scale: f64,
     pub contributions: Vec<Vec<i32>>,
-    /// The weights of the box features (the last [`BOX_FEATURES`] of the weight vector).
+    /// The weights of the box features.
     pub box_weights: [f64; BOX_FEATURES],
+    /// The weights of the edge-orientation features (0 for a model without them).
+    pub edge_weights: [f64; EDGE_FEATURES],
 }
 
 impl ScoringTables {
-    pub fn new(disc: Discretisation, cells: &[YawCells], w: &[f64]) -> ScoringTables {
+    pub fn new(desc: Descriptor, cells: &[YawCells], w: &[f64]) -> ScoringTables {
+        let disc = desc.discretisation;
         let regions = disc.regions() as usize;
         let real: Vec<Vec<f64>> = cells
             .par_iter()
@@ -476,7 +658,15 @@ impl ScoringTables {
                                 x += count as f64 * w[feature_index(r as u32, bin / NORMAL_CLASSES, class)];
                             }
                         }
-                        out[c * regions + r] = x * norm;
+                        x *= norm;
+                        if desc.cog {
+                            for point in yaw.cog_of_cell(c) {
+                                point.accumulate(desc.cog_plane(r as u32), yaw.cog_norm, |layer, bin, v| {
+                                    x += v * w[desc.cog_index(r as u32, layer, bin)]
+                                });
+                            }
+                        }
+                        out[c * regions + r] = x;
                     }
                 }
                 out
@@ -489,15 +679,21 @@ impl ScoringTables {
         let scale = if bound > 0.0 { 2f64.powi((SCORE_BUDGET / bound).log2().floor() as i32) } else { 1.0 };
         let contributions = real.iter().map(|yaw| yaw.iter().map(|x| (x * scale).round() as i32).collect()).collect();
         let mut box_weights = [0.0; BOX_FEATURES];
-        box_weights.copy_from_slice(&w[disc.voxel_dim()..disc.dim()]);
-        ScoringTables { discretisation: disc, scale, contributions, box_weights }
+        box_weights.copy_from_slice(&w[desc.box_start()..desc.box_start() + BOX_FEATURES]);
+        let mut edge_weights = [0.0; EDGE_FEATURES];
+        if desc.edges {
+            edge_weights.copy_from_slice(&w[desc.box_start() + BOX_FEATURES..desc.dim()]);
+        }
+        ScoringTables { discretisation: disc, scale, contributions, box_weights, edge_weights }
     }
 
     /// The whole fixed-point score of `room_box` given its voxel score (the kernel's or [`score_box`]'s) and
-    /// its orientation's cells: the voxel score plus `round(w_box·b(h)·scale)`. The real score is this divided
+    /// its orientation's cells: the voxel score plus `round((w_box·b(h) + w_edges·e(k))·scale)`. The real score is this divided
     /// by `scale`.
     pub fn total(&self, cells: &YawCells, room_box: &RoomBox, voxel_score: i32) -> i64 {
-        let x: f64 = box_features(cells, room_box).iter().zip(&self.box_weights).map(|(&b, &w)| b * w).sum();
+        let boxes: f64 = box_features(cells, room_box).iter().zip(&self.box_weights).map(|(&b, &w)| b * w).sum();
+        let edges: f64 = cells.edge_orientation.iter().zip(&self.edge_weights).map(|(&e, &w)| e as f64 * w).sum();
+        let x = boxes + edges;
         voxel_score as i64 + (x * self.scale).round() as i64
     }
 
