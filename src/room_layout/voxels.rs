@@ -33,7 +33,7 @@
 //! 384.
 //!
 //! # COG (optional, [`Descriptor::cog`]; paper: the layout model "utilizes our COG descriptor")
-//! The paper's COG (§3.3: 9 unsigned orientation bins laid on a plane of the voxel, projected into the image
+//! The paper's COG (§3.2: 9 unsigned orientation bins laid on a plane of the voxel, projected into the image
 //! where the gradient is, the magnitude split between the two nearest bins) adapted to the room: per point
 //! (its pixel's gradient, `crate::features::preprocess::pixel_gradient`), the bins lie on a **wall plane**
 //! through the point — plane 0 spanned by the room axis `a` and the vertical (the front and back walls),
@@ -67,7 +67,9 @@
 //! let it prefer any of the four distances, and the products with the evidence let that preference depend
 //! on whether the plane of the farthest points was seen (small `m`, or points on it: `n`) or not (`m` near
 //! 1, `n` near 0); the square root of `n` because a seen wall near the range gives `n` of only 0.05–0.27.
-//! 304 and 400 dimensions in all without COG, 952 and 1 264 with.
+//! 304 and 400 dimensions in all without COG, 952 and 1 264 with. With [`Descriptor::edges`] the 2
+//! edge-orientation features of the orientation ([`super::orientation::edge_orientation_features`]) close
+//! the vector, weighted on the CPU like the box features.
 //!
 //! # Scoring (the GPU kernel's twin)
 //! `score(h) = w·φ(h)` is a sum over cells of a per-(cell, region) contribution, tabulated once per frame
@@ -274,8 +276,8 @@ impl CogPoint {
         out
     }
 
-    /// Adds `norm ×` this point's histogram on `plane` to `out[index(bin)]` (with `index` the feature index
-    /// of a bin) — the one accumulation that features and tables share.
+    /// Hands `add(layer, bin, share · norm)` this point's two bins on `plane` — the one accumulation that
+    /// [`features`] and [`ScoringTables::new`] share.
     fn accumulate(&self, plane: usize, norm: f64, mut add: impl FnMut(usize, usize, f64)) {
         let bin0 = self.bin0[plane] as usize;
         let [s0, s1] = self.shares[plane];
