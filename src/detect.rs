@@ -18,7 +18,7 @@
 //! surfaces of the frame's
 //! detections of
 //! [`SURFACE_CATEGORIES`] whose calibrated score is at least [`DetectOptions::support_min_score`]
-//! ([`detected_surfaces`], [`surface_window`]), scored, selected and suppressed the same way.
+//! ([`detected_surfaces`], [`surface_window`](crate::features::hypotheses::surface_window)), scored, selected and suppressed the same way.
 
 use std::time::Instant;
 

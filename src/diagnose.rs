@@ -79,7 +79,7 @@ pub fn best_window_ious(scene: &FeatureScene, hypotheses: &[Hypothesis], truths:
 ///
 /// The window is the one [`crate::detect::detect_preprocessed`] enumerates: one [`FeatureScene`] per
 /// distinct `(model.window.step, model.window.yaw_anchor)` (shared by the models with both) with the
-/// frame's [`FrameYaws`], and [`sliding_window`] with the model's sizes and `min_points` — for a model
+/// frame's [`FrameYaws`], and [`sliding_window`](crate::features::hypotheses::sliding_window) with the model's sizes and `min_points` — for a model
 /// searched on support surfaces, its window on the surfaces of the frame's **annotated** objects of its
 /// supporters (`window.supporters`; `annotated_surfaces_by_category`: the window's ceiling given perfect
 /// large-object detections; detection searches the surfaces of its own detections). Categories

@@ -88,7 +88,7 @@ pub(crate) struct LatticePoint {
 }
 
 /// Where the voxel layers of one [`LayerTable`] lie along z: layer `k` holds the points with
-/// `⌊(z − z_lo) · inv_step⌋ = k`, `k < layers`. Computed once ([`FastEngine::table_span`]) for the CPU
+/// `⌊(z − z_lo) · inv_step⌋ = k`, `k < layers`. Computed once (`FastEngine::table_span`) for the CPU
 /// table and the GPU kernel that builds the same table.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TableSpan {
@@ -510,7 +510,7 @@ fn cog_scale_for(scene: &FeatureScene) -> f32 {
 /// Lanes of [`dot_lanes`].
 const DOT_LANES: usize = 8;
 
-/// `a·b` over [`DOT_LANES`] interleaved lanes — lane `l` sums, in index order, the products at the indices
+/// `a·b` over `DOT_LANES` interleaved lanes — lane `l` sums, in index order, the products at the indices
 /// `≡ l (mod 8)` — added pairwise in a fixed order at the end. The order is fixed, so the result is the same
 /// on every run, but there are eight independent chains of additions instead of `dot`'s one, which the
 /// compiler turns into SIMD: one voxel's 35-term dot product was the fast path's longest dependency chain

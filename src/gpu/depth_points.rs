@@ -1,7 +1,7 @@
 //! The `depth_points` kernel: raw depth PNG values → upright points, one `[x, y, z, w]` per pixel.
 //!
 //! Shader: `shaders/depth_points.wgsl`. The CPU twin below reads like it (same names, same f32 operation
-//! order): [`depth_points_main`] is the entry point, looping [`depth_point`] over the invocations.
+//! order): `depth_points_main` is the entry point, looping `depth_point` over the invocations.
 //!
 //! Conventions (those of [`crate::frame`]): `mm = ((d >> 3) | (d << 13)) & 0xffff`, `z = min(mm / 1000, 8)`,
 //! `u = col + 1`, `v = row + 1`, `x = (u − cx)·z/fx`, `y = (v − cy)·z/fy`, `p = Rtilt·(x, z, −y)`.

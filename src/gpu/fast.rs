@@ -8,7 +8,7 @@
 //! hypotheses are cut into chunks of at most [`MAX_CHUNK`], with up to [`MAX_WEIGHTS`] weight vectors per
 //! pass: one *dispatch record* ([`FastParams`]) per (group, chunk, pass). **Batches, not dispatches, meet
 //! the queue**: groups are collected into a batch of at most [`MAX_BATCH_BYTES`] (and at most the
-//! storage-binding limit: a batch's tables are bound as one range). Per batch, one [`BatchLayout`] places
+//! storage-binding limit: a batch's tables are bound as one range). Per batch, one `BatchLayout` places
 //! everything in shared buffers — the yaws' lattice points, the tables, the records and boundaries, the
 //! weight passes, the dispatch records and the scores — taken from a pool that the [`GpuContext`] keeps
 //! from batch to batch and frame to frame (no buffer is created per batch once the pool has grown); the
@@ -45,7 +45,7 @@
 //! # CPU twin
 //! [`fast_scores_main`] is the shader's entry point in Rust (same names, same loop order, same reduction
 //! tree), run over every workgroup by [`fast_scores_reference`], which packs its inputs with the
-//! same code as [`fast_scores_gpu`] (the same [`BatchLayout`], its buffers filled on the CPU with the
+//! same code as [`fast_scores_gpu`] (the same `BatchLayout`, its buffers filled on the CPU with the
 //! CPU-built tables). It differs from `FastEngine::scores` only in the order of the float
 //! additions (the engine sums the voxels in order ℓ), so the three agree to ~1e-6 relative.
 
@@ -572,8 +572,8 @@ impl Arena {
     }
 }
 
-/// Several jobs' fast-path scores on the GPU (see [`run`]: tables shared between jobs are built once), cut as
-/// `chunking` says. Per batch ([`run_batch`]): its inputs placed by one [`BatchLayout`] in pooled buffers,
+/// Several jobs' fast-path scores on the GPU (see `run`: tables shared between jobs are built once), cut as
+/// `chunking` says. Per batch (`run_batch`): its inputs placed by one `BatchLayout` in pooled buffers,
 /// its tables built by [`crate::gpu::fast_tables`]'s kernels (one dispatch per phase) and all its hypotheses
 /// scored by one dispatch, in four compute passes of one submission, and one read-back.
 pub fn fast_scores_gpu_jobs(
@@ -1059,7 +1059,7 @@ const TWIN_ALIGN: u32 = 256;
 
 /// The shader's `main` for workgroup `h` of the dispatch of record `params` (all 64 invocations, then the
 /// reduction): the writes invocation 0 makes, as (index in `out`, value). Written to read like `shaders/fast_scores.wgsl`; its `vec4`s are
-/// `[_; 4]` here, `table` and `weights` are indexed in `vec4` units through [`vec4_at`].
+/// `[_; 4]` here, `table` and `weights` are indexed in `vec4` units through `vec4_at`.
 pub fn fast_scores_main(
     params: &FastParams,
     table: &[u32],

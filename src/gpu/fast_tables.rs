@@ -7,7 +7,7 @@
 //! then along t) into a zeroed range of a buffer; [`crate::gpu::fast`] records them once for all the
 //! tables of a batch (workgroup z is the table, [`TableParams`] per table say where its words and its
 //! yaw's points lie), before the scoring dispatches of the same submission. The integer sums
-//! wrap exactly as on the CPU, so the table is the same words as [`LayerTable`]'s whatever the order of the
+//! wrap exactly as on the CPU, so the table is the same words as [`LayerTable`](crate::features::fast::LayerTable)'s whatever the order of the
 //! atomic adds (tested against `LayerTable::build` and the twins, on lavapipe).
 //!
 //! Each point's layer is `⌊(z − z_lo) · inv_step⌋` with `z_lo` and `inv_step` computed once on the CPU
