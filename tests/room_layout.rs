@@ -14,7 +14,7 @@ use cog_gpu::room_layout::free_space::{free_space_counts, free_space_iou, YawFre
 use cog_gpu::room_layout::learn::yaw_difference_mod_90;
 use cog_gpu::room_layout::orientation::{edge_alignment, edge_orientation_features, orientation_features};
 use cog_gpu::room_layout::voxels::{
-    box_features, cubical_region, features, front_plane_evidence, manhattan_region, CogPoint, Descriptor,
+    box_features, cubical_region, features, front_plane_evidence, manhattan_region, CogAxes, CogPoint, Descriptor,
     Discretisation, ScoringTables, YawCells, BOX_FEATURES, COG_BINS, EDGE_FEATURES, LAYERS, ORIENTATION_FEATURES,
     REACH_FEATURES, WALL_LEAK_FEATURES,
 };
@@ -286,11 +286,12 @@ fn cog_of_a_wall_ahead_falls_in_the_hand_computed_bins() {
     let mut scene = room_scene();
     let (a, b) = room_axes(YAW_ZERO);
     let ahead = Vec3::new(0.0, 5.0, 0.0);
-    let vertical_edge = CogPoint::new(&scene, ahead, Vec2::new(0.8, 0.0), a, b);
+    let axes = CogAxes::new(&scene.camera, a, b);
+    let vertical_edge = CogPoint::new(&scene, &axes, ahead, Vec2::new(0.8, 0.0));
     assert_eq!(vertical_edge.bin0[0], 0);
     assert!((vertical_edge.shares[0][0] - 0.8).abs() < 1e-5 && vertical_edge.shares[0][1].abs() < 1e-5);
     assert_eq!(vertical_edge.shares[1], [0.0; 2]);
-    let horizontal_edge = CogPoint::new(&scene, ahead, Vec2::new(0.0, 0.6), a, b);
+    let horizontal_edge = CogPoint::new(&scene, &axes, ahead, Vec2::new(0.0, 0.6));
     assert_eq!(horizontal_edge.bin0[0], 4);
     for share in horizontal_edge.shares[0] {
         assert!((share - 0.3).abs() < 1e-4, "{:?}", horizontal_edge.shares);

@@ -129,7 +129,7 @@ fn the_shipped_layout_model_lays_out_the_real_frame() {
     use cog_gpu::room_layout::voxels::Discretisation;
     use cog_gpu::room_layout::{predict, LayoutScene};
     let model = LayoutModel::read(&Path::new(MODELS).join(cog_gpu::model::LAYOUT_MODEL_FILE)).unwrap();
-    assert_eq!(model.discretisation, Discretisation::Manhattan);
+    assert_eq!(model.descriptor.discretisation, Discretisation::Manhattan);
     assert!(model.provenance.get("command").is_some() && model.provenance.get("data_seed").is_some());
     let frame = Frame::read("../shared/data/sunrgbd/kv1-b3dodata-img_0063", DepthSource::Raw).unwrap();
     let scene = LayoutScene::from_frame(&frame).unwrap();

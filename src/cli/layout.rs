@@ -56,7 +56,7 @@ pub fn frame_layout(
         Some(model) => predict(&scene, model, &|cells, tables, boxes| backend.layout_scores(cells, tables, boxes))?,
         None => predict_heuristic(&scene),
     };
-    let method = model.map_or_else(|| "heuristic".to_string(), |m| m.descriptor().name());
+    let method = model.map_or_else(|| "heuristic".to_string(), |m| m.descriptor.name());
     let record = LayoutRecord::new(&method, &predicted);
     Ok((predicted, record))
 }

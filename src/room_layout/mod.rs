@@ -416,7 +416,7 @@ pub fn predict(
     model: &model::LayoutModel,
     score_hypotheses: &ScoreHypotheses,
 ) -> Result<PredictedLayout> {
-    let descriptor = model.descriptor();
+    let descriptor = model.descriptor;
     let (cells, boxes) = hypotheses(scene, descriptor.cog, descriptor.edges);
     if boxes.is_empty() {
         return Err(Error::Input("no room hypothesis holds 80 % of the points".into()));

@@ -14,7 +14,7 @@
 
 use std::path::Path;
 
-use super::voxels::{Descriptor, Discretisation};
+use super::voxels::Descriptor;
 use crate::error::{Error, Result};
 
 pub const FORMAT: &str = "cog-gpu-layout-model";
@@ -29,13 +29,10 @@ pub const MAX_WEIGHT: f32 = 1e6;
 pub struct LayoutModel {
     pub format: String,
     pub version: u32,
-    pub discretisation: Discretisation,
-    /// COG features after the voxel features (absent in files written before them: false).
-    #[serde(default)]
-    pub cog: bool,
-    /// Edge-orientation features after the box features (absent in files written before them: false).
-    #[serde(default)]
-    pub edges: bool,
+    /// `discretisation`, `cog` and `edges` at the top level of the file (the last two absent in files
+    /// written before them: false).
+    #[serde(flatten)]
+    pub descriptor: Descriptor,
     pub weights: Vec<f32>,
     #[serde(default)]
     pub provenance: serde_json::Value,
@@ -43,13 +40,7 @@ pub struct LayoutModel {
 
 impl LayoutModel {
     pub fn new(descriptor: Descriptor, weights: Vec<f32>, provenance: serde_json::Value) -> LayoutModel {
-        let Descriptor { discretisation, cog, edges } = descriptor;
-        LayoutModel { format: FORMAT.into(), version: VERSION, discretisation, cog, edges, weights, provenance }
-    }
-
-    /// What the weights are weights of.
-    pub fn descriptor(&self) -> Descriptor {
-        Descriptor::new(self.discretisation, self.cog, self.edges)
+        LayoutModel { format: FORMAT.into(), version: VERSION, descriptor, weights, provenance }
     }
 
     /// What is wrong with the model, if anything.
@@ -64,13 +55,9 @@ impl LayoutModel {
                 self.version
             ));
         }
-        let dim = self.descriptor().dim();
+        let dim = self.descriptor.dim();
         if self.weights.len() != dim {
-            return Err(format!(
-                "{} weights; a {} layout model has {dim}",
-                self.weights.len(),
-                self.descriptor().name()
-            ));
+            return Err(format!("{} weights; a {} layout model has {dim}", self.weights.len(), self.descriptor.name()));
         }
         if let Some(i) = self.weights.iter().position(|w| !w.is_finite() || w.abs() > MAX_WEIGHT) {
             return Err(format!("weight {i} is {} (must be finite, |w| <= {MAX_WEIGHT})", self.weights[i]));

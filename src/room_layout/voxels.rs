@@ -187,10 +187,12 @@ pub const COG_PLANES: usize = 2;
 /// the voxel features, and whether the edge-orientation features
 /// ([`super::orientation::edge_orientation_features`]) follow the box features (see the module doc). Models
 /// without them (format version 3 files written before them lack the fields) are read with both false.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct Descriptor {
     pub discretisation: Discretisation,
+    #[serde(default)]
     pub cog: bool,
+    #[serde(default)]
     pub edges: bool,
 }
 
@@ -259,15 +261,29 @@ pub struct CogPoint {
     pub shares: [[f32; 2]; COG_PLANES],
 }
 
+/// One orientation's COG planes in camera coordinates: the horizontal axis of each plane (`a`, then `b`) and
+/// the vertical — the same for every point of the orientation, so made once per orientation.
+#[derive(Clone, Copy, Debug)]
+pub struct CogAxes {
+    pub along: [Vec3; COG_PLANES],
+    pub up: Vec3,
+}
+
+impl CogAxes {
+    pub fn new(camera: &crate::geometry::Camera, a: Vec2, b: Vec2) -> CogAxes {
+        CogAxes { along: [a, b].map(|axis| camera.to_camera(axis.extend(0.0))), up: camera.to_camera(Vec3::Z) }
+    }
+}
+
 impl CogPoint {
-    /// The COG contribution of the point `p` (upright) with image gradient `g`, for room axes `a`, `b`.
-    pub fn new(scene: &LayoutScene, p: Vec3, g: Vec2, a: Vec2, b: Vec2) -> CogPoint {
+    /// The COG contribution of the point `p` (upright) with image gradient `g`, on the planes `axes`.
+    pub fn new(scene: &LayoutScene, axes: &CogAxes, p: Vec3, g: Vec2) -> CogPoint {
         let camera = &scene.camera;
-        let (at, up) = (camera.to_camera(p), camera.to_camera(Vec3::Z));
+        let at = camera.to_camera(p);
         let magnitude = gradient_magnitude(g);
         let mut out = CogPoint { layer: layer(p.z, scene.floor, scene.ceiling) as u8, ..CogPoint::default() };
-        for (plane, axis) in [a, b].into_iter().enumerate() {
-            if let Some(frame) = cog_basis(camera.intrinsics, at, camera.to_camera(axis.extend(0.0)), up) {
+        for (plane, &along) in axes.along.iter().enumerate() {
+            if let Some(frame) = cog_basis(camera.intrinsics, at, along, axes.up) {
                 let (bin0, frac) = cog_position(&frame, g.x, g.y);
                 out.bin0[plane] = bin0 as u8;
                 out.shares[plane] = [(1.0 - frac) * magnitude, frac * magnitude];
@@ -403,6 +419,7 @@ impl YawCells {
         let mut centres: Vec<[i32; 2]> = Vec::new();
         let mut bins: Vec<[u16; CELL_BINS]> = Vec::new();
         let (mut cog_offsets, mut cog_points) = (Vec::new(), Vec::new());
+        let cog_axes = CogAxes::new(&scene.camera, a, b);
         for &([j, i], bin, point) in &keyed {
             let centre = [cell_centre(i), cell_centre(j)];
             if centres.last() != Some(&centre) {
@@ -415,14 +432,15 @@ impl YawCells {
             let last = bins.len() - 1;
             bins[last][bin] = bins[last][bin].saturating_add(1);
             if cog {
-                cog_points.push(CogPoint::new(scene, scene.points[point], scene.gradients[point], a, b));
+                cog_points.push(CogPoint::new(scene, &cog_axes, scene.points[point], scene.gradients[point]));
             }
         }
         if cog {
             cog_offsets.push(cog_points.len() as u32);
         }
-        let magnitude: f64 = scene.gradients.iter().map(|&g| gradient_magnitude(g) as f64).sum();
-        let cog_norm = if cog && magnitude > 0.0 { 1.0 / magnitude } else { 0.0 };
+        let magnitude: f64 =
+            if cog { scene.gradients.iter().map(|&g| gradient_magnitude(g) as f64).sum() } else { 0.0 };
+        let cog_norm = if magnitude > 0.0 { 1.0 / magnitude } else { 0.0 };
         let (lo_i, hi_i) = keyed.iter().fold((i32::MAX, i32::MIN), |(lo, hi), k| (lo.min(k.0[1]), hi.max(k.0[1])));
         let (lo_j, hi_j) = (keyed.first().map_or(0, |k| k.0[0]), keyed.last().map_or(0, |k| k.0[0]));
         let origin = if keyed.is_empty() { [0, 0] } else { [lo_i, lo_j] };
