@@ -20,7 +20,8 @@
 #      process start to exit.
 # Results go to $OUT (set by the device tool; default gpu-bench-out/): fast-bed.json, detect-0.1.json,
 # detect-own.json, sample-detect.txt, and log.txt (every step's stderr: adapter, GPU debug log). The run
-# takes about 3 minutes on an H200 and its 16-core host.
+# should take about 3 minutes on an H200 and its 16-core host (an estimate from the README's figures: not yet run
+# on a GPU; the QUICK smoke test ran on lavapipe).
 #
 # Environment: BIN (default .dev/cog-gpu, else target/release/cog-gpu), SIZES (default
 # .dev/sunrgbd-size-stats.json, else ../shared/data/sunrgbd-size-stats.json), REPEAT (2), QUICK=1 (one
