@@ -62,8 +62,8 @@ step() {
     echo "== $name: exit $status after $((SECONDS - started)) s" | tee -a "$log" >&2
 }
 
-frames=4 steps=("0.1" "own") limit=()
-[ "${QUICK:-0}" = 1 ] && frames=1 steps=("own") REPEAT=1 limit=(--limit 20000)
+frames=4 steps=("0.1" "own") hypothesis_limit=()
+[ "${QUICK:-0}" = 1 ] && frames=1 steps=("own") REPEAT=1 hypothesis_limit=(--limit 20000)
 # The steps' time limits add up to 545 s (the device tool allows 600 per command); SLOW multiplies them
 # (default 1; QUICK on a 2-core machine: 6).
 SLOW=${SLOW:-$([ "${QUICK:-0}" = 1 ] && echo 6 || echo 1)}
@@ -72,7 +72,7 @@ step synth-frames 60 "$BIN" synth --out "$work/frames" --frames "$frames" --seed
 
 # 1. The bed window on the standard frame, fast path, both paths.
 step fast-bed 90 env RUST_LOG=cog_gpu::gpu=debug "$BIN" bench --frame "$work/standard/synth-000000" --sizes "$SIZES" \
-    --features fast --both "${limit[@]}" --json > "$OUT/fast-bed.json"
+    --features fast --both "${hypothesis_limit[@]}" --json > "$OUT/fast-bed.json"
 
 # 2. End to end, every shipped model, both paths, at 0.1 m and at the models' own steps.
 for s in "${steps[@]}"; do
