@@ -15,16 +15,21 @@
 #   1. the standard frame (`synth --frames 1 --seed 1 --sensor xtion`, 640x480): the bed window on the
 #      fast path, `bench --features fast --both --json` with the GPU debug log (per-pass GPU timestamps);
 #   2. the 4 frames of `synth --frames 4 --seed 1 --sensor xtion`: `bench --detect --both --json` with
-#      every shipped model, at `--detect-step 0.1` (the issue's setting) and at the models' own steps;
+#      every shipped model, at `--detect-step 0.1` (the issue's setting; with the GPU debug log) and at the
+#      models' own steps, each path also with IN_FLIGHT frames in flight (`--in-flight`); at 0.1 m the GPU
+#      path alone with 3 and 4 frames in flight, each with the default and with four buffer-pool sets
+#      (COG_GPU_POOL_SLOTS=4); with BASE_BIN, that binary's GPU path at 0.1 m (a baseline, same machine);
 #   3. the README's main command, `cog-gpu detect` of the shipped sample frames with overlays, timed from
-#      process start to exit.
-# Results go to $OUT (set by the device tool; default gpu-bench-out/): fast-bed.json, detect-0.1.json,
-# detect-own.json, sample-detect.txt, and log.txt (every step's stderr: adapter, GPU debug log). The run
-# should take about 3 minutes on an H200 and its 16-core host (an estimate from the README's figures: not yet run
-# on a GPU; the QUICK smoke test ran on lavapipe).
+#      process start to exit (and BASE_BIN's).
+# Results go to $OUT (set by the device tool; default gpu-bench-out/), six files: fast-bed.json,
+# detect-0.1.json, detect-own.json, variants.jsonl (one line per variant of 2: {"variant", "report"}),
+# sample-detect.txt and log.txt (every step's stderr: adapter, GPU debug log). On an H200 and its 16-core
+# host the whole run (without the own steps, with a baseline) took 140 s (2026-11-27).
 #
-# Environment: BIN (default .dev/cog-gpu, else target/release/cog-gpu), SIZES (default
-# .dev/sunrgbd-size-stats.json, else ../shared/data/sunrgbd-size-stats.json), REPEAT (2), QUICK=1 (one
+# Environment: BIN (default .dev/cog-gpu, else target/release/cog-gpu), BASE_BIN (none; e.g. an earlier
+# build's .dev/cog-gpu copied aside before `prepare` replaces it), SIZES (default
+# .dev/sunrgbd-size-stats.json, else ../shared/data/sunrgbd-size-stats.json), REPEAT (2), IN_FLIGHT (2),
+# STEPS ("0.1 own"), QUICK=1 (one
 # frame, one repeat, own steps only, 20 000 bed hypotheses: a smoke test, e.g. on lavapipe, where `detect` keeps the CPU fast path).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -42,6 +47,7 @@ BIN=${BIN:-$([ -x .dev/cog-gpu ] && echo .dev/cog-gpu || echo target/release/cog
 SIZES=${SIZES:-$([ -f .dev/sunrgbd-size-stats.json ] && echo .dev/sunrgbd-size-stats.json \
     || echo ../shared/data/sunrgbd-size-stats.json)}
 REPEAT=${REPEAT:-2}
+IN_FLIGHT=${IN_FLIGHT:-2}
 OUT=${OUT:-gpu-bench-out}
 [ -x "$BIN" ] || { echo "gpu-bench: no binary at $BIN (run \`bash assets/gpu-bench.sh prepare\` first)" >&2; exit 1; }
 [ -f "$SIZES" ] || { echo "gpu-bench: no size quantiles at $SIZES" >&2; exit 1; }
@@ -62,31 +68,63 @@ step() {
     echo "== $name: exit $status after $((SECONDS - started)) s" | tee -a "$log" >&2
 }
 
-frames=4 steps=("0.1" "own") hypothesis_limit=()
+frames=4 steps=(${STEPS:-0.1 own}) hypothesis_limit=()
 [ "${QUICK:-0}" = 1 ] && frames=1 steps=("own") REPEAT=1 hypothesis_limit=(--limit 20000)
-# The steps' time limits add up to 545 s (the device tool allows 600 per command); SLOW multiplies them
+# The steps' time limits add up to 580 s (570 with BASE_BIN and STEPS=0.1; the device tool allows 600 per
+# command); SLOW multiplies them
 # (default 1; QUICK on a 2-core machine: 6).
 SLOW=${SLOW:-$([ "${QUICK:-0}" = 1 ] && echo 6 || echo 1)}
-step synth-standard 45 "$BIN" synth --out "$work/standard" --frames 1 --seed 1 --sensor xtion > /dev/null
-step synth-frames 60 "$BIN" synth --out "$work/frames" --frames "$frames" --seed 1 --sensor xtion > /dev/null
+step synth-standard 30 "$BIN" synth --out "$work/standard" --frames 1 --seed 1 --sensor xtion > /dev/null
+step synth-frames 40 "$BIN" synth --out "$work/frames" --frames "$frames" --seed 1 --sensor xtion > /dev/null
 
 # 1. The bed window on the standard frame, fast path, both paths.
-step fast-bed 90 env RUST_LOG=cog_gpu::gpu=debug "$BIN" bench --frame "$work/standard/synth-000000" --sizes "$SIZES" \
+step fast-bed 60 env RUST_LOG=cog_gpu::gpu=debug "$BIN" bench --frame "$work/standard/synth-000000" --sizes "$SIZES" \
     --features fast --both "${hypothesis_limit[@]}" --json > "$OUT/fast-bed.json"
 
-# 2. End to end, every shipped model, both paths, at 0.1 m and at the models' own steps.
+# 2. End to end, every shipped model, both paths, at 0.1 m and at the models' own steps (at 0.1 m with the
+#    GPU debug log: where each fast-path call's time goes); each path then again with IN_FLIGHT frames in
+#    flight (its wall-clock seconds per frame, detections compared).
 for s in "${steps[@]}"; do
     step_args=()
     [ "$s" = own ] || step_args=(--detect-step "$s")
-    step "detect-$s" "$([ "$s" = own ] && echo 120 || echo 170)" "$BIN" bench --detect "$work/frames" "${step_args[@]}" --both --repeat "$REPEAT" --json \
+    step "detect-$s" "$([ "$s" = own ] && echo 100 || echo 150)" env RUST_LOG="$([ "$s" = own ] || echo cog_gpu::gpu=debug)" \
+        "$BIN" bench --detect "$work/frames" "${step_args[@]}" --both --repeat "$REPEAT" --in-flight "$IN_FLIGHT" --json \
         > "$OUT/detect-$s.json"
 done
+# variant NAME SECONDS COMMAND...: a step whose JSON report goes to variants.jsonl as one line
+# {"variant": NAME, "report": ...} (few files: the device tool returns a limited number).
+variant() {
+    local name=$1 limit=$2
+    shift 2
+    step "$name" "$limit" "$@" > "$work/variant.json"
+    printf '{"variant":"%s","report":%s}\n' "$name" "$(cat "$work/variant.json")" >> "$OUT/variants.jsonl"
+}
+# 2b. The GPU path alone at 0.1 m with more frames in flight, and with more buffer-pool sets.
+if [ "${QUICK:-0}" != 1 ]; then
+    for n in 3 4; do
+        variant "gpu-in-flight-$n" 40 "$BIN" bench --detect "$work/frames" --detect-step 0.1 --gpu --repeat "$REPEAT" \
+            --in-flight "$n" --json
+        variant "gpu-in-flight-$n-pool-4" 40 env COG_GPU_POOL_SLOTS=4 "$BIN" bench --detect "$work/frames" \
+            --detect-step 0.1 --gpu --repeat "$REPEAT" --in-flight "$n" --json
+    done
+fi
+# 2c. A baseline build (BASE_BIN, e.g. the previous release), GPU path, same machine, same frames.
+if [ -n "${BASE_BIN:-}" ]; then
+    variant base-detect-0.1 50 "$BASE_BIN" bench --detect "$work/frames" --detect-step 0.1 --gpu --repeat "$REPEAT" \
+        --json
+fi
 
-# 3. The README's main command, process start to exit, overlays written.
-started=$(date +%s%N)
-step sample-detect 60 "$BIN" detect --out "$work/detections" > "$OUT/sample-detect.txt"
-elapsed_ms=$((($(date +%s%N) - started) / 1000000))
-echo "wall seconds, process start to exit: $((elapsed_ms / 1000)).$(printf %03d $((elapsed_ms % 1000)))" \
-    >> "$OUT/sample-detect.txt"
+# 3. The README's main command, process start to exit, overlays written (and the baseline's, with BASE_BIN).
+sample_detect() {
+    local name=$1 bin=$2 started elapsed_ms
+    started=$(date +%s%N)
+    echo "== $name" >> "$OUT/sample-detect.txt"
+    step "$name" 40 "$bin" detect --out "$work/$name" >> "$OUT/sample-detect.txt"
+    elapsed_ms=$((($(date +%s%N) - started) / 1000000))
+    echo "wall seconds, process start to exit: $((elapsed_ms / 1000)).$(printf %03d $((elapsed_ms % 1000)))" \
+        >> "$OUT/sample-detect.txt"
+}
+sample_detect sample-detect "$BIN"
+[ -z "${BASE_BIN:-}" ] || sample_detect base-sample-detect "$BASE_BIN"
 grep -h -m1 -i "adapter" "$log" >&2 || true
 ls -l "$OUT" >&2

@@ -375,6 +375,27 @@ pub struct DetectStages {
     pub nms_s: f64,
     /// Hypotheses scored, over all models.
     pub hypotheses: usize,
+    /// Process CPU seconds (user + system, summed over all threads, the GPU driver's included) during each
+    /// stage, as [`process_cpu_seconds`] counts them: against the wall-clock seconds times the threads,
+    /// how busy the stage keeps the cores; on the GPU path, the CPU work left beside the GPU's. Only
+    /// meaningful when nothing else in the process runs meanwhile (one frame at a time).
+    pub yaw_grids_cpu_s: f64,
+    pub window_cpu_s: f64,
+    pub lattices_cpu_s: f64,
+    pub score_cpu_s: f64,
+    pub select_cpu_s: f64,
+    pub nms_cpu_s: f64,
+}
+
+/// A stage of [`DetectStages`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stage {
+    YawGrids,
+    Window,
+    Lattices,
+    Score,
+    Select,
+    Nms,
 }
 
 impl DetectStages {
@@ -382,22 +403,72 @@ impl DetectStages {
     pub fn total_s(&self) -> f64 {
         self.yaw_grids_s + self.window_s + self.lattices_s + self.score_s + self.select_s + self.nms_s
     }
+
+    /// The sum of the stages' process CPU seconds.
+    pub fn total_cpu_s(&self) -> f64 {
+        self.yaw_grids_cpu_s
+            + self.window_cpu_s
+            + self.lattices_cpu_s
+            + self.score_cpu_s
+            + self.select_cpu_s
+            + self.nms_cpu_s
+    }
+
+    /// Adds `lap` to `stage`'s wall-clock and CPU seconds.
+    pub fn add(&mut self, stage: Stage, lap: Lap) {
+        let (wall, cpu) = match stage {
+            Stage::YawGrids => (&mut self.yaw_grids_s, &mut self.yaw_grids_cpu_s),
+            Stage::Window => (&mut self.window_s, &mut self.window_cpu_s),
+            Stage::Lattices => (&mut self.lattices_s, &mut self.lattices_cpu_s),
+            Stage::Score => (&mut self.score_s, &mut self.score_cpu_s),
+            Stage::Select => (&mut self.select_s, &mut self.select_cpu_s),
+            Stage::Nms => (&mut self.nms_s, &mut self.nms_cpu_s),
+        };
+        *wall += lap.wall_s;
+        *cpu += lap.cpu_s;
+    }
 }
 
-/// Wall-clock laps for stage timings.
-pub struct Stopwatch(Instant);
+/// Seconds of CPU time (user + system, all threads) the process has used so far (`getrusage`); 0 on a
+/// platform without it (then every stage's CPU seconds read 0).
+pub fn process_cpu_seconds() -> f64 {
+    #[cfg(unix)]
+    {
+        // SAFETY: getrusage only writes the struct it is given, which is plain data and zeroed first.
+        let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+        if unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut usage) } == 0 {
+            let seconds = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+            return seconds(usage.ru_utime) + seconds(usage.ru_stime);
+        }
+    }
+    0.0
+}
+
+/// One [`Stopwatch`] lap: wall-clock seconds and the process's CPU seconds over the same interval.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Lap {
+    pub wall_s: f64,
+    pub cpu_s: f64,
+}
+
+/// Wall-clock and process-CPU laps for stage timings.
+pub struct Stopwatch {
+    wall: Instant,
+    cpu: f64,
+}
 
 impl Stopwatch {
     pub fn start() -> Stopwatch {
-        Stopwatch(Instant::now())
+        Stopwatch { wall: Instant::now(), cpu: process_cpu_seconds() }
     }
 
     /// Seconds since the previous lap (or the start).
-    pub fn lap(&mut self) -> f64 {
+    pub fn lap(&mut self) -> Lap {
         let now = Instant::now();
-        let seconds = now.duration_since(self.0).as_secs_f64();
-        self.0 = now;
-        seconds
+        let cpu = process_cpu_seconds();
+        let lap = Lap { wall_s: now.duration_since(self.wall).as_secs_f64(), cpu_s: (cpu - self.cpu).max(0.0) };
+        (self.wall, self.cpu) = (now, cpu);
+        lap
     }
 }
 
@@ -427,7 +498,7 @@ pub fn detect_preprocessed_timed(
     check_budget_with(&pre, &frame_yaws, models)?;
     // One scene per distinct window step, yaw anchor and lattice (the yaw grids' cell is the step).
     let scenes = window_scenes(&pre, &frame_yaws, models);
-    stages.yaw_grids_s += lap();
+    stages.add(Stage::YawGrids, lap());
     let scene_of = |m: &Model| &scenes[&m.window.scene_key()];
     let mut engines = FastEngines::new();
     // The floor (and free-window) models first; the surface models then search the surfaces of their
@@ -447,7 +518,7 @@ pub fn detect_preprocessed_timed(
                 .collect()
         };
     let windows = windows_of(&floor_models, &|_| Vec::new());
-    stages.window_s += lap();
+    stages.add(Stage::Window, lap());
     let mut detections =
         detect_windows(name, &pre, &floor_models, &windows, scene_of, backend, options, &mut engines, stages)?;
     lap(); // detect_windows timed its own stages
@@ -456,7 +527,7 @@ pub fn detect_preprocessed_timed(
         let surfaces_of =
             |model: &Model| detected_surfaces(&detections, models, options.support_min_score, model.window.supporters);
         let windows = windows_of(&surface_models, &surfaces_of);
-        stages.window_s += lap();
+        stages.add(Stage::Window, lap());
         detections.extend(detect_windows(
             name,
             &pre,
@@ -472,7 +543,7 @@ pub fn detect_preprocessed_timed(
     }
     stages.tables_thread_s += engines.table_thread_seconds();
     calibrate(&mut detections, models);
-    stages.nms_s += lap();
+    stages.add(Stage::Nms, lap());
     Ok(FrameDetections { frame: name.to_string(), detections })
 }
 
@@ -525,11 +596,11 @@ fn detect_windows<'a>(
                 engines.get(scene, model);
             }
         }
-        stages.lattices_s += lap();
+        stages.add(Stage::Lattices, lap());
     }
     let all_hypotheses: Vec<&[Hypothesis]> = windows.iter().map(|w| w.hypotheses.as_slice()).collect();
     let all_scores = score_models(&model_scenes, models, &all_hypotheses, backend, engines)?;
-    stages.score_s += lap();
+    stages.add(Stage::Score, lap());
     // Each model's candidates, models in parallel, gathered in model order (the first error in model order
     // wins, as in a sequential loop).
     stages.hypotheses += all_hypotheses.iter().map(|h| h.len()).sum::<usize>();
@@ -549,7 +620,7 @@ fn detect_windows<'a>(
     // As `nms_detections` orders its survivors: by score, best first, a stable sort over the categories in
     // model order.
     detections.sort_by(|a, b| b.score.total_cmp(&a.score));
-    stages.select_s += lap();
+    stages.add(Stage::Select, lap());
     // The survivors' surfaces (a few per category; every point visited): measured in the chosen slice of a
     // model with latent surfaces, from the points alone for the other detections of surface categories.
     detections.par_iter_mut().for_each(|d| {
@@ -560,7 +631,7 @@ fn detect_windows<'a>(
             None => None,
         };
     });
-    stages.nms_s += lap();
+    stages.add(Stage::Nms, lap());
     Ok(detections)
 }
 

@@ -337,8 +337,21 @@ fn bench_detect_times_the_detection_the_cli_makes() {
     let dir = tempfile::tempdir().unwrap();
     let models = models_dir(dir.path());
     let m = models.to_str().unwrap();
-    let output =
-        run(&["--cpu", "bench", "--detect", SAMPLE, "--models", m, "--json", "--warmup", "0", "--repeat", "2"]);
+    let output = run(&[
+        "--cpu",
+        "bench",
+        "--detect",
+        SAMPLE,
+        "--models",
+        m,
+        "--json",
+        "--warmup",
+        "0",
+        "--repeat",
+        "2",
+        "--in-flight",
+        "2",
+    ]);
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
     let report: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
     let out = dir.path().join("out");
@@ -368,10 +381,39 @@ fn bench_detect_times_the_detection_the_cli_makes() {
         let sum: f64 = keys.iter().map(|k| stage(k)).sum();
         assert!(keys.iter().all(|k| stage(k) >= 0.0));
         assert!((sum - stage("total_s")).abs() <= 1e-9 * sum.max(1.0), "{sum} vs {entry}");
+        // Process CPU seconds: the stages' are parts of the frame's (sub-intervals of a monotonic clock),
+        // and no stage uses more than every core for its whole wall time.
+        let cpu_keys = [
+            "preprocess_cpu_s",
+            "yaw_grids_cpu_s",
+            "window_cpu_s",
+            "lattices_cpu_s",
+            "score_cpu_s",
+            "select_cpu_s",
+            "nms_cpu_s",
+            "layout_cpu_s",
+        ];
+        let cpu_parts: f64 = cpu_keys.iter().map(|k| stage(k)).sum();
+        assert!(cpu_keys.iter().all(|k| stage(k) >= 0.0));
+        assert!(stage("cpu_s") + 1e-6 >= cpu_parts, "{entry}");
+        assert!(stage("score_cpu_s") > 0.0, "scoring on the CPU takes CPU time: {entry}");
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get()) as f64;
+        for (cpu, wall) in [("score_cpu_s", "score_s"), ("cpu_s", "total_s")] {
+            // (Plus the kernel's accounting granularity.)
+            assert!(stage(cpu) <= cores * stage(wall) + 0.02, "{cpu} over {cores} cores × {wall}: {entry}");
+        }
     }
     let mean = report["paths"]["cpu"]["mean"]["total_s"].as_f64().unwrap();
     let expected = frames.iter().map(|f| f["total_s"].as_f64().unwrap()).sum::<f64>() / 2.0;
     assert!((mean - expected).abs() <= 1e-9 * expected);
+    // --in-flight 2: the two repeats again, at once, with the same detections and a wall time per detection.
+    let pass = &report["paths"]["cpu"]["in_flight"];
+    assert_eq!(pass["frames_in_flight"], 2, "{pass}");
+    assert_eq!(pass["detections"], 2);
+    assert_eq!(pass["same_as_one_at_a_time"], true, "{pass}");
+    assert_eq!(pass["vs_one_at_a_time"]["frames_compared"], 2);
+    let wall = pass["wall_s"].as_f64().unwrap();
+    assert!(wall > 0.0 && (pass["s_per_frame"].as_f64().unwrap() - wall / 2.0).abs() <= 1e-12 * wall, "{pass}");
 }
 
 /// The GPU path (the fast kernel forced on, lavapipe included) detects the same boxes with the same scores

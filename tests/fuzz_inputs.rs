@@ -393,6 +393,28 @@ fn batch_detect_and_eval_go_on_past_a_bad_frame() {
         assert!(out.join(format!("{good}.json")).is_file(), "{good} was not detected: {err}");
     }
     assert!(!out.join("a-bad.json").exists());
+    // Several frames in flight: the same failure report and the same files.
+    let together = tmp.path().join("together");
+    assert_rejected(
+        &[
+            "detect",
+            text(&data),
+            "--models",
+            text(&models),
+            "--out",
+            text(&together),
+            "--no-overlay",
+            "--in-flight",
+            "3",
+        ],
+        &["1 of 3 frames failed", "a-bad", "intrinsics.txt"],
+    );
+    for good in ["b-good", "c-good"] {
+        let file = format!("{good}.json");
+        let (one, three) = (std::fs::read(out.join(&file)).unwrap(), std::fs::read(together.join(&file)).unwrap());
+        assert!(one == three, "{good}: --in-flight 3 wrote another detections file");
+    }
+    assert!(!together.join("a-bad.json").exists());
 
     let fast = tmp.path().join("fast");
     assert_rejected(

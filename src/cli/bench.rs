@@ -81,6 +81,11 @@ pub struct Args {
     /// With --detect: untimed detections of the first frame before timing, per path.
     #[arg(long, default_value_t = 1)]
     pub warmup: usize,
+    /// With --detect: after the stage-by-stage pass (one frame at a time), detect every frame `--repeat`
+    /// times again with N frames in flight (as `detect --in-flight N`) and report the wall-clock seconds
+    /// per frame of that pass, its detections compared with the first pass's.
+    #[arg(long, value_name = "N", value_parser = options::at_least_one)]
+    pub in_flight: Option<usize>,
 }
 
 /// Feature paths `bench` can time.

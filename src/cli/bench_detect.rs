@@ -16,6 +16,17 @@
 //! | `layout_s` | the room layout (0 without `layout.json`) |
 //! | `output_s` | the detections file's JSON text and the overlay drawn in memory (no PNG encoding, no disk) |
 //!
+//! With `--in-flight N`, a second pass detects the frames (each `--repeat` times) with `N` frames in flight
+//! (`cli::in_flight`, as `detect --in-flight N`): stage times overlap there, so only its wall-clock
+//! seconds per frame are reported (`in_flight.s_per_frame`, beside the first pass's `mean.total_s`), and
+//! its detections are compared with the first pass's (`in_flight.same_as_one_at_a_time`).
+//!
+//! Beside each stage's wall-clock seconds, the process's CPU seconds over the same interval (user + system,
+//! all threads, `detect::process_cpu_seconds`): `preprocess_cpu_s` (reading included), `yaw_grids_cpu_s`,
+//! `window_cpu_s`, `lattices_cpu_s`, `score_cpu_s`, `select_cpu_s`, `nms_cpu_s`, `layout_cpu_s`, and `cpu_s`
+//! for the whole frame: how much of the machine a stage uses (on the GPU path, the CPU work beside the
+//! GPU's, which bounds how many frames per second the machine can detect with frames in flight).
+//!
 //! `total_s` is the sum of the stages; `tables_thread_s` is the part of `score_s`'s work spent building the
 //! fast path's tables, summed over threads. On the GPU path the read-back is inside `score_s`. The two
 //! paths' detections are compared frame by frame (same categories and boxes, scores within a relative
@@ -51,6 +62,11 @@ struct FrameTimes {
     layout_s: f64,
     output_s: f64,
     total_s: f64,
+    /// Process CPU seconds (all threads) of reading and preprocessing, of the room layout, and of the
+    /// whole frame (the detection stages' own are in `stages`).
+    preprocess_cpu_s: f64,
+    layout_cpu_s: f64,
+    cpu_s: f64,
     detections: usize,
 }
 
@@ -102,6 +118,10 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
                 detections.push(found);
             }
         }
+        let pipelined = match args.in_flight {
+            Some(n) => Some(bench.in_flight(&frames, args.repeat, n, *backend, &detect_options, &detections)?),
+            None => None,
+        };
         let adapter = match backend {
             Backend::Gpu(ctx) => ctx.adapter_summary(),
             Backend::Cpu => format!("CPU, rayon, {} threads", rayon::current_num_threads()),
@@ -113,7 +133,13 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         };
         paths.insert(
             backend.name().into(),
-            json!({"adapter": adapter, "fast_kernel": fast_kernel, "mean": mean_times(&times), "frames": times}),
+            json!({
+                "adapter": adapter,
+                "fast_kernel": fast_kernel,
+                "mean": mean_times(&times),
+                "frames": times,
+                "in_flight": pipelined,
+            }),
         );
         detections_per_path.push(detections);
     }
@@ -136,6 +162,14 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         println!("{}", serde_json::to_string(&report)?);
     } else {
         print_report(&report);
+    }
+    for (name, path) in report["paths"].as_object().into_iter().flatten() {
+        if path["in_flight"]["same_as_one_at_a_time"] == json!(false) {
+            bail!(
+                "{name} path: frames in flight detected other boxes or scores than one at a time: {}",
+                path["in_flight"]["vs_one_at_a_time"]
+            );
+        }
     }
     if let Some(agreement) = &agreement {
         if agreement["same"] == json!(false) {
@@ -163,25 +197,31 @@ impl Bench<'_> {
         let mut clock = Stopwatch::start();
         let mut lap = || clock.lap();
         let mut times = FrameTimes::default();
+        let mut cpu_s = 0.0;
         let frame = Frame::read(dir, DepthSource::Raw)?;
         times.frame = frame.name.clone();
-        times.read_s = lap();
+        let read = lap();
+        times.read_s = read.wall_s;
         let pre = Preprocessed::from_frame(&frame).with_context(|| format!("preprocessing {}", dir.display()))?;
-        times.preprocess_s = lap();
+        let preprocess = lap();
+        (times.preprocess_s, times.preprocess_cpu_s) = (preprocess.wall_s, read.cpu_s + preprocess.cpu_s);
         let mut detections =
             detect_preprocessed_timed(&frame.name, pre, self.models, backend, detect_options, &mut times.stages)
                 .with_context(|| format!("detecting in {}", dir.display()))?;
-        lap();
+        cpu_s += lap().cpu_s;
         let layout = lay_out(&frame, self.layout_model, backend)?;
-        times.layout_s = lap();
+        let laid_out = lap();
+        (times.layout_s, times.layout_cpu_s) = (laid_out.wall_s, laid_out.cpu_s);
         rescore_in_room(self.cascade, &mut detections, layout.as_ref())?;
-        times.cascade_s = lap();
+        let rescored = lap();
+        times.cascade_s = rescored.wall_s;
         let found = detections.detections.clone();
         let report = FrameReport { detections, layout: layout.as_ref().map(|(_, record)| record.clone()) };
         let text = serde_json::to_string_pretty(&report)?;
         let picture = overlay_picture(&frame, &best_of(&report, 8), layout.as_ref().map(|(p, _)| &p.room));
         std::hint::black_box((text, picture));
-        times.output_s = lap();
+        let output = lap();
+        times.output_s = output.wall_s;
         times.detections = found.len();
         times.total_s = times.read_s
             + times.preprocess_s
@@ -189,7 +229,46 @@ impl Bench<'_> {
             + times.cascade_s
             + times.layout_s
             + times.output_s;
+        // The whole frame: its laps, the detection (whose stages `stages` splits) as one of them.
+        times.cpu_s = times.preprocess_cpu_s + cpu_s + laid_out.cpu_s + rescored.cpu_s + output.cpu_s;
         Ok((times, found))
+    }
+}
+
+impl Bench<'_> {
+    /// The `--in-flight` pass: every frame `repeat` times (in the first pass's order), `in_flight` at a
+    /// time; its wall-clock seconds per frame and whether its detections equal `one_at_a_time`'s.
+    fn in_flight(
+        &self,
+        frames: &[std::path::PathBuf],
+        repeat: usize,
+        in_flight: usize,
+        backend: Backend,
+        detect_options: &DetectOptions,
+        one_at_a_time: &[Vec<Detection>],
+    ) -> anyhow::Result<serde_json::Value> {
+        let work: Vec<&std::path::PathBuf> = frames.iter().flat_map(|f| std::iter::repeat_n(f, repeat)).collect();
+        let started = std::time::Instant::now();
+        let outcomes = super::in_flight::in_flight(
+            &work,
+            in_flight,
+            |_, dir| self.frame(dir, backend, detect_options).map(|(_, found)| found),
+            |outcome| outcome.is_err(),
+        );
+        let wall_s = started.elapsed().as_secs_f64();
+        let mut found = Vec::new();
+        for outcome in outcomes.into_iter().flatten() {
+            found.push(outcome?);
+        }
+        let agreement = compare_paths(&found, one_at_a_time);
+        Ok(json!({
+            "frames_in_flight": in_flight,
+            "detections": work.len(),
+            "wall_s": wall_s,
+            "s_per_frame": wall_s / work.len() as f64,
+            "same_as_one_at_a_time": agreement.same,
+            "vs_one_at_a_time": agreement,
+        }))
     }
 }
 
@@ -249,6 +328,29 @@ fn print_report(report: &serde_json::Value) {
             columns.iter().map(|c| format!(" {:>10.4}", path["mean"][c].as_f64().unwrap_or(f64::NAN))).collect();
         println!("{name:>5} {values}");
     }
+    let cpu_columns = [
+        "preprocess_cpu_s",
+        "yaw_grids_cpu_s",
+        "window_cpu_s",
+        "lattices_cpu_s",
+        "score_cpu_s",
+        "layout_cpu_s",
+        "cpu_s",
+    ];
+    println!("mean process CPU seconds per frame (all threads):");
+    println!(
+        "{:>5} {}",
+        "path",
+        cpu_columns
+            .iter()
+            .map(|c| format!(" {:>10}", c.trim_end_matches("_s").trim_end_matches("_cpu")))
+            .collect::<String>()
+    );
+    for (name, path) in &paths {
+        let values: String =
+            cpu_columns.iter().map(|c| format!(" {:>10.4}", path["mean"][c].as_f64().unwrap_or(f64::NAN))).collect();
+        println!("{name:>5} {values}");
+    }
     for (name, path) in &paths {
         println!(
             "{name:>5}: {:.0} hypotheses/s in scoring; tables {:.3} thread-s per frame; fast kernel: {}  [{}]",
@@ -257,6 +359,20 @@ fn print_report(report: &serde_json::Value) {
             path["fast_kernel"],
             path["adapter"].as_str().unwrap_or("?")
         );
+    }
+    for (name, path) in &paths {
+        if let Some(pass) = path["in_flight"].as_object() {
+            println!(
+                "{name:>5}: {} frames in flight: {:.4} s per frame wall-clock ({} detections in {:.3} s; one at a \
+                 time: {:.4} s per frame); same detections: {}",
+                pass["frames_in_flight"],
+                pass["s_per_frame"].as_f64().unwrap_or(f64::NAN),
+                pass["detections"],
+                pass["wall_s"].as_f64().unwrap_or(f64::NAN),
+                path["mean"]["total_s"].as_f64().unwrap_or(f64::NAN),
+                pass["same_as_one_at_a_time"]
+            );
+        }
     }
     if let (Some(gpu), Some(cpu)) = (paths.get("gpu"), paths.get("cpu")) {
         let ratio = |c: &str| cpu["mean"][c].as_f64().unwrap_or(f64::NAN) / gpu["mean"][c].as_f64().unwrap_or(f64::NAN);

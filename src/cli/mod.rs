@@ -7,6 +7,7 @@ pub mod cascade;
 pub mod detect;
 pub mod eval;
 pub mod eval_layout;
+pub mod in_flight;
 pub mod info;
 pub mod layout;
 pub mod options;
