@@ -98,15 +98,16 @@ pub struct Args {
     #[arg(long)]
     pub fail_fast: bool,
     /// Frames detected at once, so that one frame's CPU stages overlap another's GPU work (same
-    /// detections; each frame in flight holds its hypotheses, ~0.5 GB at step 0.1). Default:
-    /// 2 when the GPU scores the fast path, else 1 (on the CPU path every core is already busy).
+    /// detections; each frame in flight adds ~0.5 GB of memory at step 0.1). Default: 3 when the GPU
+    /// scores the fast path, else 1 (on the CPU path every core is already busy).
     #[arg(long, value_name = "N", value_parser = options::at_least_one)]
     pub in_flight: Option<usize>,
 }
 
-/// Default of `detect --in-flight` when the GPU scores the fast path (README, "End to end": on an H200 two
-/// frames in flight against one).
-pub const GPU_IN_FLIGHT: usize = 2;
+/// Default of `detect --in-flight` when the GPU scores the fast path. Measured on an H200 with 16 cores
+/// (README, "End to end"), seconds per frame at step 0.1: 0.74–0.79 one at a time, 0.66 with two in
+/// flight, 0.60–0.61 with three, 0.57 with four (one run); three, for ~1 GB more host memory than one.
+pub const GPU_IN_FLIGHT: usize = 3;
 
 /// `path` if it exists, else the same relative path inside the crate's checkout (for the defaults).
 pub(super) fn resolve_default(path: &Path) -> PathBuf {
