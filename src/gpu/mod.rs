@@ -218,7 +218,7 @@ pub struct GpuContext {
     pub wait: GpuWait,
 }
 
-/// How a thread waits for the GPU to finish a submission before reading back ([`GpuContext::wait_for_mapping`]).
+/// How a thread waits for the GPU to finish a submission before reading back (`GpuContext::wait_for_mapping`).
 /// `COG_GPU_WAIT=block` (the default) or `sleep`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum GpuWait {
