@@ -575,13 +575,13 @@ fn voxel_boundaries(g: &[u32; 3], expanded: &ExpandedBox, lattice: &YawLattice) 
     let counts = [g[0] as usize + 1, g[1] as usize + 1];
     let mut boundaries = VoxelBoundaries { cells: [0; MAX_BOUNDARIES], counts };
     let mut at = 0;
-    for axis in 0..2 {
+    for (axis, &count) in counts.iter().enumerate() {
         let (lo, cell, origin) = (expanded.lo[axis], expanded.cell[axis], lattice.origin[axis]);
         // A lattice has far fewer than 2²⁴ cells along an axis (its table would not fit in memory), so the
         // limit is exact in f32 and i32.
         let limit = lattice.cells[axis].min(1 << 24) as i32;
         let limit_f = limit as f32;
-        for first in (0..counts[axis]).step_by(LANES) {
+        for first in (0..count).step_by(LANES) {
             let mut lanes = [0u32; LANES];
             for (l, lane) in lanes.iter_mut().enumerate() {
                 let face = lo + (first + l) as f32 * cell;
@@ -594,10 +594,10 @@ fn voxel_boundaries(g: &[u32; 3], expanded: &ExpandedBox, lattice: &YawLattice) 
                 let ceiling = t + i32::from((t as f32) < clamped);
                 *lane = ceiling.clamp(0, limit) as u32;
             }
-            let take = LANES.min(counts[axis] - first);
+            let take = LANES.min(count - first);
             boundaries.cells[at + first..at + first + take].copy_from_slice(&lanes[..take]);
         }
-        at += counts[axis];
+        at += count;
     }
     boundaries
 }
@@ -841,8 +841,8 @@ mod tests {
                 let mut lo = [uniform(-10.0, 10.0), uniform(-10.0, 10.0), 0.0];
                 if n % 5 == 0 {
                     // Faces on cell-centre ties: lo at origin + (k + ½)·cell, a cell that divides the lattice's.
-                    for a in 0..2 {
-                        lo[a] = lattice.origin[a] + ((n % 37) as f32 + 0.5) * lattice.cell;
+                    for (l, origin) in lo.iter_mut().zip(lattice.origin) {
+                        *l = origin + ((n % 37) as f32 + 0.5) * lattice.cell;
                     }
                 }
                 if n == 7 {
