@@ -404,16 +404,6 @@ impl DetectStages {
         self.yaw_grids_s + self.window_s + self.lattices_s + self.score_s + self.select_s + self.nms_s
     }
 
-    /// The sum of the stages' process CPU seconds.
-    pub fn total_cpu_s(&self) -> f64 {
-        self.yaw_grids_cpu_s
-            + self.window_cpu_s
-            + self.lattices_cpu_s
-            + self.score_cpu_s
-            + self.select_cpu_s
-            + self.nms_cpu_s
-    }
-
     /// Adds `lap` to `stage`'s wall-clock and CPU seconds.
     pub fn add(&mut self, stage: Stage, lap: Lap) {
         let (wall, cpu) = match stage {

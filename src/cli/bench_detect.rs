@@ -233,9 +233,7 @@ impl Bench<'_> {
         times.cpu_s = times.preprocess_cpu_s + cpu_s + laid_out.cpu_s + rescored.cpu_s + output.cpu_s;
         Ok((times, found))
     }
-}
 
-impl Bench<'_> {
     /// The `--in-flight` pass: every frame `repeat` times (in the first pass's order), `in_flight` at a
     /// time; its wall-clock seconds per frame and whether its detections equal `one_at_a_time`'s.
     fn in_flight(
