@@ -17,8 +17,8 @@
 #   2. the 4 frames of `synth --frames 4 --seed 1 --sensor xtion`: `bench --detect --both --json` with
 #      every shipped model, at `--detect-step 0.1` (the issue's setting; with the GPU debug log) and at the
 #      models' own steps, each path also with IN_FLIGHT frames in flight (`--in-flight`); at 0.1 m the GPU
-#      path alone with 3 frames in flight, with four buffer-pool sets (COG_GPU_POOL_SLOTS=4), and with
-#      sleeping waits (COG_GPU_WAIT=sleep) at 3 and 4 frames in flight; with BASE_BIN, that binary's GPU
+#      path alone with 3 and 4 frames in flight, and with 3 and four buffer-pool sets
+#      (COG_GPU_POOL_SLOTS=4); with BASE_BIN, that binary's GPU
 #      path at 0.1 m (a baseline, same machine);
 #   3. the README's main command, `cog-gpu detect` of the shipped sample frames with overlays, timed from
 #      process start to exit (and BASE_BIN's).
@@ -71,7 +71,7 @@ step() {
 
 frames=4 steps=(${STEPS:-0.1 own}) hypothesis_limit=()
 [ "${QUICK:-0}" = 1 ] && frames=1 steps=("own") REPEAT=1 hypothesis_limit=(--limit 20000)
-# The steps' time limits add up to 580 s (570 with BASE_BIN and STEPS=0.1; the device tool allows 600 per
+# The steps' time limits add up to 540 s (530 with BASE_BIN and STEPS=0.1; the device tool allows 600 per
 # command); SLOW multiplies them
 # (default 1; QUICK on a 2-core machine: 6).
 SLOW=${SLOW:-$([ "${QUICK:-0}" = 1 ] && echo 6 || echo 1)}
@@ -100,14 +100,12 @@ variant() {
     step "$name" "$limit" "$@" > "$work/variant.json"
     printf '{"variant":"%s","report":%s}\n' "$name" "$(cat "$work/variant.json")" >> "$OUT/variants.jsonl"
 }
-# 2b. The GPU path alone at 0.1 m with more frames in flight, with more buffer-pool sets, and with
-#     sleeping instead of blocking waits for the GPU (COG_GPU_WAIT=sleep).
+# 2b. The GPU path alone at 0.1 m with more frames in flight, and with more buffer-pool sets.
 if [ "${QUICK:-0}" != 1 ]; then
     gpu_at_0_1=("$BIN" bench --detect "$work/frames" --detect-step 0.1 --gpu --repeat "$REPEAT" --json)
     variant gpu-in-flight-3 40 "${gpu_at_0_1[@]}" --in-flight 3
     variant gpu-in-flight-3-pool-4 40 env COG_GPU_POOL_SLOTS=4 "${gpu_at_0_1[@]}" --in-flight 3
-    variant gpu-in-flight-3-sleep 40 env COG_GPU_WAIT=sleep "${gpu_at_0_1[@]}" --in-flight 3
-    variant gpu-in-flight-4-sleep 40 env COG_GPU_WAIT=sleep "${gpu_at_0_1[@]}" --in-flight 4
+    variant gpu-in-flight-4 40 "${gpu_at_0_1[@]}" --in-flight 4
 fi
 # 2c. A baseline build (BASE_BIN, e.g. the previous release), GPU path, same machine, same frames.
 if [ -n "${BASE_BIN:-}" ]; then

@@ -244,36 +244,3 @@ fn concurrent_calls_on_one_context_equal_the_calls_one_after_the_other() {
         assert_scores_match(got, &twin, &magnitude, &format!("call {n}: concurrent GPU vs CPU twin"));
     }
 }
-
-#[test]
-fn sleeping_waits_read_back_the_same_scores_as_blocking_ones() {
-    // `COG_GPU_WAIT=sleep` (`GpuWait::Sleep`): the read-backs poll and sleep instead of blocking in the
-    // driver. Concurrent calls with several batches each (so waits overlap and callbacks may run on other
-    // threads' polls): the same bits as with blocking waits.
-    use cog_gpu::gpu::GpuWait;
-    let Some(mut ctx) = context() else { return };
-    let window = synthetic_window("bed");
-    let layout = FeatureLayout::default();
-    let engine = FastEngine::new(&window.scene, &layout, FastOptions::default());
-    let hyps = sample(&window, 200);
-    let weights: Vec<Vec<Vec<f32>>> = (0..3).map(|n| random_weights(&layout, 1 + n, 70 + n as u64)).collect();
-    let chunking = FastChunking { max_chunk: 48, max_batch_bytes: 16 << 20 };
-    let concurrent = |ctx: &GpuContext| -> Vec<Vec<u32>> {
-        std::thread::scope(|s| {
-            let handles: Vec<_> = (0..3)
-                .map(|n| {
-                    let (engine, hyps, weights) = (&engine, &hyps, &weights);
-                    s.spawn(move || {
-                        let job = FastJob { hypotheses: hyps, weights: &weights[n] };
-                        bits(&fast_scores_gpu_jobs(ctx, engine, &[job], chunking).unwrap()[0])
-                    })
-                })
-                .collect();
-            handles.into_iter().map(|h| h.join().unwrap()).collect()
-        })
-    };
-    ctx.wait = GpuWait::Block;
-    let blocking = concurrent(&ctx);
-    ctx.wait = GpuWait::Sleep;
-    assert_eq!(concurrent(&ctx), blocking);
-}

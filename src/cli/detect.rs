@@ -106,7 +106,8 @@ pub struct Args {
 
 /// Default of `detect --in-flight` when the GPU scores the fast path. Measured on an H200 with 16 cores
 /// (README, "End to end"), seconds per frame at step 0.1: 0.74–0.79 one at a time, 0.66 with two in
-/// flight, 0.60–0.61 with three, 0.57 with four (one run); three, for ~1 GB more host memory than one.
+/// flight, 0.605–0.615 with three, 0.64–0.68 with four (two runs); three, for ~1 GB more host memory than
+/// one.
 pub const GPU_IN_FLIGHT: usize = 3;
 
 /// `path` if it exists, else the same relative path inside the crate's checkout (for the defaults).

@@ -887,7 +887,8 @@ mod tests {
     }
 
     /// The window's shared-footprint counting keeps exactly the boxes a count per size keeps, whatever the
-    /// order of the sizes (product order, where footprints repeat, or shuffled, where they do not).
+    /// order of the sizes (product order, where footprints repeat, or shuffled, where they do not). The
+    /// count per size is `CountTable::count`, checked against points counted one by one above.
     #[test]
     fn window_counts_equal_a_count_per_size_in_any_size_order() {
         let scene = sample_scene();

@@ -214,37 +214,6 @@ pub struct GpuContext {
     pub pools: Vec<Mutex<BufferPool>>,
     /// Which set a caller waits for when every set is taken (round robin).
     next_pool: AtomicUsize,
-    /// How a read-back waits for its submission ([`GpuWait`], `COG_GPU_WAIT`).
-    pub wait: GpuWait,
-}
-
-/// How a thread waits for the GPU to finish a submission before reading back (`GpuContext::wait_for_mapping`).
-/// `COG_GPU_WAIT=block` (the default) or `sleep`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum GpuWait {
-    /// Block in the driver (`device.poll` with a wait): the lowest latency, but a driver may spin on the
-    /// CPU while it waits, taking a core from the other frames' and calls' CPU work.
-    Block,
-    /// Poll without blocking, then sleep [`SLEEP_SLICE`] until the map callback comes (run by this thread's
-    /// next poll or another thread's): no CPU used while the GPU works, up to a slice of latency per wait.
-    Sleep,
-}
-
-/// How long a [`GpuWait::Sleep`] wait sleeps between polls.
-pub const SLEEP_SLICE: std::time::Duration = std::time::Duration::from_micros(100);
-
-/// The wait a new context uses: `COG_GPU_WAIT` when set, else [`GpuWait::Block`].
-pub fn gpu_wait() -> Result<GpuWait> {
-    parse_gpu_wait(std::env::var("COG_GPU_WAIT").ok().as_deref())
-}
-
-/// [`gpu_wait`] of the variable's value (`None`: unset).
-fn parse_gpu_wait(value: Option<&str>) -> Result<GpuWait> {
-    match value.map(str::trim) {
-        None | Some("block") => Ok(GpuWait::Block),
-        Some("sleep") => Ok(GpuWait::Sleep),
-        Some(other) => Err(Error::Input(format!("COG_GPU_WAIT is '{other}': expected 'block' or 'sleep'"))),
-    }
 }
 
 /// Default number of [`BufferPool`] sets of a context ([`pool_slots`]).
@@ -451,7 +420,6 @@ impl GpuContext {
         device.set_device_lost_callback(|reason, message| log::error!("GPU device lost ({reason:?}): {message}"));
         let kernels = Kernels::new(&device)?;
         let pools = (0..pool_slots()?).map(|_| Mutex::default()).collect();
-        let wait = gpu_wait()?;
         Ok(GpuContext {
             instance,
             adapter,
@@ -463,7 +431,6 @@ impl GpuContext {
             timestamps,
             pools,
             next_pool: AtomicUsize::new(0),
-            wait,
         })
     }
 
@@ -726,37 +693,23 @@ impl GpuContext {
     /// [`MAP_WAIT`].
     ///
     /// `submission` is the submission the mapping waits for: the poll blocks until it is done, not until
-    /// the latest one (another caller's batch may be running on another pool set); with
-    /// [`GpuWait::Sleep`], non-blocking polls and sleeps instead. `None`: the buffer is in no unfinished
-    /// submission, so a non-blocking poll maps it.
+    /// the latest one (another caller's batch may be running on another pool set). `None`: the buffer is in
+    /// no unfinished submission, so a non-blocking poll maps it.
     fn wait_for_mapping(
         &self,
         mapped: &std::sync::mpsc::Receiver<std::result::Result<(), wgpu::BufferAsyncError>>,
         submission: Option<&wgpu::SubmissionIndex>,
     ) -> Result<std::result::Result<(), wgpu::BufferAsyncError>> {
-        let sleeping = submission.is_some() && self.wait == GpuWait::Sleep;
-        // When the GPU was last seen done with the submission: from then on the callback must come within
-        // MAP_WAIT (a blocking poll returns only then; a buffer in no submission is done already).
-        let mut done_since = None;
+        let started = std::time::Instant::now();
         loop {
             let until = match submission {
-                Some(index) if !sleeping => {
-                    wgpu::PollType::Wait { submission_index: Some(index.clone()), timeout: None }
-                }
-                _ => wgpu::PollType::Poll,
+                Some(index) => wgpu::PollType::Wait { submission_index: Some(index.clone()), timeout: None },
+                None => wgpu::PollType::Poll,
             };
-            let status = self.device.poll(until).map_err(|e| Error::Gpu(format!("waiting for the GPU: {e}")))?;
-            if !sleeping || status.is_queue_empty() {
-                done_since.get_or_insert_with(std::time::Instant::now);
-            }
-            let slice = if sleeping { SLEEP_SLICE } else { std::time::Duration::from_millis(10) };
-            match mapped.recv_timeout(slice) {
+            self.device.poll(until).map_err(|e| Error::Gpu(format!("waiting for the GPU: {e}")))?;
+            match mapped.recv_timeout(std::time::Duration::from_millis(10)) {
                 Ok(status) => return Ok(status),
-                Err(std::sync::mpsc::RecvTimeoutError::Timeout)
-                    if done_since.is_none_or(|t: std::time::Instant| t.elapsed() < MAP_WAIT) =>
-                {
-                    continue
-                }
+                Err(std::sync::mpsc::RecvTimeoutError::Timeout) if started.elapsed() < MAP_WAIT => continue,
                 Err(_) => {
                     return Err(Error::Gpu(format!(
                         "a buffer to map was not mapped {} s after the GPU went idle",
@@ -950,17 +903,6 @@ impl ErrorScopes {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn gpu_wait_defaults_to_blocking_and_names_a_bad_value() {
-        assert_eq!(parse_gpu_wait(None).unwrap(), GpuWait::Block);
-        assert_eq!(parse_gpu_wait(Some("block")).unwrap(), GpuWait::Block);
-        assert_eq!(parse_gpu_wait(Some(" sleep ")).unwrap(), GpuWait::Sleep);
-        for bad in ["", "spin", "Sleep", "1"] {
-            let message = parse_gpu_wait(Some(bad)).unwrap_err().to_string();
-            assert!(message.contains("COG_GPU_WAIT") && message.contains(&format!("'{}'", bad.trim())), "{message}");
-        }
-    }
 
     #[test]
     fn pool_slots_default_to_two_and_take_one_to_eight() {
