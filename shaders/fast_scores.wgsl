@@ -16,7 +16,9 @@
 // and scalar loads was 1.4× slower). On lavapipe the kernel is bound by its 45 non-uniform vec4 loads per
 // voxel (36 table, 9 weights), which gallivm performs lane by lane. The 64 partial scores
 // per weight vector are reduced in workgroup memory in a fixed tree order, so the result is the same
-// bits on every run. The view features are added on the CPU (12 numbers per hypothesis).
+// bits on every run. Then invocation 0 adds the view part (group bit 8): the view cosine of the box's centre,
+// its VIEW_RBFS radial basis functions and the bias, dotted with the pass's view weights — after the voxels,
+// as `FastEngine::scores` adds it.
 //
 // Loops are short (≤ 9 voxels × ≤ 36 channels per invocation): far from gallivm's 65535-iteration cap
 // (see shaders/features.wgsl).
@@ -25,16 +27,24 @@ const MAX_WEIGHTS: u32 = 8u;
 const WORKGROUP: u32 = 64u;
 const MIN_PROJECT_DEPTH: f32 = 1e-3;
 const COG_EPSILON: f32 = 0.01;
+// The view features (src/features/feature_layout.rs): VIEW_RBFS radial basis functions of the view cosine
+// at −1, −0.8, …, 1 with width VIEW_SIGMA, then a constant 1.
+const VIEW: u32 = 12u;
+const VIEW_RBFS: u32 = 11u;
+const VIEW_SIGMA: f32 = 0.5;
+// A centre horizontally within this of the camera has view cosine 0 (`view_cosine`).
+const VIEW_MIN_DISTANCE: f32 = 1e-6;
 
-// One hypothesis: its expanded box's low corner and voxel size in the yaw's rotated frame.
+// One hypothesis: its expanded box's low corner and voxel size in the yaw's rotated frame, and its centre on
+// the ground (s, t) for the view features.
 struct FastRecord {
-    lo: vec4<f32>,   // s, t, z, unused
-    cell: vec4<f32>, // voxel size along s, t, z, unused
+    lo: vec4<f32>,   // s, t, z, centre s
+    cell: vec4<f32>, // voxel size along s, t, z, centre t
 }
 
 struct FastParams {
     grid: vec4<u32>,  // nx, ny, nz, dim (unused)
-    job: vec4<u32>,   // hypothesis count, weight count, group bits (1 density, 2 normals, 4 cog), boundaries per hypothesis
+    job: vec4<u32>,   // hypothesis count, weight count, group bits (1 density, 2 normals, 4 cog, 8 view), boundaries per hypothesis
     table: vec4<u32>, // entries per table row (cells along s + 1), rows per layer (cells along t + 1), unused, unused
     scale: vec4<f32>, // fx, fy, 1 / cog_scale, unused
     m0: vec4<f32>,    // camera_from_rotated, column 0 (xyz)
@@ -42,6 +52,7 @@ struct FastParams {
     m2: vec4<f32>,    // column 2
     base: vec4<u32>,  // first vec4 of the table in `table`, first record, first boundary, first vec4 of the weights
     at: vec4<u32>,    // first score in `out`, unused, unused, unused
+    view: vec4<f32>,  // the yaw's rotation to upright (cos, sin) and the boxes' front direction (x, y), upright
 }
 
 // This dispatch's record (a dynamic offset into the batch's records).
@@ -51,8 +62,9 @@ struct FastParams {
 @group(0) @binding(2) var<storage, read> records: array<FastRecord>;
 // Per hypothesis: nx + 1 cell boundaries along s, then ny + 1 along t (voxel i covers cells xs[i]..xs[i+1]).
 @group(0) @binding(3) var<storage, read> bounds: array<u32>;
-// The passes' weight vectors without the view part, each voxel padded to 36 (pad weight 0):
-// weights[base.w + (w·voxels + ℓ)·9 + c] holds the weights of channels 4c..4c+3 of voxel ℓ.
+// The passes' weight vectors, each voxel padded to 36 (pad weight 0):
+// weights[base.w + (w·voxels + ℓ)·9 + c] holds the weights of channels 4c..4c+3 of voxel ℓ; with the view
+// group, weights[base.w + weight_count·voxels·9 + w·3 + c] those of view features 4c..4c+3 after them.
 @group(0) @binding(4) var<storage, read> weights: array<vec4<f32>>;
 @group(0) @binding(5) var<storage, read_write> out: array<f32>;
 
@@ -65,6 +77,35 @@ fn camera_point(q: vec3<f32>) -> vec3<f32> {
 // Written out (not dot()) so the order of the additions is the CPU's.
 fn dot3(a: vec3<f32>, b: vec3<f32>) -> f32 {
     return a.x * b.x + a.y * b.y + a.z * b.z;
+}
+
+// The view cosine of a box centred at (s, t) on the ground (`view_cosine`: the centre turned upright, the
+// unit direction from it to the camera, dotted with the front), with the CPU's operations in its order.
+fn view_cosine(s: f32, t: f32) -> f32 {
+    let x = s * params.view.x - t * params.view.y;
+    let y = s * params.view.y + t * params.view.x;
+    let to_camera = vec2<f32>(-x, -y);
+    let length = sqrt(to_camera.x * to_camera.x + to_camera.y * to_camera.y);
+    if (length < VIEW_MIN_DISTANCE) {
+        return 0.0;
+    }
+    let inv_length = 1.0 / length;
+    return params.view.z * (to_camera.x * inv_length) + params.view.w * (to_camera.y * inv_length);
+}
+
+// The view part of weight vector w's score: Σ_j weights_j · view_j over the VIEW features in order.
+fn view_part(w: u32, weight_count: u32, voxels: u32, cosine: f32) -> f32 {
+    let wb = params.base.w + weight_count * voxels * 9u + w * 3u;
+    var acc = 0.0;
+    for (var j = 0u; j < VIEW; j++) {
+        var feature = 1.0;
+        if (j < VIEW_RBFS) {
+            let d = cosine - (-1.0 + 0.2 * f32(j));
+            feature = exp(-(d * d) / (2.0 * VIEW_SIGMA * VIEW_SIGMA));
+        }
+        acc += weights[wb + j / 4u][j % 4u] * feature;
+    }
+    return acc;
 }
 
 // acc + a·b, adding the four products one after the other (the CPU twin's order).
@@ -89,6 +130,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let use_density = (groups & 1u) != 0u;
     let use_normals = (groups & 2u) != 0u;
     let use_cog = (groups & 4u) != 0u;
+    let use_view = (groups & 8u) != 0u;
     // Uniform control flow up to the barriers: out-of-range work is masked, not returned from.
     let working = h < params.job.x;
     var my_partial: array<f32, 8>;
@@ -203,8 +245,15 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         workgroupBarrier();
     }
     if (lid == 0u && working) {
+        let record = records[params.base.y + h];
+        let cosine = view_cosine(record.lo.w, record.cell.w);
+        let voxels = nx * ny * nz;
         for (var w = 0u; w < weight_count; w++) {
-            out[params.at.x + h * weight_count + w] = partial[w];
+            var score = partial[w];
+            if (use_view) {
+                score += view_part(w, weight_count, voxels, cosine);
+            }
+            out[params.at.x + h * weight_count + w] = score;
         }
     }
 }

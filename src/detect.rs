@@ -34,7 +34,7 @@ use crate::eval::{Detection, FrameDetections};
 use crate::features::budget;
 use crate::features::fast::FastEngine;
 use crate::features::hypotheses::{
-    free_bottoms, window, FrameYaws, HypothesisSet, Support, SupportSurface, WindowOptions,
+    free_bottoms, windows, FrameYaws, HypothesisSet, Support, SupportSurface, WindowOptions, WindowRequest,
 };
 use crate::features::surface::{
     best_slice, measured_surface_height, refined_surface_height, slice_at, surface_height, SurfaceEngine,
@@ -42,7 +42,7 @@ use crate::features::surface::{
 use crate::features::{FeatureScene, Hypothesis, Preprocessed};
 use crate::frame::Frame;
 use crate::geometry::Camera;
-use crate::model::{window_scenes, FeaturePath, Model};
+use crate::model::{window_scenes, FeaturePath, Model, SceneKey};
 use crate::nms::{suppress_in_order, NmsOptions, DEFAULT_NMS_IOU};
 
 /// Settings of [`detect_frame`].
@@ -495,17 +495,35 @@ pub fn detect_preprocessed_timed(
     // detections.
     let (floor_models, surface_models): (Vec<&Model>, Vec<&Model>) =
         models.iter().partition(|m| !m.window.support.uses_surfaces());
-    // Each model's window (the surface models' on the surfaces `surfaces_of` gives them).
+    // Each model's window (the surface models' on the surfaces `surfaces_of` gives them): the models of
+    // one scene in one call of `windows` (their yaws and models in parallel; each yaw's count tables built
+    // once for all of them), the scenes one after the other, gathered in model order.
     let windows_of =
         |models: &[&Model], surfaces_of: &(dyn Fn(&Model) -> Vec<SupportSurface> + Sync)| -> Vec<HypothesisSet> {
-            // Models in parallel (each window's yaws in parallel too), gathered in model order.
-            models
-                .par_iter()
-                .map(|model| {
-                    let options = WindowOptions { sizes: model.sizes(), min_points: model.window.min_points };
-                    window(model.window.support, scene_of(model), &options, &surfaces_of(model))
-                })
-                .collect()
+            let options: Vec<WindowOptions> = models
+                .iter()
+                .map(|model| WindowOptions { sizes: model.sizes(), min_points: model.window.min_points })
+                .collect();
+            let surfaces: Vec<Vec<SupportSurface>> = models.iter().map(|model| surfaces_of(model)).collect();
+            let mut sets: Vec<Option<HypothesisSet>> = models.iter().map(|_| None).collect();
+            let mut keys: Vec<SceneKey> = models.iter().map(|model| model.window.scene_key()).collect();
+            keys.sort();
+            keys.dedup();
+            for key in keys {
+                let members: Vec<usize> = (0..models.len()).filter(|&m| models[m].window.scene_key() == key).collect();
+                let requests: Vec<WindowRequest> = members
+                    .iter()
+                    .map(|&m| WindowRequest {
+                        support: models[m].window.support,
+                        options: &options[m],
+                        surfaces: &surfaces[m],
+                    })
+                    .collect();
+                for (m, set) in members.iter().zip(windows(&scenes[&key], &requests)) {
+                    sets[*m] = Some(set);
+                }
+            }
+            sets.into_iter().map(|set| set.expect("every model's scene is searched")).collect()
         };
     let windows = windows_of(&floor_models, &|_| Vec::new());
     stages.add(Stage::Window, lap());

@@ -7,14 +7,16 @@
 
 mod common;
 
-use common::{shader_module, wgsl_const, wgsl_struct_size};
+use common::{shader_module, wgsl_const, wgsl_const_f32, wgsl_struct_size};
 
 use std::path::Path;
 
+use cog_gpu::features::cpu::VIEW_MIN_DISTANCE;
 use cog_gpu::features::fast::{FastEngine, FastOptions, CHANNELS};
-use cog_gpu::features::feature_layout::{FeatureLayout, Groups, COG};
+use cog_gpu::features::feature_layout::{FeatureLayout, Groups, COG, COG_EPSILON, VIEW, VIEW_RBFS, VIEW_SIGMA};
 use cog_gpu::features::{Hypothesis, PreparedWindow, SizeQuantiles};
 use cog_gpu::frame::{DepthSource, Frame};
+use cog_gpu::geometry::MIN_PROJECT_DEPTH;
 use cog_gpu::gpu::fast::{FastParams, FastRecord, MAX_WEIGHTS, WORKGROUP};
 use cog_gpu::gpu::fast_tables::{
     build_table_gpu, build_table_reference, build_tables_gpu, build_tables_reference, table_params, table_params_at,
@@ -211,6 +213,12 @@ fn fast_kernels_share_their_constants_and_structs_with_rust() {
     let scores = shader_module("fast_scores.wgsl");
     assert_eq!(wgsl_const(&scores, "MAX_WEIGHTS"), MAX_WEIGHTS as i64);
     assert_eq!(wgsl_const(&scores, "WORKGROUP"), WORKGROUP as i64);
+    assert_eq!(wgsl_const(&scores, "VIEW"), VIEW as i64);
+    assert_eq!(wgsl_const(&scores, "VIEW_RBFS"), VIEW_RBFS as i64);
+    assert_eq!(wgsl_const_f32(&scores, "VIEW_SIGMA").to_bits(), VIEW_SIGMA.to_bits());
+    assert_eq!(wgsl_const_f32(&scores, "VIEW_MIN_DISTANCE").to_bits(), VIEW_MIN_DISTANCE.to_bits());
+    assert_eq!(wgsl_const_f32(&scores, "COG_EPSILON").to_bits(), COG_EPSILON.to_bits());
+    assert_eq!(wgsl_const_f32(&scores, "MIN_PROJECT_DEPTH").to_bits(), MIN_PROJECT_DEPTH.to_bits());
     assert_eq!(wgsl_struct_size(&scores, "FastParams"), std::mem::size_of::<FastParams>());
     assert_eq!(wgsl_struct_size(&scores, "FastRecord"), std::mem::size_of::<FastRecord>());
 }

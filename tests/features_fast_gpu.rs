@@ -12,8 +12,9 @@ mod common;
 
 use std::path::Path;
 
+use cog_gpu::features::cpu::view_cosine;
 use cog_gpu::features::fast::{FastEngine, FastOptions};
-use cog_gpu::features::feature_layout::{FeatureLayout, Groups};
+use cog_gpu::features::feature_layout::{view_features, FeatureLayout, Groups};
 use cog_gpu::features::{sliding_window, WindowOptions};
 use cog_gpu::features::{Hypothesis, PreparedWindow, SizeQuantiles};
 use cog_gpu::frame::{DepthSource, Frame};
@@ -149,6 +150,41 @@ fn gpu_fast_scores_honour_switched_off_groups_and_other_grids() {
         FeatureLayout::new([5, 5, 7], false, Groups::ALL).unwrap(),
     ] {
         compare_paths(&ctx, &window, &layout, &hyps, &random_weights(&layout, 3, 3), &layout.id());
+    }
+}
+
+/// The view part, computed in the shader since 2026-11-28: weights on the view features alone (voxel weights
+/// 0), ten vectors (two weight passes: the second pass's view weights lie at their own offset), the
+/// hypotheses of every yaw and one moved onto the camera's vertical (view cosine 0 by the CPU's rule).
+#[test]
+fn gpu_fast_view_part_matches_the_cpu_in_every_pass() {
+    let Some(ctx) = context() else { return };
+    let window = synthetic_window("sofa");
+    let layout = FeatureLayout::default();
+    let mut hyps = sample(&window, 500);
+    assert!(hyps.len() >= 300, "{} hypotheses", hyps.len());
+    let mut at_camera = hyps[0];
+    at_camera.centre = glam::Vec2::ZERO;
+    hyps.push(at_camera);
+    let offset = layout.view_offset();
+    let weights: Vec<Vec<f32>> = random_weights(&layout, 10, 7)
+        .into_iter()
+        .map(|w| w.iter().enumerate().map(|(i, &x)| if i >= offset { x } else { 0.0 }).collect())
+        .collect();
+    let gpu = compare_paths(&ctx, &window, &layout, &hyps, &weights, "view weights only, ten vectors");
+    // Independent expectation: the score is the view weights dotted with the 12 view features of the
+    // cuboid's view cosine (0 for the box on the camera's vertical).
+    for (n, hyp) in hyps.iter().enumerate() {
+        let cosine = if n + 1 == hyps.len() { 0.0 } else { view_cosine(&hyp.cuboid(&window.scene)) };
+        let view = view_features(cosine);
+        for (w, weight) in weights.iter().enumerate() {
+            let expected: f32 = weight[offset..].iter().zip(&view).map(|(a, b)| a * b).sum();
+            let got = gpu[n * weights.len() + w];
+            assert!(
+                (got - expected).abs() <= 1e-5 * (1.0 + expected.abs()),
+                "hypothesis {n}, vector {w}: {got} vs {expected}"
+            );
+        }
     }
 }
 

@@ -480,3 +480,40 @@ fn the_resting_window_keeps_the_free_boxes_that_stand_on_a_seen_top() {
         assert!(tops as u32 >= RESTING_MIN_UP_POINTS, "{h:?}: {tops} upward-facing points around it");
     }
 }
+
+/// `windows` searches several models of one scene with each yaw's count tables built once for all of
+/// them: every request's set equals its window searched alone (same hypotheses in the same order, same
+/// generated count), whatever the mix of supports and sizes in the call.
+#[test]
+fn windows_of_several_models_equal_each_window_alone() {
+    use cog_gpu::features::hypotheses::{window, windows, WindowRequest};
+    let (scene, table, pillow) = scene_with_pillow();
+    let surface = SupportSurface { object: table, z: TOP };
+    let on_floor = SupportSurface { object: table, z: FLOOR };
+    let small = WindowOptions { sizes: pillow_sizes(&pillow), min_points: 20 };
+    let large = WindowOptions { sizes: vec![Vec3::new(1.2, 0.8, 0.7), Vec3::new(0.5, 0.5, 1.0)], min_points: 50 };
+    // min_points 0 keeps the floor's pillow-sized boxes (the floor slab holds the only points there).
+    let every = WindowOptions { sizes: pillow_sizes(&pillow), min_points: 0 };
+    let surfaces = [surface, on_floor];
+    let requests = [
+        WindowRequest { support: Support::Floor, options: &large, surfaces: &[] },
+        WindowRequest { support: Support::Surfaces, options: &small, surfaces: &surfaces },
+        WindowRequest { support: Support::Free, options: &small, surfaces: &[] },
+        WindowRequest { support: Support::Resting, options: &small, surfaces: &[] },
+        WindowRequest { support: Support::FloorAndSurfaces, options: &small, surfaces: &surfaces },
+        WindowRequest { support: Support::Floor, options: &every, surfaces: &[] },
+        WindowRequest { support: Support::Surfaces, options: &small, surfaces: &[] },
+    ];
+    let together = windows(&scene, &requests);
+    assert_eq!(together.len(), requests.len());
+    for (n, (request, set)) in requests.iter().zip(&together).enumerate() {
+        let alone = window(request.support, &scene, request.options, request.surfaces);
+        assert_eq!(set.hypotheses, alone.hypotheses, "request {n} ({:?})", request.support);
+        assert_eq!(set.generated, alone.generated, "request {n} ({:?})", request.support);
+    }
+    // Not a vacuous comparison: every support but the surface-less one keeps boxes here.
+    for (n, set) in together.iter().enumerate().take(6) {
+        assert!(!set.hypotheses.is_empty(), "request {n} kept nothing");
+    }
+    assert!(together[6].hypotheses.is_empty() && together[6].generated == 0);
+}

@@ -11,7 +11,7 @@ use rayon::prelude::*;
 
 use super::fast::CHANNELS;
 use super::feature_layout::FeatureLayout;
-use super::hypotheses::Hypothesis;
+use super::hypotheses::{Hypothesis, SURFACE_COUNT_CELL_M};
 use super::preprocess::Preprocessed;
 use super::scene::{extent, grid_cells, rotate, PointRecord};
 use crate::error::Result;
@@ -61,11 +61,19 @@ pub fn check_window(pre: &Preprocessed, yaws: &[f32], step: f32, sizes: usize) -
     let cells: f64 = yaws.iter().map(|y| y.cells[0] * y.cells[1]).sum();
     let records = (pre.len() * yaws.len()) as f64 * std::mem::size_of::<PointRecord>() as f64;
     check_memory("the yaw grids", cells + records / 4.0, 4.0, &hint)?;
-    // Each yaw's count table lives while that yaw's hypotheses are enumerated, one per rayon thread.
-    let largest = yaws.iter().map(|y| (y.cells[0] + 1.0) * (y.cells[1] + 1.0) * (y.layers + 1.0)).fold(0.0, f64::max);
+    // Each yaw's count tables live while that yaw's hypotheses are enumerated, one yaw per rayon thread:
+    // the step's, and for the surface, free and resting windows two of `SURFACE_COUNT_CELL_M` layers (all
+    // points, upward points; `hypotheses::windows` builds them once for all the models of a scene), counted
+    // whatever the support.
+    let top = pre.points.iter().fold(pre.floor, |m, p| m.max(p.z));
+    let fine_layers = (((top - pre.floor) / SURFACE_COUNT_CELL_M).floor() as f64 + 1.0).max(1.0);
+    let largest = yaws
+        .iter()
+        .map(|y| (y.cells[0] + 1.0) * (y.cells[1] + 1.0) * ((y.layers + 1.0) + 2.0 * (fine_layers + 1.0)))
+        .fold(0.0, f64::max);
     let concurrent = rayon::current_num_threads().min(yaws.len()) as f64;
     check_memory(
-        &format!("the count tables of the skipping test ({concurrent} built at once)"),
+        &format!("the count tables of the skipping test ({concurrent} yaws at once, three tables each)"),
         largest * concurrent,
         4.0,
         &hint,

@@ -117,12 +117,15 @@ impl HypothesisRecord {
     }
 }
 
+/// A centre horizontally closer than this (metres) to the camera has view cosine 0 ([`view_cosine`]).
+pub const VIEW_MIN_DISTANCE: f32 = 1e-6;
+
 /// Cosine of the horizontal angle between the cuboid's front and the direction from its centre to the
 /// camera (at the origin): 1 when it faces the camera, −1 when it faces away; 0 when the centre is
-/// (horizontally) within 1 µm of the camera.
+/// (horizontally) within [`VIEW_MIN_DISTANCE`] (1 µm) of the camera.
 pub fn view_cosine(cuboid: &Cuboid) -> f32 {
     let to_camera = -cuboid.centre.truncate();
-    if to_camera.length() < 1e-6 {
+    if to_camera.length() < VIEW_MIN_DISTANCE {
         return 0.0;
     }
     cuboid.front().dot(to_camera.normalize())

@@ -513,34 +513,137 @@ fn push_sizes(
     options.sizes.len()
 }
 
-/// Runs `visit(yaw_index, grid, table, kept)` for every yaw of `scene` in parallel — `table` the yaw's
-/// point counts with z cells of side `count_cell` (`None`: the window step) from the floor up, `visit`
-/// pushing its hypotheses onto `kept` and returning how many it generated — and gathers the yaws' sets in
-/// yaw order.
-fn each_yaw(
-    scene: &FeatureScene,
-    count_cell: Option<f32>,
-    visit: impl Fn(usize, &YawGrid, &CountTable, &mut Vec<Hypothesis>) -> usize + Sync,
-) -> HypothesisSet {
+/// One yaw's point-count tables, built once and shared by every window searched on the yaw ([`windows`]):
+/// with z cells of the window step (the floor's sliding window), of [`SURFACE_COUNT_CELL_M`] (the surface,
+/// free and resting windows) and of [`SURFACE_COUNT_CELL_M`] over the upward-facing points only (the
+/// resting window's tops) — each only when a request needs it. A frame's models that share a scene used
+/// to build their own tables, one per model and yaw: a fifth of the window's CPU time with the 19 shipped
+/// models. They are built before the requests run (not on first use), so no thread waits for another's.
+struct YawCounts<'g> {
+    grid: &'g YawGrid,
+    floor: f32,
+    step: Option<CountTable>,
+    surface: Option<CountTable>,
+    tops: Option<CountTable>,
+}
+
+impl<'g> YawCounts<'g> {
+    /// The tables of `grid` that `requests` read.
+    fn new(grid: &'g YawGrid, floor: f32, requests: &[WindowRequest], raised: &[Vec<SupportSurface>]) -> Self {
+        let reads_step = requests.iter().any(|r| matches!(r.support, Support::Floor | Support::FloorAndSurfaces));
+        let reads_surface = requests.iter().zip(raised).any(|(r, raised)| match r.support {
+            Support::Floor => false,
+            Support::Surfaces => !r.surfaces.is_empty(),
+            Support::FloorAndSurfaces => !raised.is_empty(),
+            Support::Free | Support::Resting => true,
+        });
+        let reads_tops = requests.iter().any(|r| r.support == Support::Resting);
+        YawCounts {
+            grid,
+            floor,
+            step: reads_step.then(|| CountTable::build(grid, floor, grid.step)),
+            surface: reads_surface.then(|| CountTable::build(grid, floor, SURFACE_COUNT_CELL_M)),
+            tops: reads_tops.then(|| CountTable::build_of(grid, floor, SURFACE_COUNT_CELL_M, |r| r.normal_bin == 0)),
+        }
+    }
+
+    /// Z cells of the window step.
+    fn step(&self) -> &CountTable {
+        self.step.as_ref().expect("built for the floor windows")
+    }
+
+    /// Z cells of [`SURFACE_COUNT_CELL_M`].
+    fn surface(&self) -> &CountTable {
+        self.surface.as_ref().expect("built for the surface, free and resting windows")
+    }
+
+    /// Z cells of [`SURFACE_COUNT_CELL_M`], upward-facing points only.
+    fn tops(&self) -> &CountTable {
+        self.tops.as_ref().expect("built for the resting windows")
+    }
+}
+
+/// One model's window in a call of [`windows`]: where its boxes stand, its sizes and skipping threshold,
+/// and the surfaces it searches (read only when [`Support::uses_surfaces`]).
+#[derive(Clone, Copy)]
+pub struct WindowRequest<'a> {
+    pub support: Support,
+    pub options: &'a WindowOptions,
+    pub surfaces: &'a [SupportSurface],
+}
+
+/// The windows of several models on one scene ([`window`] of each request, the same hypotheses in the
+/// same order), yaws in parallel and each yaw's requests in parallel, **each yaw's count tables built once
+/// for all the requests** ([`YawCounts`]) and dropped when the yaw is done: at most one yaw's tables per
+/// thread, as before. `detect` searches all the
+/// models of a scene with one call.
+pub fn windows(scene: &FeatureScene, requests: &[WindowRequest]) -> Vec<HypothesisSet> {
     use rayon::prelude::*;
     let floor = scene.pre.floor;
-    let per_yaw: Vec<(usize, Vec<Hypothesis>)> = scene
+    // A surface at the floor's own height is the floor, which the floor part of a floor+surfaces window
+    // searches already (see `floor_and_surface_window`).
+    let raised: Vec<Vec<SupportSurface>> = requests
+        .iter()
+        .map(|r| match r.support {
+            Support::FloorAndSurfaces => r.surfaces.iter().filter(|s| s.z != floor).copied().collect(),
+            _ => Vec::new(),
+        })
+        .collect();
+    let per_yaw: Vec<Vec<(usize, Vec<Hypothesis>)>> = scene
         .yaws
         .par_iter()
         .enumerate()
         .map(|(yaw_index, grid)| {
-            let table = CountTable::build(grid, floor, count_cell.unwrap_or(grid.step));
-            let mut kept = Vec::new();
-            let generated = visit(yaw_index, grid, &table, &mut kept);
-            (generated, kept)
+            let counts = YawCounts::new(grid, floor, requests, &raised);
+            requests
+                .par_iter()
+                .zip(&raised)
+                .map(|(request, raised)| {
+                    let mut kept = Vec::new();
+                    let options = request.options;
+                    let generated = match request.support {
+                        Support::Floor => floor_yaw(&counts, yaw_index, options, &mut kept),
+                        Support::Surfaces => surface_yaw(&counts, yaw_index, options, request.surfaces, &mut kept),
+                        Support::Free => layered_yaw(&counts, yaw_index, options, false, &mut kept),
+                        Support::Resting => layered_yaw(&counts, yaw_index, options, true, &mut kept),
+                        // Within a yaw the floor's hypotheses first, then those on the surfaces.
+                        Support::FloorAndSurfaces => {
+                            floor_yaw(&counts, yaw_index, options, &mut kept)
+                                + surface_yaw(&counts, yaw_index, options, raised, &mut kept)
+                        }
+                    };
+                    (generated, kept)
+                })
+                .collect()
         })
         .collect();
-    let mut set = HypothesisSet::default();
-    for (generated, kept) in per_yaw {
-        set.generated += generated;
-        set.hypotheses.extend(kept);
+    // Each request's yaws (moved, not copied), then each request's set gathered in yaw order, the requests
+    // in parallel.
+    let mut by_request: Vec<Vec<(usize, Vec<Hypothesis>)>> = requests.iter().map(|_| Vec::new()).collect();
+    for yaw in per_yaw {
+        for (parts, part) in by_request.iter_mut().zip(yaw) {
+            parts.push(part);
+        }
     }
-    set
+    by_request
+        .into_par_iter()
+        .map(|parts| {
+            let mut set = HypothesisSet {
+                hypotheses: Vec::with_capacity(parts.iter().map(|(_, kept)| kept.len()).sum()),
+                generated: 0,
+            };
+            for (generated, kept) in parts {
+                set.generated += generated;
+                set.hypotheses.extend(kept);
+            }
+            set
+        })
+        .collect()
+}
+
+/// The one window of `request` on `scene`.
+fn single_window(scene: &FeatureScene, request: WindowRequest) -> HypothesisSet {
+    windows(scene, &[request]).pop().unwrap_or_default()
 }
 
 /// The centre of lattice cell `(col, row)` of `grid`, in the yaw's rotated frame.
@@ -568,15 +671,18 @@ fn cells_above(bottom: f32, floor: f32) -> impl Fn(Vec3) -> (i64, i64) {
 
 /// Enumerates the sliding window over every yaw of `scene` (see the module doc).
 pub fn sliding_window(scene: &FeatureScene, options: &WindowOptions) -> HypothesisSet {
-    let floor = scene.pre.floor;
-    each_yaw(scene, None, |yaw_index, grid, table, kept| {
-        // The floor slab (the lowest cell layer) is left out: every box on the floor holds floor points,
-        // which say nothing about an object.
-        let z_cells = |size: Vec3| (1, centred_cells(floor, floor + size.z, floor, grid.step).1);
-        occupied_centres(grid)
-            .map(|centre| push_sizes(table, grid, (yaw_index, centre, floor), options, z_cells, kept))
-            .sum()
-    })
+    single_window(scene, WindowRequest { support: Support::Floor, options, surfaces: &[] })
+}
+
+/// One yaw of [`sliding_window`]: pushes its kept hypotheses onto `kept`, returns how many it generated.
+fn floor_yaw(counts: &YawCounts, yaw_index: usize, options: &WindowOptions, kept: &mut Vec<Hypothesis>) -> usize {
+    let (grid, floor, table) = (counts.grid, counts.floor, counts.step());
+    // The floor slab (the lowest cell layer) is left out: every box on the floor holds floor points,
+    // which say nothing about an object.
+    let z_cells = |size: Vec3| (1, centred_cells(floor, floor + size.z, floor, grid.step).1);
+    occupied_centres(grid)
+        .map(|centre| push_sizes(table, grid, (yaw_index, centre, floor), options, z_cells, kept))
+        .sum()
 }
 
 /// Where a window's boxes stand (a model file's `window.support`).
@@ -670,40 +776,49 @@ impl SupportSurface {
 /// surfaces at the same height that share a cell give its hypotheses once (the first surface's).
 /// `generated` counts the hypotheses before the skipping test.
 pub fn surface_window(scene: &FeatureScene, options: &WindowOptions, surfaces: &[SupportSurface]) -> HypothesisSet {
+    single_window(scene, WindowRequest { support: Support::Surfaces, options, surfaces })
+}
+
+/// One yaw of [`surface_window`] (no table is built when there is no surface).
+fn surface_yaw(
+    counts: &YawCounts,
+    yaw_index: usize,
+    options: &WindowOptions,
+    surfaces: &[SupportSurface],
+    kept: &mut Vec<Hypothesis>,
+) -> usize {
     if surfaces.is_empty() {
-        return HypothesisSet::default();
+        return 0;
     }
-    let floor = scene.pre.floor;
-    each_yaw(scene, Some(SURFACE_COUNT_CELL_M), |yaw_index, grid, table, kept| {
-        let step = grid.step;
-        let mut seen = std::collections::HashSet::new();
-        let mut generated = 0;
-        for surface in surfaces {
-            let footprint = surface.search_footprint();
-            // The footprint in the yaw's rotated frame bounds the cells to look at.
-            let (lo, hi) = extent(&footprint.map(|p| rotate(&p.extend(0.0), grid.sin, grid.cos)));
-            let (c0, c1) = centred_cells(lo[0], hi[0], grid.origin[0], step);
-            let (r0, r1) = centred_cells(lo[1], hi[1], grid.origin[1], step);
-            let (c0, c1) = (c0.max(0), c1.min(grid.cells[0] as i64 - 1));
-            let (r0, r1) = (r0.max(0), r1.min(grid.cells[1] as i64 - 1));
-            for row in r0..=r1 {
-                for col in c0..=c1 {
-                    let (row, col) = (row as u32, col as u32);
-                    if grid.row_span(row, (col, col)).is_empty() {
-                        continue;
-                    }
-                    let centre = cell_centre(grid, col, row);
-                    let upright = grid.to_upright(centre.extend(0.0)).truncate();
-                    if !polygon_contains(&footprint, upright) || !seen.insert((col, row, surface.z.to_bits())) {
-                        continue;
-                    }
-                    let at = (yaw_index, centre, surface.z);
-                    generated += push_sizes(table, grid, at, options, cells_above(surface.z, floor), kept);
+    let (grid, floor, table) = (counts.grid, counts.floor, counts.surface());
+    let step = grid.step;
+    let mut seen = std::collections::HashSet::new();
+    let mut generated = 0;
+    for surface in surfaces {
+        let footprint = surface.search_footprint();
+        // The footprint in the yaw's rotated frame bounds the cells to look at.
+        let (lo, hi) = extent(&footprint.map(|p| rotate(&p.extend(0.0), grid.sin, grid.cos)));
+        let (c0, c1) = centred_cells(lo[0], hi[0], grid.origin[0], step);
+        let (r0, r1) = centred_cells(lo[1], hi[1], grid.origin[1], step);
+        let (c0, c1) = (c0.max(0), c1.min(grid.cells[0] as i64 - 1));
+        let (r0, r1) = (r0.max(0), r1.min(grid.cells[1] as i64 - 1));
+        for row in r0..=r1 {
+            for col in c0..=c1 {
+                let (row, col) = (row as u32, col as u32);
+                if grid.row_span(row, (col, col)).is_empty() {
+                    continue;
                 }
+                let centre = cell_centre(grid, col, row);
+                let upright = grid.to_upright(centre.extend(0.0)).truncate();
+                if !polygon_contains(&footprint, upright) || !seen.insert((col, row, surface.z.to_bits())) {
+                    continue;
+                }
+                let at = (yaw_index, centre, surface.z);
+                generated += push_sizes(table, grid, at, options, cells_above(surface.z, floor), kept);
             }
         }
-        generated
-    })
+    }
+    generated
 }
 
 /// Highest bottom (metres above the floor) of the free window's boxes. Chosen to cover what the
@@ -727,7 +842,7 @@ pub fn free_bottoms(floor: f32, step: f32) -> Vec<f32> {
 /// not the object — counted on ground cells × [`SURFACE_COUNT_CELL_M`] layers. `generated` counts the
 /// hypotheses before the skipping test.
 pub fn free_window(scene: &FeatureScene, options: &WindowOptions) -> HypothesisSet {
-    layered_window(scene, options, false)
+    single_window(scene, WindowRequest { support: Support::Free, options, surfaces: &[] })
 }
 
 /// Upward-facing points ([`normal_bin`] 0) a raised bottom of [`resting_window`] needs around a
@@ -752,34 +867,38 @@ pub const RESTING_REACH_CELLS: i64 = 2;
 /// top there is seen edge-on or not at all (a lamp on a tall cabinet). The skipping test is the free
 /// window's. `generated` counts the hypotheses at the bottoms and centres kept, before the skipping test.
 pub fn resting_window(scene: &FeatureScene, options: &WindowOptions) -> HypothesisSet {
-    layered_window(scene, options, true)
+    single_window(scene, WindowRequest { support: Support::Resting, options, surfaces: &[] })
 }
 
-/// The free window's boxes ([`free_window`]), with `on_seen_tops` only those of the resting window
-/// ([`resting_window`]): one loop for both, so the resting window stays a subsequence of the free one.
-fn layered_window(scene: &FeatureScene, options: &WindowOptions, on_seen_tops: bool) -> HypothesisSet {
-    let floor = scene.pre.floor;
-    each_yaw(scene, Some(SURFACE_COUNT_CELL_M), |yaw_index, grid, table, kept| {
-        let tops = on_seen_tops.then(|| CountTable::build_of(grid, floor, SURFACE_COUNT_CELL_M, |r| r.normal_bin == 0));
-        let reach = RESTING_REACH_CELLS;
-        let mut generated = 0;
-        for (layer, bottom) in free_bottoms(floor, grid.step).into_iter().enumerate() {
-            let z_cells = cells_above(bottom, floor);
-            let needs_top = tops.as_ref().filter(|_| layer > 0 && bottom < 0.0);
-            let (z0, z1) = centred_cells(bottom - grid.step, bottom + grid.step, floor, SURFACE_COUNT_CELL_M);
-            for (col, row) in occupied_cells(grid) {
-                let (c, r) = (col as i64, row as i64);
-                if needs_top.is_some_and(|t| {
-                    t.count([c - reach, r - reach, z0], [c + reach, r + reach, z1]) < RESTING_MIN_UP_POINTS
-                }) {
-                    continue;
-                }
-                let centre = cell_centre(grid, col, row);
-                generated += push_sizes(table, grid, (yaw_index, centre, bottom), options, &z_cells, kept);
+/// One yaw of the free window's boxes ([`free_window`]), with `on_seen_tops` only those of the resting
+/// window ([`resting_window`]): one loop for both, so the resting window stays a subsequence of the free one.
+fn layered_yaw(
+    counts: &YawCounts,
+    yaw_index: usize,
+    options: &WindowOptions,
+    on_seen_tops: bool,
+    kept: &mut Vec<Hypothesis>,
+) -> usize {
+    let (grid, floor, table) = (counts.grid, counts.floor, counts.surface());
+    let tops = on_seen_tops.then(|| counts.tops());
+    let reach = RESTING_REACH_CELLS;
+    let mut generated = 0;
+    for (layer, bottom) in free_bottoms(floor, grid.step).into_iter().enumerate() {
+        let z_cells = cells_above(bottom, floor);
+        let needs_top = tops.filter(|_| layer > 0 && bottom < 0.0);
+        let (z0, z1) = centred_cells(bottom - grid.step, bottom + grid.step, floor, SURFACE_COUNT_CELL_M);
+        for (col, row) in occupied_cells(grid) {
+            let (c, r) = (col as i64, row as i64);
+            if needs_top.is_some_and(|t| {
+                t.count([c - reach, r - reach, z0], [c + reach, r + reach, z1]) < RESTING_MIN_UP_POINTS
+            }) {
+                continue;
             }
+            let centre = cell_centre(grid, col, row);
+            generated += push_sizes(table, grid, (yaw_index, centre, bottom), options, &z_cells, kept);
         }
-        generated
-    })
+    }
+    generated
 }
 
 /// The window of [`Support::FloorAndSurfaces`]: the hypotheses of [`sliding_window`] and then those of
@@ -791,15 +910,7 @@ pub fn floor_and_surface_window(
     options: &WindowOptions,
     surfaces: &[SupportSurface],
 ) -> HypothesisSet {
-    let raised: Vec<SupportSurface> = surfaces.iter().filter(|s| s.z != scene.pre.floor).copied().collect();
-    let floor = sliding_window(scene, options);
-    let on_surfaces = surface_window(scene, options, &raised);
-    let generated = floor.generated + on_surfaces.generated;
-    let mut hypotheses = floor.hypotheses;
-    hypotheses.extend(on_surfaces.hypotheses);
-    // Stable: within a yaw the floor's hypotheses stay first, each window's in its own order.
-    hypotheses.sort_by_key(|h| h.yaw_index);
-    HypothesisSet { hypotheses, generated }
+    single_window(scene, WindowRequest { support: Support::FloorAndSurfaces, options, surfaces })
 }
 
 /// The window of `support` on `scene` with `options`: [`sliding_window`], [`surface_window`] on
@@ -811,13 +922,7 @@ pub fn window(
     options: &WindowOptions,
     surfaces: &[SupportSurface],
 ) -> HypothesisSet {
-    match support {
-        Support::Floor => sliding_window(scene, options),
-        Support::Surfaces => surface_window(scene, options, surfaces),
-        Support::Free => free_window(scene, options),
-        Support::FloorAndSurfaces => floor_and_surface_window(scene, options, surfaces),
-        Support::Resting => resting_window(scene, options),
-    }
+    single_window(scene, WindowRequest { support, options, surfaces })
 }
 
 impl Hypothesis {

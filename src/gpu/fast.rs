@@ -29,11 +29,16 @@
 //! dots them with the weights. The 64 partial scores are reduced in workgroup memory in a fixed tree order:
 //! results are bit-identical run to run.
 //!
-//! **Choice: the view features are added on the CPU** ([`FastEngine`]'s own `view`, 12 numbers per
-//! hypothesis): their dot products with the weights are computed while the hypotheses are packed (in
-//! parallel, while earlier batches run on the GPU) and added to the voxel part when it comes back, in the
-//! order of `FastEngine::scores` (voxels first, then view). This keeps `exp` out of the shader and the
-//! view part identical to the CPU path.
+//! **The view features are computed in the shader too** (since 2026-11-28; before, the CPU computed their
+//! dot products while packing, 52 ns per hypothesis of the GPU path's CPU time): the record carries the
+//! box's centre on the ground, and after the reduction invocation 0 computes its view cosine (the centre
+//! turned upright with the yaw's own `cos`/`sin`, the front from `Cuboid::front` of the yaw, both passed in
+//! [`FastParams::view`]), the 11 radial basis functions and the bias, and adds their dot product with the
+//! pass's view weights (stored after its voxel weights) to the voxel part — in the order of
+//! `FastEngine::scores` (voxels first, then view). The operations are the CPU's in its order, but the GPU's
+//! `exp`, `sqrt` and division are not correctly rounded (and a driver may fuse a multiply-add), so the
+//! view part agrees with the CPU's to float precision rather than bit for bit — within the paths' 1e-5
+//! relative agreement, tested with weights on the view features alone.
 //!
 //! A table larger than the storage-binding limit (128 MiB on lavapipe; ~40 MB for a 10 m × 10 m room at
 //! the default lattice) is an [`Error::Gpu`]; callers fall back to the CPU path.
@@ -60,12 +65,15 @@ use super::fast_tables::{
 };
 use super::{BufferBinding, GpuContext, KernelSpec};
 use crate::error::{Error, Result};
-use crate::features::cpu::{dot, ExpandedBox};
+use crate::features::cpu::{ExpandedBox, VIEW_MIN_DISTANCE};
 use crate::features::fast::{group_by_table, FastEngine, LayerTable, TableKey, TableSpan, CHANNELS};
-use crate::features::feature_layout::{FeatureLayout, COG, COG_BINS, COG_EPSILON, NORMALS, PER_VOXEL, VIEW};
+use crate::features::feature_layout::{
+    FeatureLayout, COG, COG_BINS, COG_EPSILON, NORMALS, PER_VOXEL, VIEW, VIEW_RBFS, VIEW_SIGMA,
+};
 use crate::features::preprocess::NORMAL_BINS;
 use crate::features::Hypothesis;
-use crate::geometry::MIN_PROJECT_DEPTH;
+use crate::geometry::{Cuboid, MIN_PROJECT_DEPTH};
+use glam::Vec3;
 
 /// The kernel's spec (registered in [`super::Kernels`]).
 pub const KERNEL: KernelSpec = KernelSpec {
@@ -111,16 +119,21 @@ pub struct FastParams {
     pub base: [u32; 4],
     /// First score in the scores buffer, unused, unused, unused.
     pub at: [u32; 4],
+    /// The view features' geometry: the yaw's `cos θ`, `sin θ` (its [`crate::features::YawGrid`]'s, which
+    /// turn a rotated-frame centre upright) and the boxes' front direction (x, y) upright
+    /// ([`crate::geometry::Cuboid::front`] of the yaw).
+    pub view: [f32; 4],
 }
-const _: () = assert!(std::mem::size_of::<FastParams>() == 144);
+const _: () = assert!(std::mem::size_of::<FastParams>() == 160);
 
-/// Twin of WGSL `struct FastRecord`: one hypothesis's expanded box in the yaw's rotated frame.
+/// Twin of WGSL `struct FastRecord`: one hypothesis's expanded box in the yaw's rotated frame, and its
+/// centre on the ground for the view features.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct FastRecord {
-    /// Low corner (s, t, z), unused.
+    /// Low corner (s, t, z), then the centre's s.
     pub lo: [f32; 4],
-    /// Voxel size along (s, t, z), unused.
+    /// Voxel size along (s, t, z), then the centre's t.
     pub cell: [f32; 4],
 }
 const _: () = assert!(std::mem::size_of::<FastRecord>() == 32);
@@ -129,10 +142,10 @@ const _: () = assert!(std::mem::size_of::<FastRecord>() == 32);
 const _: () =
     assert!(CHANNELS == 36 && PER_VOXEL == 35 && NORMALS == 1 && NORMAL_BINS == 25 && COG == 26 && COG_BINS == 9);
 
-/// Group bits of the shader (the view group is the CPU's, see the module doc).
+/// Group bits of the shader: 1 density, 2 normals, 4 COG, 8 view.
 fn group_bits(layout: &FeatureLayout) -> u32 {
     let g = layout.groups;
-    u32::from(g.density) | (u32::from(g.normals) << 1) | (u32::from(g.cog) << 2)
+    u32::from(g.density) | (u32::from(g.normals) << 1) | (u32::from(g.cog) << 2) | (u32::from(g.view) << 3)
 }
 
 /// How the work is cut into dispatches and submissions (tests force small values; the device limits may
@@ -176,8 +189,8 @@ pub struct FastDispatch<'a> {
     pub records: &'a [FastRecord],
     /// `params.job[3]` boundaries per hypothesis.
     pub bounds: &'a [u32],
-    /// The pass's weight vectors without the view part, each voxel padded to [`CHANNELS`] with a zero:
-    /// `params.job[1] × voxels × CHANNELS`.
+    /// The pass's weight vectors, each voxel padded to [`CHANNELS`] with a zero: `params.job[1] × voxels ×
+    /// CHANNELS`, then with the view group each vector's [`VIEW`] view weights (`params.job[1] × VIEW`).
     pub weights: &'a [f32],
 }
 
@@ -209,9 +222,6 @@ struct PackedChunk {
     members: Vec<usize>,
     records: Vec<FastRecord>,
     bounds: Vec<u32>,
-    /// Per member and weight vector of its job, the view part of the score (`w[view] · view(h)`), when the
-    /// layout has view features; empty otherwise.
-    views: Vec<f32>,
 }
 
 impl PackedGroup {
@@ -228,7 +238,6 @@ impl PackedGroup {
         let layout = engine.layout();
         let g = layout.grid();
         let bounds_per_hyp = (g[0] + g[1] + 2) as usize;
-        let view_offset = layout.groups.view.then(|| layout.view_offset());
         let mut chunks = Vec::new();
         for (job, job_members) in members {
             for part in job_members.chunks(max_chunk.max(1)) {
@@ -238,23 +247,18 @@ impl PackedGroup {
                 let mut bounds = vec![0u32; part.len() * bounds_per_hyp];
                 records.par_iter_mut().zip(bounds.par_chunks_mut(bounds_per_hyp)).zip(part).for_each(
                     |((record, bounds), &n)| {
-                        let expanded = ExpandedBox::new(layout, &jobs[*job].hypotheses[n]);
+                        let hyp = &jobs[*job].hypotheses[n];
+                        let expanded = ExpandedBox::new(layout, hyp);
                         let boundaries = engine.voxel_boundaries(&expanded, key.yaw_index);
                         bounds.copy_from_slice(boundaries.all());
                         let ExpandedBox { lo, cell, .. } = expanded;
-                        *record = FastRecord { lo: [lo[0], lo[1], lo[2], 0.0], cell: [cell[0], cell[1], cell[2], 0.0] };
+                        *record = FastRecord {
+                            lo: [lo[0], lo[1], lo[2], hyp.centre.x],
+                            cell: [cell[0], cell[1], cell[2], hyp.centre.y],
+                        };
                     },
                 );
-                // The view part of each score here too, off the call's critical path (it was a pass over all
-                // hypotheses after the last batch came back).
-                let weights = jobs[*job].weights;
-                let views = match view_offset {
-                    Some(offset) if !weights.is_empty() => {
-                        view_parts(engine, jobs[*job].hypotheses, part, weights, offset)
-                    }
-                    _ => Vec::new(),
-                };
-                chunks.push(PackedChunk { job: *job, members: part.to_vec(), records, bounds, views });
+                chunks.push(PackedChunk { job: *job, members: part.to_vec(), records, bounds });
             }
         }
         let span = engine.table_span(key);
@@ -300,43 +304,6 @@ fn plan_batches(
     batches
 }
 
-/// The view parts of the scores of `members` (indices into `hypotheses`): per member and weight vector,
-/// `w[offset..offset + VIEW] · view(h)`. Consecutive members often share a centre (the window pushes a
-/// centre's sizes one after the other), and the view features depend on the centre and the yaw only
-/// (`view_cosine`: the horizontal direction from the centre to the camera, and the front), so a run of
-/// members with one centre computes them once — the same numbers, by the same operations.
-fn view_parts(
-    engine: &FastEngine,
-    hypotheses: &[Hypothesis],
-    members: &[usize],
-    weights: &[Vec<f32>],
-    offset: usize,
-) -> Vec<f32> {
-    const PIECE: usize = 256;
-    let count = weights.len();
-    let mut views = vec![0.0f32; members.len() * count];
-    views.par_chunks_mut(PIECE * count).zip(members.par_chunks(PIECE)).for_each(|(rows, piece)| {
-        let mut last: Option<((u16, [u32; 2]), usize)> = None;
-        for (k, &n) in piece.iter().enumerate() {
-            let hyp = &hypotheses[n];
-            let key = (hyp.yaw_index, [hyp.centre.x.to_bits(), hyp.centre.y.to_bits()]);
-            let (done, rest) = rows.split_at_mut(k * count);
-            let row = &mut rest[..count];
-            match last {
-                Some((seen, at)) if seen == key => row.copy_from_slice(&done[at * count..(at + 1) * count]),
-                _ => {
-                    let view = engine.view(hyp);
-                    for (v, w) in row.iter_mut().zip(weights) {
-                        *v = dot(&w[offset..offset + VIEW], &view);
-                    }
-                    last = Some((key, k));
-                }
-            }
-        }
-    });
-    views
-}
-
 /// Checks a job's weights and hypotheses against the engine.
 fn validate_job(engine: &FastEngine, job: &FastJob) -> Result<()> {
     let dim = engine.layout().dim();
@@ -355,18 +322,24 @@ fn validate_job(engine: &FastEngine, job: &FastJob) -> Result<()> {
     Ok(())
 }
 
-/// The shader's weight layout of one job: per pass of at most [`MAX_WEIGHTS`] vectors, the voxel part only,
-/// each voxel padded to [`CHANNELS`] with a zero weight.
+/// The shader's weight layout of one job: per pass of at most [`MAX_WEIGHTS`] vectors, their voxel parts,
+/// each voxel padded to [`CHANNELS`] with a zero weight, then (with the view group) their view parts.
 fn padded_passes(layout: &FeatureLayout, weights: &[Vec<f32>]) -> Vec<Vec<f32>> {
     let voxels = layout.voxel_count();
     weights
         .chunks(MAX_WEIGHTS)
         .map(|chunk| {
-            let mut padded = Vec::with_capacity(chunk.len() * voxels * CHANNELS);
+            let mut padded = Vec::with_capacity(chunk.len() * pass_stride(layout));
             for w in chunk {
                 for voxel in w[..voxels * PER_VOXEL].chunks(PER_VOXEL) {
                     padded.extend_from_slice(voxel);
                     padded.resize(padded.len() + CHANNELS - PER_VOXEL, 0.0);
+                }
+            }
+            if layout.groups.view {
+                let offset = layout.view_offset();
+                for w in chunk {
+                    padded.extend_from_slice(&w[offset..offset + VIEW]);
                 }
             }
             padded
@@ -374,13 +347,18 @@ fn padded_passes(layout: &FeatureLayout, weights: &[Vec<f32>]) -> Vec<Vec<f32>> 
         .collect()
 }
 
+/// Numbers per weight vector in a pass of [`padded_passes`].
+fn pass_stride(layout: &FeatureLayout) -> usize {
+    layout.voxel_count() * CHANNELS + if layout.groups.view { VIEW } else { 0 }
+}
+
 /// Packs every dispatch of every job and hands them to `execute` one batch at a time (GPU: one submission
 /// per batch; CPU twin: each dispatch in turn), which returns each dispatch's `records.len() × weight count`
-/// voxel scores; adds the view part (computed on the CPU while packing) and returns, per job, `scores[h·W + w]`. Jobs whose
+/// scores (voxel and view parts); returns, per job, `scores[h·W + w]`. Jobs whose
 /// hypotheses share a table (same yaw, bottom and height) share its group: the table is built once. The
 /// dispatches, and so the scores, do not depend on how they are batched or which other jobs come along.
 /// Batches are planned from the groups' sizes first ([`plan_batches`]); a batch's groups are packed
-/// (records, boundaries and view parts computed, tables built on the CPU when `build_tables`) in parallel,
+/// (records and boundaries computed, tables built on the CPU when `build_tables`) in parallel,
 /// and **the next batch is packed while the last one executes** (`rayon::join`: the packing of a call's
 /// next batch used to wait for its last batch's GPU work and read-back), so at most two batches are held.
 /// Nothing blocks a rayon thread on work that needs another one (a thread waiting in the join helps with
@@ -412,7 +390,6 @@ fn run(
             Some(first)
         })
         .collect();
-    let voxels = layout.voxel_count();
     let dim = layout.dim();
     let g = layout.grid();
     let bounds_per_hyp = g[0] + g[1] + 2;
@@ -420,7 +397,9 @@ fn run(
     let inv_cog_scale = 1.0 / engine.cog_scale();
     let params_of = |group: &PackedGroup, chunk: &PackedChunk, count: usize| {
         let stride = engine.lattice(group.yaw_index).table_stride();
-        let m = scene.yaws[group.yaw_index].camera_from_rotated;
+        let grid = &scene.yaws[group.yaw_index];
+        let m = grid.camera_from_rotated;
+        let front = Cuboid::new(Vec3::ZERO, Vec3::ONE, grid.yaw).front();
         FastParams {
             grid: [g[0], g[1], g[2], dim as u32],
             job: [chunk.records.len() as u32, count as u32, group_bits(layout), bounds_per_hyp],
@@ -432,6 +411,7 @@ fn run(
             // Filled in by the batch's layout.
             base: [0; 4],
             at: [0; 4],
+            view: [grid.cos, grid.sin, front.x, front.y],
         }
     };
     let mut flush = |batch: &[PackedGroup], scores: &mut [Vec<f32>], times: &mut RunTimes| -> Result<()> {
@@ -441,7 +421,7 @@ fn run(
         for (group_index, group) in batch.iter().enumerate() {
             for chunk in &group.chunks {
                 for (pass, pass_weights) in passes[chunk.job].iter().enumerate() {
-                    let count = pass_weights.len() / (voxels * CHANNELS).max(1);
+                    let count = pass_weights.len() / pass_stride(layout).max(1);
                     dispatches.push(FastDispatch {
                         group: group_index,
                         chunk: chunk_index,
@@ -471,15 +451,8 @@ fn run(
             let w_total = w_totals[chunk.job];
             let job_scores = &mut scores[chunk.job];
             for (slot, &n) in chunk.members.iter().enumerate() {
-                for w in 0..count {
-                    let column = pass * MAX_WEIGHTS + w;
-                    // Voxel part, then the view part: the order of `FastEngine::scores`.
-                    let voxel_part = out[slot * count + w];
-                    job_scores[n * w_total + column] = match chunk.views.get(slot * w_total + column) {
-                        Some(view) => voxel_part + view,
-                        None => voxel_part,
-                    };
-                }
+                let row = &mut job_scores[n * w_total + pass * MAX_WEIGHTS..][..count];
+                row.copy_from_slice(&out[slot * count..(slot + 1) * count]);
             }
         }
         times.place += placing.elapsed().as_secs_f64();
@@ -520,7 +493,7 @@ fn run(
 }
 
 /// Seconds of the parts of [`run`] (for the debug log): grouping the hypotheses by table, packing the
-/// groups (records, boundaries and the view parts of the scores), executing the batches, placing their
+/// groups (records and boundaries), executing the batches, placing their
 /// scores.
 #[derive(Default)]
 struct RunTimes {
@@ -624,7 +597,7 @@ pub fn fast_scores_gpu_jobs(
         })?;
         let total = started.elapsed().as_secs_f64();
         log::debug!(
-            "fast_scores time: {total:.4} s in all: grouping {:.4}, packing with the view parts {:.4} (while earlier \
+            "fast_scores time: {total:.4} s in all: grouping {:.4}, packing {:.4} (while earlier \
              batches execute), placing scores {:.4}; batches {:.4}: preparing {:.4} (layout {:.4}, waiting for the \
              pool {:.4}, buffers {:.4}, uploads {:.4}, bind groups {:.4}, encoding {:.4}), submitting and waiting \
              for the GPU and the read-back {:.4} (GPU passes: scatter {:.4}, rows {:.4}, columns {:.4}, scoring \
@@ -1074,6 +1047,7 @@ pub fn fast_scores_main(
     let use_density = groups & 1 != 0;
     let use_normals = groups & 2 != 0;
     let use_cog = groups & 4 != 0;
+    let use_view = groups & 8 != 0;
     let mut partial = [0.0f32; WORKGROUP * MAX_WEIGHTS];
     // Past the last hypothesis of its dispatch (the grid's padding): no work, no write.
     if h >= params.job[0] as usize {
@@ -1187,7 +1161,41 @@ pub fn fast_scores_main(
         }
         stride /= 2;
     }
-    (0..weight_count).map(|w| (params.at[0] as usize + h * weight_count + w, partial[w])).collect()
+    // Invocation 0: the view part (the shader's `view_cosine` and `view_part`).
+    let view_cosine = |s: f32, t: f32| -> f32 {
+        let x = s * params.view[0] - t * params.view[1];
+        let y = s * params.view[1] + t * params.view[0];
+        let to_camera = [-x, -y];
+        let length = (to_camera[0] * to_camera[0] + to_camera[1] * to_camera[1]).sqrt();
+        if length < VIEW_MIN_DISTANCE {
+            return 0.0;
+        }
+        let inv_length = 1.0 / length;
+        params.view[2] * (to_camera[0] * inv_length) + params.view[3] * (to_camera[1] * inv_length)
+    };
+    let view_part = |w: usize, cosine: f32| -> f32 {
+        let wb = params.base[3] as usize + weight_count * voxels * 9 + w * 3;
+        let mut acc = 0.0f32;
+        for j in 0..VIEW {
+            let mut feature = 1.0f32;
+            if j < VIEW_RBFS {
+                let d = cosine - (-1.0 + 0.2 * j as f32);
+                feature = (-(d * d) / (2.0 * VIEW_SIGMA * VIEW_SIGMA)).exp();
+            }
+            acc += vec4_at(weights, wb + j / 4)[j % 4] * feature;
+        }
+        acc
+    };
+    let cosine = view_cosine(record.lo[3], record.cell[3]);
+    (0..weight_count)
+        .map(|w| {
+            let mut score = partial[w];
+            if use_view {
+                score += view_part(w, cosine);
+            }
+            (params.at[0] as usize + h * weight_count + w, score)
+        })
+        .collect()
 }
 
 /// Element `n` of `data` viewed as an array of `vec4`s.

@@ -48,18 +48,35 @@ pub fn shader_module(file: &str) -> naga::Module {
     naga::front::wgsl::parse_str(&source).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
-/// The value of WGSL `const NAME` (an integer literal) in `module`, as i64.
+/// The initialiser of WGSL `const NAME` in `module`.
 #[allow(dead_code)]
-pub fn wgsl_const(module: &naga::Module, name: &str) -> i64 {
+fn wgsl_const_init<'m>(module: &'m naga::Module, name: &str) -> &'m naga::Expression {
     let (_, constant) = module
         .constants
         .iter()
         .find(|(_, c)| c.name.as_deref() == Some(name))
         .unwrap_or_else(|| panic!("no const {name} in the shader"));
-    match module.global_expressions[constant.init] {
+    &module.global_expressions[constant.init]
+}
+
+/// The value of WGSL `const NAME` (an integer literal) in `module`, as i64.
+#[allow(dead_code)]
+pub fn wgsl_const(module: &naga::Module, name: &str) -> i64 {
+    match *wgsl_const_init(module, name) {
         naga::Expression::Literal(naga::Literal::U32(v)) => v as i64,
         naga::Expression::Literal(naga::Literal::I32(v)) => v as i64,
         ref other => panic!("const {name} is {other:?}, expected an integer literal"),
+    }
+}
+
+/// The value of WGSL `const NAME` (an `f32` literal, or an abstract float naga has concretised) in
+/// `module`.
+#[allow(dead_code)]
+pub fn wgsl_const_f32(module: &naga::Module, name: &str) -> f32 {
+    match *wgsl_const_init(module, name) {
+        naga::Expression::Literal(naga::Literal::F32(v)) => v,
+        naga::Expression::Literal(naga::Literal::AbstractFloat(v)) => v as f32,
+        ref other => panic!("const {name} is {other:?}, expected a float literal"),
     }
 }
 
