@@ -188,7 +188,7 @@ fn table_differences_count_the_points_of_any_rectangle() {
                         .wrapping_sub(entry(k, x[1], y[0], c))
                         .wrapping_add(entry(k, x[0], y[0], c))
                 };
-                let count = brute_count(&points, &params, k, x, y);
+                let count = brute_count(points, &params, k, x, y);
                 assert_eq!(sum(0), count, "layer {k}, cells {x:?} × {y:?}");
                 // Every point has one normal bin: the 25 normal channels add up to the count.
                 let normals: u32 = (1..COG).map(sum).fold(0, u32::wrapping_add);

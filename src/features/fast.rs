@@ -35,13 +35,14 @@
 //! The agreement with the exact path is measured by `tests/features_fast.rs` (feature cosine similarity)
 //! and by `cog-gpu bench --features both`.
 
-use std::collections::HashMap;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
 
+use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 use rayon::prelude::*;
+use rustc_hash::FxHashMap;
 
 use super::cpu::{cog_frame, cog_position, dot, view_cosine, ExpandedBox};
 use super::feature_layout::{
@@ -74,17 +75,35 @@ impl Default for FastOptions {
     }
 }
 
-/// One point as the fast path bins it.
-#[derive(Clone, Copy, Debug, Default)]
-pub(crate) struct LatticePoint {
+/// One point as the fast path bins it — in the layout the GPU's table kernels read, so that a yaw's
+/// lattice is uploaded as it is (no conversion per engine call: with the 19 shipped models that was
+/// ~20 ms of one thread per call and a handful of calls per frame). Twin of WGSL `struct TablePoint` in
+/// `shaders/fast_tables.wgsl` ([`crate::gpu::fast_tables::TablePoint`] is this type).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct LatticePoint {
     /// Ground cell index `t·cells_s + s`.
-    pub(crate) cell: u32,
+    pub cell: u32,
     /// Height (metres).
-    pub(crate) z: f32,
-    pub(crate) normal_bin: u8,
-    pub(crate) cog_bins: [u8; 2],
+    pub z: f32,
+    /// Normal bin | COG bin 0 << 8 | COG bin 1 << 16.
+    pub bins: u32,
     /// Fixed-point shares of the gradient magnitude for the two COG bins (0 when it has none).
-    pub(crate) cog_shares: [u32; 2],
+    pub share0: u32,
+    pub share1: u32,
+}
+const _: () = assert!(std::mem::size_of::<LatticePoint>() == 20);
+
+impl LatticePoint {
+    /// Its normal bin.
+    pub fn normal_bin(&self) -> usize {
+        (self.bins & 0xff) as usize
+    }
+
+    /// Its COG bin `k` (0 or 1).
+    pub fn cog_bin(&self, k: usize) -> usize {
+        ((self.bins >> (8 + 8 * k)) & 0xff) as usize
+    }
 }
 
 /// Where the voxel layers of one [`LayerTable`] lie along z: layer `k` holds the points with
@@ -631,18 +650,18 @@ pub(crate) struct TableKey {
 pub(crate) fn group_by_table(hypotheses: &[Hypothesis]) -> Vec<(TableKey, Vec<usize>)> {
     // Pieces grouped in parallel, merged in piece order: each group's members stay in ascending order.
     const PIECE: usize = 1 << 16;
-    let pieces: Vec<HashMap<TableKey, Vec<usize>>> = hypotheses
+    let pieces: Vec<FxHashMap<TableKey, Vec<usize>>> = hypotheses
         .par_chunks(PIECE)
         .enumerate()
         .map(|(p, piece)| {
-            let mut groups: HashMap<TableKey, Vec<usize>> = HashMap::new();
+            let mut groups: FxHashMap<TableKey, Vec<usize>> = FxHashMap::default();
             for (n, hyp) in piece.iter().enumerate() {
                 groups.entry(key_of(hyp)).or_default().push(p * PIECE + n);
             }
             groups
         })
         .collect();
-    let mut groups: HashMap<TableKey, Vec<usize>> = HashMap::new();
+    let mut groups: FxHashMap<TableKey, Vec<usize>> = FxHashMap::default();
     for piece in pieces {
         for (key, members) in piece {
             groups.entry(key).or_default().extend(members);
@@ -660,7 +679,7 @@ impl YawLattice {
     }
 
     /// The binned points, grouped by height (in binning order within each 5 cm height bucket).
-    pub(crate) fn points(&self) -> &[LatticePoint] {
+    pub fn points(&self) -> &[LatticePoint] {
         &self.points
     }
 
@@ -689,18 +708,20 @@ impl YawLattice {
                 let index = |axis: usize| -> usize {
                     floor_to_i64((q[axis] - origin[axis]) / cell).clamp(0, cells[axis] as i64 - 1) as usize
                 };
+                // A normal bin below 2⁸ (25 bins): the packed `bins` hold it whole.
                 let mut point = LatticePoint {
                     cell: (index(1) * cells[0] + index(0)) as u32,
                     z: q.z,
-                    normal_bin: r.normal_bin as u8,
+                    bins: r.normal_bin & 0xff,
                     ..LatticePoint::default()
                 };
                 if use_cog && r.magnitude > 0.0 {
                     if let Some(frame) = cog_frame(grid, intrinsics, q) {
                         let (bin0, frac) = cog_position(&frame, r.gx, r.gy);
                         let scaled = r.magnitude * cog_scale;
-                        point.cog_bins = [bin0 as u8, ((bin0 + 1) % COG_BINS) as u8];
-                        point.cog_shares = [((1.0 - frac) * scaled + 0.5) as u32, (frac * scaled + 0.5) as u32];
+                        point.bins |= ((bin0 as u32) << 8) | ((((bin0 + 1) % COG_BINS) as u32) << 16);
+                        point.share0 = ((1.0 - frac) * scaled + 0.5) as u32;
+                        point.share1 = (frac * scaled + 0.5) as u32;
                     }
                 }
                 point
@@ -733,9 +754,9 @@ impl LayerTable {
             let base = ((layer * stride[1] + y + 1) * stride[0] + x + 1) * CHANNELS;
             let entry = &mut sums[base..base + CHANNELS];
             entry[0] += 1;
-            entry[1 + p.normal_bin as usize] += 1;
-            entry[COG + p.cog_bins[0] as usize] = entry[COG + p.cog_bins[0] as usize].wrapping_add(p.cog_shares[0]);
-            entry[COG + p.cog_bins[1] as usize] = entry[COG + p.cog_bins[1] as usize].wrapping_add(p.cog_shares[1]);
+            entry[1 + p.normal_bin()] += 1;
+            entry[COG + p.cog_bin(0)] = entry[COG + p.cog_bin(0)].wrapping_add(p.share0);
+            entry[COG + p.cog_bin(1)] = entry[COG + p.cog_bin(1)].wrapping_add(p.share1);
         }
         // Inclusive 2D prefix sums per layer in one pass over the rows (a layer is often larger than the
         // cache; two passes, along s then along t, read it twice): entry (x, y) = entry (x, y − 1) + the

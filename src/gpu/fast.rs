@@ -572,9 +572,6 @@ pub fn fast_scores_gpu_jobs(
         // Where the call's wall time goes (debug log): packing and view features on the CPU are the rest.
         let started = std::time::Instant::now();
         let mut batch_times = BatchTimes::default();
-        // Each yaw's lattice points in the shader's layout, made once per call (a yaw's tables may fall in
-        // several batches).
-        let mut points: Vec<Option<Vec<TablePoint>>> = vec![None; engine.scene().yaws.len()];
         let mut run_times = RunTimes::default();
         let scores = run(engine, jobs, chunking, false, &mut run_times, |dispatches| {
             for (n, d) in dispatches.iter().enumerate() {
@@ -593,7 +590,7 @@ pub fn fast_scores_gpu_jobs(
             }
             submissions += 1;
             dispatch_count += dispatches.len();
-            run_batch(ctx, engine, dispatches, &mut points, &mut batch_times)
+            run_batch(ctx, engine, dispatches, &mut batch_times)
         })?;
         let total = started.elapsed().as_secs_f64();
         log::debug!(
@@ -662,31 +659,21 @@ struct BatchLayout<'p> {
 }
 
 impl<'p> BatchLayout<'p> {
-    /// The layout of `dispatches` with storage offsets aligned to `align` bytes; `points_of_yaw` holds the
-    /// yaws' lattice points (made here for the yaws that lack them).
-    fn new(
-        engine: &FastEngine,
-        dispatches: &[FastDispatch],
-        points_of_yaw: &'p mut [Option<Vec<TablePoint>>],
-        align: u32,
-    ) -> Result<BatchLayout<'p>> {
+    /// The layout of `dispatches` with storage offsets aligned to `align` bytes; the yaws' lattice points
+    /// are the engine's own (uploaded as they are).
+    fn new(engine: &'p FastEngine, dispatches: &[FastDispatch], align: u32) -> Result<BatchLayout<'p>> {
         let too_large = |what: &str| Error::Gpu(format!("fast_scores: a batch's {what} pass 2³² elements"));
         let index = |bytes: u64, unit: u64, what: &str| u32::try_from(bytes / unit).map_err(|_| too_large(what));
-        let mut used = vec![false; points_of_yaw.len()];
+        let mut used = vec![false; engine.scene().yaws.len()];
         for d in dispatches {
             used[d.yaw_index] = true;
         }
-        points_of_yaw
-            .par_iter_mut()
-            .enumerate()
-            .filter(|(yaw, points)| used[*yaw] && points.is_none())
-            .for_each(|(yaw, points)| *points = Some(table_points(engine.lattice(yaw))));
         let mut point_count = 0usize;
-        let yaw_points: Vec<Option<(usize, &[TablePoint])>> = points_of_yaw
+        let yaw_points: Vec<Option<(usize, &[TablePoint])>> = used
             .iter()
-            .zip(&used)
-            .map(|(points, &used)| {
-                let points = points.as_deref().filter(|_| used)?;
+            .enumerate()
+            .map(|(yaw, &used)| {
+                let points = used.then(|| table_points(engine.lattice(yaw)))?;
                 let first = point_count;
                 point_count += points.len();
                 Some((first, points))
@@ -767,13 +754,12 @@ fn run_batch(
     ctx: &GpuContext,
     engine: &FastEngine,
     dispatches: &[FastDispatch],
-    points_of_yaw: &mut [Option<Vec<TablePoint>>],
     times: &mut BatchTimes,
 ) -> Result<Vec<Vec<f32>>> {
     let started = std::time::Instant::now();
     let mut mark = started;
     let storage_align = ctx.limits.min_storage_buffer_offset_alignment;
-    let layout = BatchLayout::new(engine, dispatches, points_of_yaw, storage_align)?;
+    let layout = BatchLayout::new(engine, dispatches, storage_align)?;
     times.layout += split(&mut mark);
     // The pooled buffers are this batch's until its scores are read back. Calls on other threads (other
     // engines of the frame) pack their batches meanwhile; nothing below runs rayon work, so a thread that
@@ -938,7 +924,7 @@ fn run_batch(
 #[derive(Default)]
 struct BatchTimes {
     prepare: f64,
-    /// The batch's layout (and the lattice points it converts).
+    /// The batch's layout.
     layout: f64,
     /// Waiting for the buffer pool while another call's batch holds it.
     pool_wait: f64,
@@ -990,10 +976,9 @@ pub fn fast_scores_reference_jobs(
     jobs: &[FastJob],
     chunking: FastChunking,
 ) -> Result<Vec<Vec<f32>>> {
-    let mut points: Vec<Option<Vec<TablePoint>>> = vec![None; engine.scene().yaws.len()];
     run(engine, jobs, chunking, true, &mut RunTimes::default(), |dispatches| {
         // The GPU's layout and buffers, filled on the CPU (the tables from the CPU's LayerTables).
-        let layout = BatchLayout::new(engine, dispatches, &mut points, TWIN_ALIGN)?;
+        let layout = BatchLayout::new(engine, dispatches, TWIN_ALIGN)?;
         let mut table = vec![0u32; (layout.tables.len / 4) as usize];
         let mut records = vec![FastRecord::default(); (layout.records.len / 32) as usize];
         let mut bounds = vec![0u32; (layout.bounds.len / 4) as usize];

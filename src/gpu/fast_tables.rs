@@ -49,32 +49,9 @@ pub const SCAN_ROWS: u32 = 1;
 /// The shader's `SCAN_COLUMNS`: running sums along t.
 pub const SCAN_COLUMNS: u32 = 2;
 
-/// Twin of WGSL `struct TablePoint`: one lattice point.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
-pub struct TablePoint {
-    /// Ground cell `t·cells_s + s`.
-    pub cell: u32,
-    /// Height (metres).
-    pub z: f32,
-    /// Normal bin | COG bin 0 << 8 | COG bin 1 << 16.
-    pub bins: u32,
-    pub share0: u32,
-    pub share1: u32,
-}
-const _: () = assert!(std::mem::size_of::<TablePoint>() == 20);
-
-impl From<&LatticePoint> for TablePoint {
-    fn from(p: &LatticePoint) -> TablePoint {
-        TablePoint {
-            cell: p.cell,
-            z: p.z,
-            bins: u32::from(p.normal_bin) | (u32::from(p.cog_bins[0]) << 8) | (u32::from(p.cog_bins[1]) << 16),
-            share0: p.cog_shares[0],
-            share1: p.cog_shares[1],
-        }
-    }
-}
+/// Twin of WGSL `struct TablePoint`: one lattice point — the fast path's own [`LatticePoint`], uploaded as
+/// the lattice holds it.
+pub type TablePoint = LatticePoint;
 
 /// Twin of WGSL `struct TableParams`: one table's shape, z layers and place, and the dispatch's job.
 #[repr(C)]
@@ -93,8 +70,8 @@ const _: () = assert!(std::mem::size_of::<TableParams>() == 48);
 const _: () = assert!(CHANNELS == 36 && COG == 26);
 
 /// The lattice's points as the shader reads them.
-pub fn table_points(lattice: &YawLattice) -> Vec<TablePoint> {
-    lattice.points().iter().map(TablePoint::from).collect()
+pub fn table_points(lattice: &YawLattice) -> &[TablePoint] {
+    lattice.points()
 }
 
 /// The params of a table of `span` over `lattice`, for the dispatch `mode` (0 for the scatter), alone in
@@ -196,7 +173,7 @@ pub fn build_table_reference(lattice: &YawLattice, span: TableSpan) -> Vec<u32> 
     let mut table = vec![0u32; table_words(&scatter)];
     let [point_count, row_jobs, column_jobs] = table_invocations(&scatter);
     for n in 0..point_count as usize {
-        scatter_main(&[scatter], &points, &mut table, 0, n);
+        scatter_main(&[scatter], points, &mut table, 0, n);
     }
     for n in 0..row_jobs as usize {
         scan_main(&[table_params(lattice, span, SCAN_ROWS)], &mut table, 0, n);
@@ -274,7 +251,7 @@ pub fn build_table_gpu(ctx: &GpuContext, lattice: &YawLattice, span: TableSpan) 
         )));
     }
     ctx.checked("fast_tables kernels", || {
-        let point_buffer = ctx.storage_buffer("table points", &points);
+        let point_buffer = ctx.storage_buffer("table points", points);
         let table = ctx.output_buffer("fast table", (words * 4) as u64);
         let invocations = table_invocations(&scatter);
         let mut encoder =
