@@ -44,7 +44,7 @@ struct FastRecord {
 
 struct FastParams {
     grid: vec4<u32>,  // nx, ny, nz, dim (unused)
-    job: vec4<u32>,   // hypothesis count, weight count, group bits (1 density, 2 normals, 4 cog, 8 view), boundaries per hypothesis
+    job: vec4<u32>,   // hypothesis count, weight count, group bits (1 density, 2 normals, 4 cog, 8 view), boundary words per hypothesis
     table: vec4<u32>, // entries per table row (cells along s + 1), rows per layer (cells along t + 1), unused, unused
     scale: vec4<f32>, // fx, fy, 1 / cog_scale, unused
     m0: vec4<f32>,    // camera_from_rotated, column 0 (xyz)
@@ -60,7 +60,8 @@ struct FastParams {
 // The batch's LayerTables, one vec4 per 4 channels (CHANNELS = 36 = 9 vec4 per entry).
 @group(0) @binding(1) var<storage, read> table: array<vec4<u32>>;
 @group(0) @binding(2) var<storage, read> records: array<FastRecord>;
-// Per hypothesis: nx + 1 cell boundaries along s, then ny + 1 along t (voxel i covers cells xs[i]..xs[i+1]).
+// Per hypothesis: nx + 1 cell boundaries along s, then ny + 1 along t (voxel i covers cells xs[i]..xs[i+1]),
+// two 16-bit boundaries per word, the lower half first (`boundary`).
 @group(0) @binding(3) var<storage, read> bounds: array<u32>;
 // The passes' weight vectors, each voxel padded to 36 (pad weight 0):
 // weights[base.w + (w·voxels + ℓ)·9 + c] holds the weights of channels 4c..4c+3 of voxel ℓ; with the view
@@ -108,6 +109,11 @@ fn view_part(w: u32, weight_count: u32, voxels: u32, cosine: f32) -> f32 {
     return acc;
 }
 
+// Boundary k of the hypothesis whose boundaries start at word b.
+fn boundary(b: u32, k: u32) -> u32 {
+    return (bounds[b + (k >> 1u)] >> ((k & 1u) * 16u)) & 0xffffu;
+}
+
 // acc + a·b, adding the four products one after the other (the CPU twin's order).
 fn dot_acc(acc: f32, a: vec4<f32>, b: vec4<f32>) -> f32 {
     return (((acc + a.x * b.x) + a.y * b.y) + a.z * b.z) + a.w * b.w;
@@ -151,10 +157,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
             let j = (v / nx) % ny;
             let k = v / (nx * ny);
             // Step 3: the voxel's sums, four corners of layer k (9 vec4 per entry).
-            let x0 = bounds[b + i];
-            let x1 = bounds[b + i + 1u];
-            let y0 = bounds[b + nx + 1u + j];
-            let y1 = bounds[b + nx + 1u + j + 1u];
+            let x0 = boundary(b, i);
+            let x1 = boundary(b, i + 1u);
+            let y0 = boundary(b, nx + 1u + j);
+            let y1 = boundary(b, nx + 1u + j + 1u);
             let layer = k * params.table.y;
             let high = params.base.x + ((layer + y1) * row + x1) * 9u;
             let left = params.base.x + ((layer + y1) * row + x0) * 9u;

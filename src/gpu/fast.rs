@@ -19,7 +19,8 @@
 //! is batched does not change a single bit of the scores (tested).
 //!
 //! Per hypothesis the CPU packs a [`FastRecord`] (low corner and voxel size of the expanded box) and the
-//! `nx + 1 + ny + 1` voxel-boundary cell indices, computed by the engine's own membership rule
+//! `nx + 1 + ny + 1` voxel-boundary cell indices (two 16-bit indices per word since 2026-11-28,
+//! [`pack_boundaries`]: 32 bytes instead of 64 with the default grid, written and uploaded per hypothesis), computed by the engine's own membership rule
 //! (`FastEngine::voxel_boundaries`, the function its scoring uses; no view cosine, no allocation per hypothesis), so cell membership is identical by
 //! construction. The shader runs one workgroup of 64 invocations per hypothesis; invocation `lid` takes the
 //! voxels `ℓ = lid + 64·r` in the layout's
@@ -104,7 +105,8 @@ pub const MAX_CHUNK: usize = 1 << 16;
 pub struct FastParams {
     /// nx, ny, nz, dim.
     pub grid: [u32; 4],
-    /// Hypothesis count, weight count, group bits (1 density, 2 normals, 4 cog), boundaries per hypothesis.
+    /// Hypothesis count, weight count, group bits (1 density, 2 normals, 4 cog, 8 view), boundary words per
+    /// hypothesis ([`boundary_words`]).
     pub job: [u32; 4],
     /// Entries per table row (cells along s + 1), rows per layer (cells along t + 1), unused, unused.
     pub table: [u32; 4],
@@ -148,6 +150,25 @@ fn group_bits(layout: &FeatureLayout) -> u32 {
     u32::from(g.density) | (u32::from(g.normals) << 1) | (u32::from(g.cog) << 2) | (u32::from(g.view) << 3)
 }
 
+/// Words of packed voxel boundaries per hypothesis for the grid `g`: its `g[0] + 1 + g[1] + 1` boundaries,
+/// two per word.
+pub fn boundary_words(g: &[u32; 3]) -> usize {
+    (g[0] as usize + g[1] as usize + 2).div_ceil(2)
+}
+
+/// Packs `boundaries` (each at most [`MAX_LATTICE_CELLS`]) two per word into `words`, the lower half first —
+/// what the shader's `boundary` unpacks. A hypothesis's boundaries are 64 bytes as `u32`s with the default
+/// grid; packed, 32: the packing on the CPU writes them and the upload copies them, per hypothesis.
+pub fn pack_boundaries(boundaries: &[u32], words: &mut [u32]) {
+    for (word, pair) in words.iter_mut().zip(boundaries.chunks(2)) {
+        *word = pair[0] | (pair.get(1).copied().unwrap_or(0) << 16);
+    }
+}
+
+/// Most lattice cells along an axis the packed boundaries can address (a boundary is a cell index in
+/// `0..=cells`): 3.2 km at the default 5 cm lattice, far beyond any table that fits a storage binding.
+pub const MAX_LATTICE_CELLS: usize = u16::MAX as usize;
+
 /// How the work is cut into dispatches and submissions (tests force small values; the device limits may
 /// make them smaller still).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -187,7 +208,8 @@ pub struct FastDispatch<'a> {
     /// The table's layers along z.
     pub(crate) span: TableSpan,
     pub records: &'a [FastRecord],
-    /// `params.job[3]` boundaries per hypothesis.
+    /// Per hypothesis its `nx + 1 + ny + 1` voxel boundaries, two 16-bit boundaries per word (the lower half
+    /// first), `params.job[3]` words ([`pack_boundaries`]).
     pub bounds: &'a [u32],
     /// The pass's weight vectors, each voxel padded to [`CHANNELS`] with a zero: `params.job[1] × voxels ×
     /// CHANNELS`, then with the view group each vector's [`VIEW`] view weights (`params.job[1] × VIEW`).
@@ -237,20 +259,20 @@ impl PackedGroup {
     ) -> Self {
         let layout = engine.layout();
         let g = layout.grid();
-        let bounds_per_hyp = (g[0] + g[1] + 2) as usize;
+        let words = boundary_words(&g);
         let mut chunks = Vec::new();
         for (job, job_members) in members {
             for part in job_members.chunks(max_chunk.max(1)) {
                 // Hypotheses in parallel (groups differ in size by orders of magnitude, so a group per
                 // thread left most threads idle while the largest groups packed).
                 let mut records = vec![FastRecord::default(); part.len()];
-                let mut bounds = vec![0u32; part.len() * bounds_per_hyp];
-                records.par_iter_mut().zip(bounds.par_chunks_mut(bounds_per_hyp)).zip(part).for_each(
+                let mut bounds = vec![0u32; part.len() * words];
+                records.par_iter_mut().zip(bounds.par_chunks_mut(words)).zip(part).for_each(
                     |((record, bounds), &n)| {
                         let hyp = &jobs[*job].hypotheses[n];
                         let expanded = ExpandedBox::new(layout, hyp);
                         let boundaries = engine.voxel_boundaries(&expanded, key.yaw_index);
-                        bounds.copy_from_slice(boundaries.all());
+                        pack_boundaries(boundaries.all(), bounds);
                         let ExpandedBox { lo, cell, .. } = expanded;
                         *record = FastRecord {
                             lo: [lo[0], lo[1], lo[2], hyp.centre.x],
@@ -270,11 +292,10 @@ impl PackedGroup {
     /// the group is packed, so batches are planned first ([`plan_batches`]).
     fn bytes(engine: &FastEngine, key: TableKey, members: &JobMembers, scores_per_hypothesis: &[usize]) -> u64 {
         let g = engine.layout().grid();
-        let bounds_per_hyp = (g[0] + g[1] + 2) as usize;
+        let words = boundary_words(&g);
         let lattice = engine.lattice(key.yaw_index as usize);
         let table_words = table_words(&table_params(lattice, engine.table_span(key), 0));
-        let per_member =
-            |job: usize| std::mem::size_of::<FastRecord>() + 4 * (bounds_per_hyp + scores_per_hypothesis[job]);
+        let per_member = |job: usize| std::mem::size_of::<FastRecord>() + 4 * (words + scores_per_hypothesis[job]);
         let members: usize = members.iter().map(|(job, m)| m.len() * per_member(*job)).sum();
         (4 * table_words + members) as u64
     }
@@ -378,6 +399,13 @@ fn run(
     for job in jobs {
         validate_job(engine, job)?;
     }
+    if let Some(cells) = (0..scene.yaws.len()).flat_map(|y| engine.lattice(y).cells()).find(|&c| c > MAX_LATTICE_CELLS)
+    {
+        return Err(Error::Gpu(format!(
+            "fast_scores: a lattice of {cells} cells along an axis; the packed voxel boundaries address at most \
+             {MAX_LATTICE_CELLS}"
+        )));
+    }
     let w_totals: Vec<usize> = jobs.iter().map(|j| j.weights.len()).collect();
     let mut scores: Vec<Vec<f32>> = jobs.iter().map(|j| vec![0.0f32; j.hypotheses.len() * j.weights.len()]).collect();
     // Weight passes of all jobs, numbered globally (dispatches of one pass share its upload).
@@ -392,7 +420,7 @@ fn run(
         .collect();
     let dim = layout.dim();
     let g = layout.grid();
-    let bounds_per_hyp = g[0] + g[1] + 2;
+    let words = boundary_words(&g) as u32;
     let [fx, fy, _, _] = scene.pre.camera.intrinsics;
     let inv_cog_scale = 1.0 / engine.cog_scale();
     let params_of = |group: &PackedGroup, chunk: &PackedChunk, count: usize| {
@@ -402,7 +430,7 @@ fn run(
         let front = Cuboid::new(Vec3::ZERO, Vec3::ONE, grid.yaw).front();
         FastParams {
             grid: [g[0], g[1], g[2], dim as u32],
-            job: [chunk.records.len() as u32, count as u32, group_bits(layout), bounds_per_hyp],
+            job: [chunk.records.len() as u32, count as u32, group_bits(layout), words],
             table: [stride[0] as u32, stride[1] as u32, 0, 0],
             scale: [fx, fy, inv_cog_scale, 0.0],
             m0: m.x_axis.extend(0.0).to_array(),
@@ -1064,10 +1092,11 @@ pub fn fast_scores_main(
             let j = (v / nx) % ny;
             let k = v / (nx * ny);
             // Step 3: the voxel's sums, four corners of layer k (9 vec4 per entry).
-            let x0 = bounds[b + i] as usize;
-            let x1 = bounds[b + i + 1] as usize;
-            let y0 = bounds[b + nx + 1 + j] as usize;
-            let y1 = bounds[b + nx + 1 + j + 1] as usize;
+            let boundary = |k: usize| ((bounds[b + (k >> 1)] >> ((k & 1) * 16)) & 0xffff) as usize;
+            let x0 = boundary(i);
+            let x1 = boundary(i + 1);
+            let y0 = boundary(nx + 1 + j);
+            let y1 = boundary(nx + 1 + j + 1);
             let layer = k * params.table[1] as usize;
             let high = table_base + ((layer + y1) * table_row + x1) * 9;
             let left = table_base + ((layer + y1) * table_row + x0) * 9;
@@ -1204,4 +1233,33 @@ pub fn use_kernel_on(ctx: &GpuContext) -> bool {
         );
     }
     false
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The shader's `boundary` (the twin's closure), written out.
+    fn unpack(words: &[u32], k: usize) -> u32 {
+        (words[k >> 1] >> ((k & 1) * 16)) & 0xffff
+    }
+
+    #[test]
+    fn packed_boundaries_unpack_to_themselves() {
+        for g in [[5u32, 5, 5], [7, 7, 7], [5, 3, 5], [4, 2, 1]] {
+            let count = (g[0] + g[1] + 2) as usize;
+            // Every value a boundary can take at the edges of the 16 bits, and some between.
+            let edges = [0, 1, 255, 256, 65_534, MAX_LATTICE_CELLS as u32];
+            let boundaries: Vec<u32> =
+                (0..count).map(|k| (edges[k % 6] + (k / 6) as u32).min(MAX_LATTICE_CELLS as u32)).collect();
+            let mut words = vec![u32::MAX; boundary_words(&g)];
+            pack_boundaries(&boundaries, &mut words);
+            assert_eq!(words.len(), count.div_ceil(2));
+            let unpacked: Vec<u32> = (0..count).map(|k| unpack(&words, k)).collect();
+            assert_eq!(unpacked, boundaries, "grid {g:?}");
+            if count % 2 == 1 {
+                assert_eq!(words[count / 2] >> 16, 0, "grid {g:?}: the last word's upper half is clear");
+            }
+        }
+    }
 }
