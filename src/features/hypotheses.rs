@@ -574,9 +574,8 @@ pub struct WindowRequest<'a> {
 
 /// The windows of several models on one scene ([`window`] of each request, the same hypotheses in the
 /// same order), yaws in parallel and each yaw's requests in parallel, **each yaw's count tables built once
-/// for all the requests** ([`YawCounts`]) and dropped when the yaw is done: at most one yaw's tables per
-/// thread, as before. `detect` searches all the
-/// models of a scene with one call.
+/// for all the requests** (`YawCounts`) and dropped when the yaw is done: at most one yaw's tables per
+/// thread, as before. `detect` searches all the models of a scene with one call.
 pub fn windows(scene: &FeatureScene, requests: &[WindowRequest]) -> Vec<HypothesisSet> {
     use rayon::prelude::*;
     let floor = scene.pre.floor;

@@ -18,10 +18,11 @@
 //! batch is submitted once and its scores read back once. How the work
 //! is batched does not change a single bit of the scores (tested).
 //!
-//! Per hypothesis the CPU packs a [`FastRecord`] (low corner and voxel size of the expanded box) and the
-//! `nx + 1 + ny + 1` voxel-boundary cell indices (two 16-bit indices per word since 2026-11-28,
-//! [`pack_boundaries`]: 32 bytes instead of 64 with the default grid, written and uploaded per hypothesis), computed by the engine's own membership rule
-//! (`FastEngine::voxel_boundaries`, the function its scoring uses; no view cosine, no allocation per hypothesis), so cell membership is identical by
+//! Per hypothesis the CPU packs a [`FastRecord`] (low corner and voxel size of the expanded box, and its
+//! centre) and the `nx + 1 + ny + 1` voxel-boundary cell indices (two 16-bit indices per word since
+//! 2026-11-28, [`pack_boundaries`]: 32 bytes instead of 64 with the default grid, written and uploaded per
+//! hypothesis), computed by the engine's own membership rule (`FastEngine::voxel_boundaries`, the function
+//! its scoring uses; no view cosine, no allocation per hypothesis), so cell membership is identical by
 //! construction. The shader runs one workgroup of 64 invocations per hypothesis; invocation `lid` takes the
 //! voxels `ℓ = lid + 64·r` in the layout's
 //! order, differences four table corners with wrapping `u32` arithmetic (exact, as on the CPU), finalises
