@@ -19,7 +19,8 @@
 #      models' own steps, each path also with IN_FLIGHT frames in flight (`--in-flight`); at 0.1 m the GPU
 #      path alone with 3 and 4 frames in flight, and with 3 and four buffer-pool sets
 #      (COG_GPU_POOL_SLOTS=4); with BASE_BIN, that binary's GPU
-#      path at 0.1 m (a baseline, same machine);
+#      path at 0.1 m (a baseline, same machine), one frame at a time and then BASE_IN_FLIGHT frames in
+#      flight;
 #   3. the README's main command, `cog-gpu detect` of the shipped sample frames with overlays, timed from
 #      process start to exit (and BASE_BIN's).
 # Results go to $OUT (set by the device tool; default gpu-bench-out/), six files: fast-bed.json,
@@ -28,7 +29,9 @@
 # host the whole run (without the own steps, with a baseline) took 140 s (2026-11-27).
 #
 # Environment: BIN (default .dev/cog-gpu, else target/release/cog-gpu), BASE_BIN (none; e.g. an earlier
-# build's .dev/cog-gpu copied aside before `prepare` replaces it), SIZES (default
+# build's .dev/cog-gpu copied aside before `prepare` replaces it), BASE_IN_FLIGHT (3: the baseline's
+# throughput with 3 frames in flight, comparable with gpu-in-flight-3 of the same run; 0 leaves that pass
+# out, for a BASE_BIN older than `--in-flight`, 2026-11-27), SIZES (default
 # .dev/sunrgbd-size-stats.json, else ../shared/data/sunrgbd-size-stats.json), REPEAT (2), IN_FLIGHT (2),
 # STEPS ("0.1 own"), QUICK=1 (one
 # frame, one repeat, own steps only, 20 000 bed hypotheses: a smoke test, e.g. on lavapipe, where `detect` keeps the CPU fast path).
@@ -109,8 +112,10 @@ if [ "${QUICK:-0}" != 1 ]; then
 fi
 # 2c. A baseline build (BASE_BIN, e.g. the previous release), GPU path, same machine, same frames.
 if [ -n "${BASE_BIN:-}" ]; then
+    base_in_flight=()
+    [ "${BASE_IN_FLIGHT:-3}" = 0 ] || base_in_flight=(--in-flight "${BASE_IN_FLIGHT:-3}")
     variant base-detect-0.1 50 "$BASE_BIN" bench --detect "$work/frames" --detect-step 0.1 --gpu --repeat "$REPEAT" \
-        --json
+        --json "${base_in_flight[@]}"
 fi
 
 # 3. The README's main command, process start to exit, overlays written (and the baseline's, with BASE_BIN).
