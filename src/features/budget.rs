@@ -27,6 +27,8 @@ struct YawSize {
     cells: [f64; 2],
     /// Cell layers of the count table (floor to the highest point).
     layers: f64,
+    /// Layers of the surface, free and resting windows' count tables (`SURFACE_COUNT_CELL_M` cells).
+    fine_layers: f64,
 }
 
 /// Per-yaw grid sizes of `pre` at centre step `step` for the window's `yaws`, as `YawGrid::build` and the
@@ -34,12 +36,13 @@ struct YawSize {
 /// [`super::scene::LatticePhase::Walls`], can add one cell per axis: well inside the limits' margins).
 fn yaw_sizes(pre: &Preprocessed, yaws: &[f32], step: f32) -> Vec<YawSize> {
     let top = pre.points.iter().fold(pre.floor, |m, p| m.max(p.z));
-    let layers = (((top - pre.floor) / step).floor() as f64 + 1.0).max(1.0);
+    let layers_of = |cell: f32| (((top - pre.floor) / cell).floor() as f64 + 1.0).max(1.0);
+    let (layers, fine_layers) = (layers_of(step), layers_of(SURFACE_COUNT_CELL_M));
     yaws.par_iter()
         .map(|&yaw| {
             let (sin, cos) = (yaw as f64).sin_cos();
             let rotated: Vec<[f32; 2]> = pre.points.iter().map(|p| rotate(p, sin as f32, cos as f32)).collect();
-            YawSize { cells: grid_cells(extent(&rotated), step).1, layers }
+            YawSize { cells: grid_cells(extent(&rotated), step).1, layers, fine_layers }
         })
         .collect()
 }
@@ -65,11 +68,9 @@ pub fn check_window(pre: &Preprocessed, yaws: &[f32], step: f32, sizes: usize) -
     // the step's, and for the surface, free and resting windows two of `SURFACE_COUNT_CELL_M` layers (all
     // points, upward points; `hypotheses::windows` builds them once for all the models of a scene), counted
     // whatever the support.
-    let top = pre.points.iter().fold(pre.floor, |m, p| m.max(p.z));
-    let fine_layers = (((top - pre.floor) / SURFACE_COUNT_CELL_M).floor() as f64 + 1.0).max(1.0);
     let largest = yaws
         .iter()
-        .map(|y| (y.cells[0] + 1.0) * (y.cells[1] + 1.0) * ((y.layers + 1.0) + 2.0 * (fine_layers + 1.0)))
+        .map(|y| (y.cells[0] + 1.0) * (y.cells[1] + 1.0) * ((y.layers + 1.0) + 2.0 * (y.fine_layers + 1.0)))
         .fold(0.0, f64::max);
     let concurrent = rayon::current_num_threads().min(yaws.len()) as f64;
     check_memory(

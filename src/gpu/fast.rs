@@ -67,10 +67,10 @@ use super::fast_tables::{
 };
 use super::{BufferBinding, GpuContext, KernelSpec};
 use crate::error::{Error, Result};
-use crate::features::cpu::{ExpandedBox, VIEW_MIN_DISTANCE};
+use crate::features::cpu::{dot, ExpandedBox, VIEW_MIN_DISTANCE};
 use crate::features::fast::{group_by_table, FastEngine, LayerTable, TableKey, TableSpan, CHANNELS};
 use crate::features::feature_layout::{
-    FeatureLayout, COG, COG_BINS, COG_EPSILON, NORMALS, PER_VOXEL, VIEW, VIEW_RBFS, VIEW_SIGMA,
+    view_features, FeatureLayout, COG, COG_BINS, COG_EPSILON, NORMALS, PER_VOXEL, VIEW,
 };
 use crate::features::preprocess::NORMAL_BINS;
 use crate::features::Hypothesis;
@@ -164,6 +164,11 @@ pub fn pack_boundaries(boundaries: &[u32], words: &mut [u32]) {
     for (word, pair) in words.iter_mut().zip(boundaries.chunks(2)) {
         *word = pair[0] | (pair.get(1).copied().unwrap_or(0) << 16);
     }
+}
+
+/// Boundary `k` of packed `words` ([`pack_boundaries`]): the shader's `boundary`.
+pub fn packed_boundary(words: &[u32], k: usize) -> u32 {
+    (words[k >> 1] >> ((k & 1) * 16)) & 0xffff
 }
 
 /// Most lattice cells along an axis the packed boundaries can address (a boundary is a cell index in
@@ -1093,7 +1098,7 @@ pub fn fast_scores_main(
             let j = (v / nx) % ny;
             let k = v / (nx * ny);
             // Step 3: the voxel's sums, four corners of layer k (9 vec4 per entry).
-            let boundary = |k: usize| ((bounds[b + (k >> 1)] >> ((k & 1) * 16)) & 0xffff) as usize;
+            let boundary = |k: usize| packed_boundary(&bounds[b..], k) as usize;
             let x0 = boundary(i);
             let x1 = boundary(i + 1);
             let y0 = boundary(nx + 1 + j);
@@ -1176,7 +1181,7 @@ pub fn fast_scores_main(
         }
         stride /= 2;
     }
-    // Invocation 0: the view part (the shader's `view_cosine` and `view_part`).
+    // Invocation 0: the view part (the shader's `view_cosine`; its `view_part` writes out `view_features`).
     let view_cosine = |s: f32, t: f32| -> f32 {
         let x = s * params.view[0] - t * params.view[1];
         let y = s * params.view[1] + t * params.view[0];
@@ -1188,18 +1193,10 @@ pub fn fast_scores_main(
         let inv_length = 1.0 / length;
         params.view[2] * (to_camera[0] * inv_length) + params.view[3] * (to_camera[1] * inv_length)
     };
+    // The VIEW weights after the pass's voxel weights, dotted in order with the view features.
     let view_part = |w: usize, cosine: f32| -> f32 {
-        let wb = params.base[3] as usize + weight_count * voxels * 9 + w * 3;
-        let mut acc = 0.0f32;
-        for j in 0..VIEW {
-            let mut feature = 1.0f32;
-            if j < VIEW_RBFS {
-                let d = cosine - (-1.0 + 0.2 * j as f32);
-                feature = (-(d * d) / (2.0 * VIEW_SIGMA * VIEW_SIGMA)).exp();
-            }
-            acc += vec4_at(weights, wb + j / 4)[j % 4] * feature;
-        }
-        acc
+        let wb = 4 * (params.base[3] as usize + weight_count * voxels * 9 + w * 3);
+        dot(&weights[wb..wb + VIEW], &view_features(cosine))
     };
     let cosine = view_cosine(record.lo[3], record.cell[3]);
     (0..weight_count)
@@ -1240,11 +1237,6 @@ pub fn use_kernel_on(ctx: &GpuContext) -> bool {
 mod tests {
     use super::*;
 
-    /// The shader's `boundary` (the twin's closure), written out.
-    fn unpack(words: &[u32], k: usize) -> u32 {
-        (words[k >> 1] >> ((k & 1) * 16)) & 0xffff
-    }
-
     #[test]
     fn packed_boundaries_unpack_to_themselves() {
         for g in [[5u32, 5, 5], [7, 7, 7], [5, 3, 5], [4, 2, 1]] {
@@ -1256,7 +1248,7 @@ mod tests {
             let mut words = vec![u32::MAX; boundary_words(&g)];
             pack_boundaries(&boundaries, &mut words);
             assert_eq!(words.len(), count.div_ceil(2));
-            let unpacked: Vec<u32> = (0..count).map(|k| unpack(&words, k)).collect();
+            let unpacked: Vec<u32> = (0..count).map(|k| packed_boundary(&words, k)).collect();
             assert_eq!(unpacked, boundaries, "grid {g:?}");
             if count % 2 == 1 {
                 assert_eq!(words[count / 2] >> 16, 0, "grid {g:?}: the last word's upper half is clear");
