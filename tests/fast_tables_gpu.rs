@@ -22,6 +22,7 @@ use cog_gpu::gpu::fast_tables::{
     build_table_gpu, build_table_reference, build_tables_gpu, build_tables_reference, table_params, table_params_at,
     table_points, table_words, TableParams, TablePoint, SCAN_COLUMNS, SCAN_ROWS,
 };
+use cog_gpu::gpu::TexelRows;
 use cog_gpu::synth::{self, SynthOptions};
 
 const FRAME: &str = "../shared/data/sunrgbd/kv1-b3dodata-img_0063";
@@ -213,6 +214,7 @@ fn fast_kernels_share_their_constants_and_structs_with_rust() {
     let scores = shader_module("fast_scores.wgsl");
     assert_eq!(wgsl_const(&scores, "MAX_WEIGHTS"), MAX_WEIGHTS as i64);
     assert_eq!(wgsl_const(&scores, "WORKGROUP"), WORKGROUP as i64);
+    assert_eq!(wgsl_const(&scores, "TEXELS_PER_ROW"), i64::from(TexelRows::WIDTH));
     assert_eq!(wgsl_const(&scores, "VIEW"), VIEW as i64);
     assert_eq!(wgsl_const(&scores, "VIEW_RBFS"), VIEW_RBFS as i64);
     assert_eq!(wgsl_const_f32(&scores, "VIEW_SIGMA").to_bits(), VIEW_SIGMA.to_bits());

@@ -267,11 +267,7 @@ fn gpu_errors_come_back_as_errors() {
     let spec = gpu::depth_points::KERNEL;
     // The shader's binding 0 is a uniform; declaring it as storage must fail pipeline creation.
     let wrong_layout = gpu::KernelSpec {
-        bindings: &[
-            gpu::BufferBinding::StorageRead,
-            gpu::BufferBinding::StorageRead,
-            gpu::BufferBinding::StorageReadWrite,
-        ],
+        bindings: &[gpu::Binding::StorageRead, gpu::Binding::StorageRead, gpu::Binding::StorageReadWrite],
         ..spec
     };
     let err = gpu::Kernel::new(&ctx.device, &wrong_layout).expect_err("layout mismatch");

@@ -13,7 +13,7 @@
 use bytemuck::{Pod, Zeroable};
 use glam::Mat3;
 
-use super::{BufferBinding, GpuContext, KernelSpec};
+use super::{Binding, GpuContext, KernelSpec};
 use crate::error::{Error, Result};
 use crate::frame::{encode_depth_value, Frame, MAX_DEPTH_M};
 
@@ -22,7 +22,7 @@ pub const KERNEL: KernelSpec = KernelSpec {
     label: "depth_points",
     source: include_str!("../../shaders/depth_points.wgsl"),
     entry_point: "depth_points",
-    bindings: &[BufferBinding::Uniform, BufferBinding::StorageRead, BufferBinding::StorageReadWrite],
+    bindings: &[Binding::Uniform, Binding::StorageRead, Binding::StorageReadWrite],
 };
 
 /// Bytes of one output point (`vec4<f32>`).

@@ -23,17 +23,29 @@
 //! 2026-11-28, [`pack_boundaries`]: 32 bytes instead of 64 with the default grid, written and uploaded per
 //! hypothesis), computed by the engine's own membership rule (`FastEngine::voxel_boundaries`, the function
 //! its scoring uses; no view cosine, no allocation per hypothesis), so cell membership is identical by
-//! construction. The shader runs one workgroup of 64 invocations per hypothesis; invocation `lid` takes the
-//! voxels `ℓ = lid + 64·r` in the layout's
-//! order, differences four table corners with wrapping `u32` arithmetic (exact, as on the CPU), finalises
-//! the 35 features as `FastEngine::scores` does (density and normal bins over the linearised projected
-//! area, COG normalised `φ/√(‖φ‖² + ε)`, switched-off groups and empty voxels contributing nothing) and
-//! dots them with the weights. The 64 partial scores are reduced in workgroup memory in a fixed tree order:
-//! results are bit-identical run to run.
+//! construction. The shader runs **one invocation per hypothesis** (since 2026-11-28; before, a workgroup of
+//! 64 invocations per hypothesis, one voxel each, reduced in workgroup memory): it visits the voxels in the
+//! layout's order, row by row, each voxel's right table corners becoming the next one's left corners (18
+//! texel reads per voxel instead of 36), differences four corners with wrapping `u32` arithmetic (exact, as
+//! on the CPU), finalises the 35 features as `FastEngine::scores` does (density and normal bins over the
+//! linearised projected area, COG normalised `φ/√(‖φ‖² + ε)`, switched-off groups and empty voxels
+//! contributing nothing) and adds each voxel's dot product with each of the pass's weight vectors to that
+//! vector's score in voxel order: results are bit-identical run to run. **The tables, the boundaries and the
+//! weights are read as textures** ([`TexelRows`]: each is copied from its buffer into an `rgba32` texture
+//! 8192 texels wide after the tables are built), the records and scores stay buffers. Why, measured on
+//! lavapipe (CI's device): its storage-buffer loads run lane by lane with a branch per lane and component
+//! (~13 ns per `vec4`), texture reads are vectorised gathers (1.4–3.8 ns); a workgroup costs a coroutine
+//! per subgroup and every barrier switches them, so the workgroup per hypothesis spent 2.2 of its 5.7 s
+//! on the bed window's first 40 000 hypotheses outside its voxel loop; and lavapipe runs every `if` body
+//! and every iteration of a loop of constant length with the lanes masked, so the loop over the weights
+//! has the pass's own length, not `MAX_WEIGHTS`. The bed window on the standard frame went from 25.4 s
+//! to 6.5 s there (tables and scores; the CPU fast path 0.78 s; README, "The fast path"). On hardware
+//! GPUs a thread per hypothesis is the usual shape (no barriers, the weights read at one address by a
+//! whole warp); its speed there is not measured yet.
 //!
 //! **The view features are computed in the shader too** (since 2026-11-28; before, the CPU computed their
 //! dot products while packing, 52 ns per hypothesis of the GPU path's CPU time): the record carries the
-//! box's centre on the ground, and after the reduction invocation 0 computes its view cosine (the centre
+//! box's centre on the ground, and after the voxels the invocation computes its view cosine (the centre
 //! turned upright with the yaw's own `cos`/`sin`, the front from `Cuboid::front` of the yaw, both passed in
 //! [`FastParams::view`]), the 11 radial basis functions and the bias, and adds their dot product with the
 //! pass's view weights (stored after its voxel weights) to the voxel part — in the order of
@@ -65,7 +77,7 @@ use super::fast_tables::{
     table_invocations, table_params, table_params_at, table_points, table_words, TableParams, TablePoint, SCAN_COLUMNS,
     SCAN_ROWS,
 };
-use super::{BufferBinding, GpuContext, KernelSpec};
+use super::{Binding, GpuContext, KernelSpec, TexelRows};
 use crate::error::{Error, Result};
 use crate::features::cpu::{dot, ExpandedBox, VIEW_MIN_DISTANCE};
 use crate::features::fast::{group_by_table, FastEngine, LayerTable, TableKey, TableSpan, CHANNELS};
@@ -83,18 +95,19 @@ pub const KERNEL: KernelSpec = KernelSpec {
     source: include_str!("../../shaders/fast_scores.wgsl"),
     entry_point: "main",
     bindings: &[
-        BufferBinding::UniformDynamic,
-        BufferBinding::StorageRead,
-        BufferBinding::StorageRead,
-        BufferBinding::StorageRead,
-        BufferBinding::StorageRead,
-        BufferBinding::StorageReadWrite,
+        Binding::UniformDynamic,
+        Binding::TextureU32,
+        Binding::StorageRead,
+        Binding::TextureU32,
+        Binding::TextureF32,
+        Binding::StorageReadWrite,
     ],
 };
 
 /// Weight vectors scored per dispatch (the shader's `MAX_WEIGHTS`); more are done in several passes.
 pub const MAX_WEIGHTS: usize = 8;
-/// Invocations per workgroup (the shader's `WORKGROUP`): one workgroup per hypothesis.
+/// Invocations per workgroup (the shader's `WORKGROUP`): one invocation per hypothesis, so one workgroup
+/// scores up to 64 hypotheses of a dispatch.
 pub const WORKGROUP: usize = 64;
 /// Largest number of hypotheses per dispatch.
 pub const MAX_CHUNK: usize = 1 << 16;
@@ -810,12 +823,18 @@ fn run_batch(
     let record_size = std::mem::size_of::<FastParams>() as u64;
     let record_stride = record_size.next_multiple_of(u64::from(ctx.limits.min_uniform_buffer_offset_alignment));
     let params_bytes = record_stride * layout.params.len() as u64;
+    // The tables and the weights are read by the scoring kernel as textures (`TexelRows`: lavapipe reads
+    // storage buffers lane by lane), copies of their buffers; the buffers hold whole rows for the copies.
+    let max_rows = ctx.limits.max_texture_dimension_2d;
+    let table_rows = TexelRows::for_bytes(layout.tables.len, max_rows, "fast_scores: the batch's tables")?;
+    let weight_rows = TexelRows::for_bytes(layout.weights.len, max_rows, "fast_scores: the batch's weights")?;
+    let bound_rows = TexelRows::for_bytes(layout.bounds.len, max_rows, "fast_scores: the batch's boundaries")?;
     let lattice_buffer = pooled("fast lattice points", storage, point_bytes);
     // Pooled, so not zero: the table range is cleared on the GPU before the scatter adds into it.
-    let table_buffer = pooled("fast tables", storage, layout.tables.len);
+    let table_buffer = pooled("fast tables", storage, table_rows.bytes());
     let record_buffer = pooled("fast records", storage, layout.records.len);
-    let bound_buffer = pooled("fast bounds", storage, layout.bounds.len);
-    let weight_buffer = pooled("fast weights", storage, layout.weights.len);
+    let bound_buffer = pooled("fast bounds", storage, bound_rows.bytes());
+    let weight_buffer = pooled("fast weights", storage, weight_rows.bytes());
     let params_buffer = pooled("fast params", wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST, params_bytes);
     let out_buffer = pooled("fast scores", storage, layout.scores.len);
     let staging =
@@ -825,6 +844,10 @@ fn run_batch(
     let mut phase_params = Arena::new(storage_align);
     let phase_at: [u64; 3] = [(); 3].map(|_| phase_params.place((layout.groups.len() * table_params_size) as u64));
     let table_params_buffer = pooled("fast table params", storage, phase_params.len);
+    let table_texture = pool.texture(&ctx.device, "fast tables", wgpu::TextureFormat::Rgba32Uint, table_rows, max_rows);
+    let weight_texture =
+        pool.texture(&ctx.device, "fast weights", wgpu::TextureFormat::Rgba32Float, weight_rows, max_rows);
+    let bound_texture = pool.texture(&ctx.device, "fast bounds", wgpu::TextureFormat::Rgba32Uint, bound_rows, max_rows);
     // Everything the batch uploads, laid out as in its destination buffers, region after region, in one
     // pooled upload buffer: one copy per destination buffer.
     let mut regions = Arena::new(wgpu::COPY_BUFFER_ALIGNMENT as u32);
@@ -890,15 +913,20 @@ fn run_batch(
         }
     }
     let kernel = &ctx.kernels.fast_scores;
-    let scoring = ctx.bind_group_ranges(
+    let range = |buffer, size: u64| {
+        wgpu::BindingResource::Buffer(wgpu::BufferBinding { buffer, offset: 0, size: wgpu::BufferSize::new(size) })
+    };
+    let [table_view, bound_view, weight_view] =
+        [&table_texture, &bound_texture, &weight_texture].map(|t| t.create_view(&Default::default()));
+    let scoring = ctx.bind_group_resources(
         kernel,
         &[
-            (&params_buffer, 0, record_size),
-            (&table_buffer, 0, layout.tables.len.max(4)),
-            (&record_buffer, 0, layout.records.len.max(4)),
-            (&bound_buffer, 0, layout.bounds.len.max(4)),
-            (&weight_buffer, 0, layout.weights.len.max(4)),
-            (&out_buffer, 0, layout.scores.len.max(4)),
+            range(&params_buffer, record_size),
+            wgpu::BindingResource::TextureView(&table_view),
+            range(&record_buffer, layout.records.len.max(4)),
+            wgpu::BindingResource::TextureView(&bound_view),
+            wgpu::BindingResource::TextureView(&weight_view),
+            range(&out_buffer, layout.scores.len.max(4)),
         ],
     );
     times.bind_groups += split(&mut mark);
@@ -924,13 +952,16 @@ fn run_batch(
         let jobs: Vec<(&wgpu::BindGroup, u32, u32)> = jobs.iter().map(|(b, n, z)| (b, *n, *z)).collect();
         ctx.encode_layered_dispatches(&mut encoder, kernel, &jobs, timer.as_ref().map(|t| (t, index as u32)))?;
     }
-    // One workgroup per hypothesis: the 1-D convention with 64 invocations per hypothesis.
+    table_rows.encode_copy(&mut encoder, &table_buffer, &table_texture);
+    weight_rows.encode_copy(&mut encoder, &weight_buffer, &weight_texture);
+    bound_rows.encode_copy(&mut encoder, &bound_buffer, &bound_texture);
+    // One invocation per hypothesis (the 1-D convention).
     let jobs: Vec<(u32, u32)> = dispatches
         .iter()
         .enumerate()
         .map(|(n, d)| {
             let offset = u32::try_from(n as u64 * record_stride);
-            let invocations = u32::try_from(d.records.len() * kernel.invocations_per_workgroup() as usize);
+            let invocations = u32::try_from(d.records.len());
             match (offset, invocations) {
                 (Ok(offset), Ok(invocations)) => Ok((offset, invocations)),
                 _ => Err(Error::Gpu("fast_scores: a dispatch record offset or size beyond 2³²".into())),
@@ -1015,7 +1046,8 @@ pub fn fast_scores_reference_jobs(
         let layout = BatchLayout::new(engine, dispatches, TWIN_ALIGN)?;
         let mut table = vec![0u32; (layout.tables.len / 4) as usize];
         let mut records = vec![FastRecord::default(); (layout.records.len / 32) as usize];
-        let mut bounds = vec![0u32; (layout.bounds.len / 4) as usize];
+        // Whole texels (4 words), as the texture the shader reads them from.
+        let mut bounds = vec![0u32; (layout.bounds.len / 4).next_multiple_of(4) as usize];
         let mut weights = vec![0.0f32; (layout.weights.len / 4) as usize];
         for d in dispatches {
             let group = &layout.groups[d.group];
@@ -1030,10 +1062,10 @@ pub fn fast_scores_reference_jobs(
             let at = (layout.passes[d.pass].expect("placed") / 4) as usize;
             weights[at..at + d.weights.len()].copy_from_slice(d.weights);
         }
-        // Every workgroup of every dispatch: (dispatch, hypothesis).
-        let workgroups: Vec<(usize, usize)> =
+        // Every invocation of every dispatch: (dispatch, hypothesis).
+        let invocations: Vec<(usize, usize)> =
             dispatches.iter().enumerate().flat_map(|(n, d)| (0..d.records.len()).map(move |h| (n, h))).collect();
-        let writes: Vec<Vec<(usize, f32)>> = workgroups
+        let writes: Vec<Vec<(usize, f32)>> = invocations
             .into_par_iter()
             .map(|(n, h)| fast_scores_main(&layout.params[n], &table, &records, &bounds, &weights, h))
             .collect();
@@ -1049,9 +1081,10 @@ pub fn fast_scores_reference_jobs(
 /// largest a device may ask for).
 const TWIN_ALIGN: u32 = 256;
 
-/// The shader's `main` for workgroup `h` of the dispatch of record `params` (all 64 invocations, then the
-/// reduction): the writes invocation 0 makes, as (index in `out`, value). Written to read like `shaders/fast_scores.wgsl`; its `vec4`s are
-/// `[_; 4]` here, `table` and `weights` are indexed in `vec4` units through `vec4_at`.
+/// The shader's `main` for the invocation of hypothesis `h` of the dispatch of record `params`: the writes it
+/// makes, as (index in `out`, value). Written to read like `shaders/fast_scores.wgsl`; its `vec4`s are
+/// `[_; 4]` here; `table`, `bounds` and `weights` are the buffers the shader sees as textures, read through
+/// `texel` as it reads them (element `n` of a [`TexelRows`] texture is element `n` of its buffer).
 pub fn fast_scores_main(
     params: &FastParams,
     table: &[u32],
@@ -1060,6 +1093,10 @@ pub fn fast_scores_main(
     weights: &[f32],
     h: usize,
 ) -> Vec<(usize, f32)> {
+    // Past the last hypothesis of its dispatch (the grid's padding): no work, no write.
+    if h >= params.job[0] as usize {
+        return Vec::new();
+    }
     let [nx, ny, nz, _] = params.grid.map(|v| v as usize);
     let weight_count = params.job[1] as usize;
     let groups = params.job[2];
@@ -1067,11 +1104,7 @@ pub fn fast_scores_main(
     let use_normals = groups & 2 != 0;
     let use_cog = groups & 4 != 0;
     let use_view = groups & 8 != 0;
-    let mut partial = [0.0f32; WORKGROUP * MAX_WEIGHTS];
-    // Past the last hypothesis of its dispatch (the grid's padding): no work, no write.
-    if h >= params.job[0] as usize {
-        return Vec::new();
-    }
+    let mut score = [0.0f32; MAX_WEIGHTS];
 
     let record = &records[params.base[1] as usize + h];
     let lo = record.lo;
@@ -1079,8 +1112,7 @@ pub fn fast_scores_main(
     let face_areas = [cell[1] * cell[2], cell[0] * cell[2], cell[0] * cell[1]];
     let [fx, fy, inv_cog_scale, _] = params.scale;
     let b = params.base[2] as usize + h * params.job[3] as usize;
-    let table_row = params.table[0] as usize;
-    let table_base = params.base[0] as usize;
+    let row = params.table[0] as usize;
     let voxels = nx * ny * nz;
     let camera_point = |q: [f32; 3]| -> [f32; 3] {
         [0, 1, 2].map(|a| params.m0[a] * q[0] + params.m1[a] * q[1] + params.m2[a] * q[2])
@@ -1091,97 +1123,97 @@ pub fn fast_scores_main(
         |acc: f32, a: [f32; 4], b: [f32; 4]| (((acc + a[0] * b[0]) + a[1] * b[1]) + a[2] * b[2]) + a[3] * b[3];
     let to_f32 = |s: [u32; 4]| s.map(|x| x as f32);
     let mul = |a: [f32; 4], m: [f32; 4]| [a[0] * m[0], a[1] * m[1], a[2] * m[2], a[3] * m[3]];
-    for lid in 0..WORKGROUP {
-        let mut my_partial = [0.0f32; MAX_WEIGHTS];
-        for v in (lid..voxels).step_by(WORKGROUP) {
-            let i = v % nx;
-            let j = (v / nx) % ny;
-            let k = v / (nx * ny);
-            // Step 3: the voxel's sums, four corners of layer k (9 vec4 per entry).
-            let boundary = |k: usize| packed_boundary(&bounds[b..], k) as usize;
-            let x0 = boundary(i);
-            let x1 = boundary(i + 1);
+    // Boundary k of the hypothesis (two 16-bit boundaries per word, four words per texel).
+    let boundary = |k: usize| -> usize {
+        let word = b + (k >> 1);
+        ((texel_at(bounds, texel(word / 4))[word % 4] >> ((k & 1) * 16)) & 0xffff) as usize
+    };
+    // The entry whose first vec4 is element e: the 36 channels of a corner, as 9 vec4.
+    let corner = |e: usize| -> [[u32; 4]; 9] { std::array::from_fn(|c| texel_at(table, texel(e + c))) };
+    let sums = |high: [u32; 4], left: [u32; 4], low: [u32; 4], both: [u32; 4]| -> [u32; 4] {
+        [0, 1, 2, 3].map(|n| high[n].wrapping_sub(left[n]).wrapping_sub(low[n]).wrapping_add(both[n]))
+    };
+    // The voxels in the layout's order ℓ = (k·ny + j)·nx + i.
+    for k in 0..nz {
+        let layer = k * params.table[1] as usize;
+        for j in 0..ny {
             let y0 = boundary(nx + 1 + j);
             let y1 = boundary(nx + 1 + j + 1);
-            let layer = k * params.table[1] as usize;
-            let high = table_base + ((layer + y1) * table_row + x1) * 9;
-            let left = table_base + ((layer + y1) * table_row + x0) * 9;
-            let low = table_base + ((layer + y0) * table_row + x1) * 9;
-            let both = table_base + ((layer + y0) * table_row + x0) * 9;
-            let sums = |c: usize| -> [u32; 4] {
-                let [hi, le, lo, bo] = [high, left, low, both].map(|e| vec4_at(table, e + c));
-                [0, 1, 2, 3].map(|n| hi[n].wrapping_sub(le[n]).wrapping_sub(lo[n]).wrapping_add(bo[n]))
-            };
-            let s0 = sums(0);
-            if s0[0] == 0 {
-                continue;
-            }
-            // Step 4: each channel's multiplier.
-            let mut density = 0.0f32;
-            let mut normal = 0.0f32;
-            let centre = [
-                lo[0] + (i as f32 + 0.5) * cell[0],
-                lo[1] + (j as f32 + 0.5) * cell[1],
-                lo[2] + (k as f32 + 0.5) * cell[2],
-            ];
-            let p = camera_point(centre);
-            if p[2] >= MIN_PROJECT_DEPTH {
-                let area = fx
-                    * fy
-                    * (face_areas[0] * dot3(&params.m0, p).abs()
-                        + face_areas[1] * dot3(&params.m1, p).abs()
-                        + face_areas[2] * dot3(&params.m2, p).abs())
-                    / (p[2] * p[2] * p[2]);
-                let inv_area = 1.0 / area.max(1.0);
-                density = if use_density { inv_area } else { 0.0 };
-                normal = if use_normals { inv_area } else { 0.0 };
-            }
-            // COG bins are channels 26..34: s6[2..], s7, s8[..3].
-            let (s6, s7, s8) = (sums(6), sums(7), sums(8));
-            let mut cog = 0.0f32;
-            if use_cog {
-                let [g6, g7, g8] = [s6, s7, s8].map(|s| to_f32(s).map(|x| x * inv_cog_scale));
-                let mut norm_sq = 0.0f32;
-                for x in [g6[2], g6[3], g7[0], g7[1], g7[2], g7[3], g8[0], g8[1], g8[2]] {
-                    norm_sq += x * x;
+            // Step 3: each voxel's right corners are the next one's left corners.
+            let x_first = boundary(0);
+            let mut left = corner(params.base[0] as usize + ((layer + y1) * row + x_first) * 9);
+            let mut both = corner(params.base[0] as usize + ((layer + y0) * row + x_first) * 9);
+            for i in 0..nx {
+                let v = (k * ny + j) * nx + i;
+                let x1 = boundary(i + 1);
+                let high = corner(params.base[0] as usize + ((layer + y1) * row + x1) * 9);
+                let low = corner(params.base[0] as usize + ((layer + y0) * row + x1) * 9);
+                let channel = |c: usize| sums(high[c], left[c], low[c], both[c]);
+                let s0 = channel(0);
+                if s0[0] == 0 {
+                    left = high;
+                    both = low;
+                    continue;
                 }
-                cog = inv_cog_scale * (1.0 / (norm_sq + COG_EPSILON).sqrt());
-            }
-            let f = [
-                mul(to_f32(s0), [density, normal, normal, normal]),
-                mul(to_f32(sums(1)), [normal; 4]),
-                mul(to_f32(sums(2)), [normal; 4]),
-                mul(to_f32(sums(3)), [normal; 4]),
-                mul(to_f32(sums(4)), [normal; 4]),
-                mul(to_f32(sums(5)), [normal; 4]),
-                mul(to_f32(s6), [normal, normal, cog, cog]),
-                mul(to_f32(s7), [cog; 4]),
-                mul(to_f32(s8), [cog, cog, cog, 0.0]),
-            ];
-            for (w, slot) in my_partial.iter_mut().enumerate() {
-                if w < weight_count {
+                // Step 4: each channel's multiplier.
+                let mut density = 0.0f32;
+                let mut normal = 0.0f32;
+                let centre = [
+                    lo[0] + (i as f32 + 0.5) * cell[0],
+                    lo[1] + (j as f32 + 0.5) * cell[1],
+                    lo[2] + (k as f32 + 0.5) * cell[2],
+                ];
+                let p = camera_point(centre);
+                if p[2] >= MIN_PROJECT_DEPTH {
+                    let area = fx
+                        * fy
+                        * (face_areas[0] * dot3(&params.m0, p).abs()
+                            + face_areas[1] * dot3(&params.m1, p).abs()
+                            + face_areas[2] * dot3(&params.m2, p).abs())
+                        / (p[2] * p[2] * p[2]);
+                    let inv_area = 1.0 / area.max(1.0);
+                    density = if use_density { inv_area } else { 0.0 };
+                    normal = if use_normals { inv_area } else { 0.0 };
+                }
+                // COG bins are channels 26..34: s6.zw, s7, s8.xyz.
+                let s6 = channel(6);
+                let s7 = channel(7);
+                let s8 = channel(8);
+                let mut cog = 0.0f32;
+                if use_cog {
+                    let g = [s6[2], s6[3], s7[0], s7[1], s7[2], s7[3], s8[0], s8[1], s8[2]]
+                        .map(|x| x as f32 * inv_cog_scale);
+                    let mut norm_sq = 0.0f32;
+                    for x in g {
+                        norm_sq += x * x;
+                    }
+                    cog = inv_cog_scale * (1.0 / (norm_sq + COG_EPSILON).sqrt());
+                }
+                let f = [
+                    mul(to_f32(s0), [density, normal, normal, normal]),
+                    mul(to_f32(channel(1)), [normal; 4]),
+                    mul(to_f32(channel(2)), [normal; 4]),
+                    mul(to_f32(channel(3)), [normal; 4]),
+                    mul(to_f32(channel(4)), [normal; 4]),
+                    mul(to_f32(channel(5)), [normal; 4]),
+                    mul(to_f32(s6), [normal, normal, cog, cog]),
+                    mul(to_f32(s7), [cog; 4]),
+                    mul(to_f32(s8), [cog, cog, cog, 0.0]),
+                ];
+                for (w, slot) in score.iter_mut().enumerate().take(weight_count) {
                     let wb = params.base[3] as usize + (w * voxels + v) * 9;
                     let mut acc = 0.0f32;
                     for (c, fc) in f.iter().enumerate() {
-                        acc = dot_acc(acc, vec4_at(weights, wb + c), *fc);
+                        acc = dot_acc(acc, texel_at(weights, texel(wb + c)), *fc);
                     }
                     *slot += acc;
                 }
+                left = high;
+                both = low;
             }
         }
-        partial[lid * MAX_WEIGHTS..(lid + 1) * MAX_WEIGHTS].copy_from_slice(&my_partial);
     }
-    // Fixed tree: partial[l] += partial[l + stride] for stride 32, 16, …, 1.
-    let mut stride = WORKGROUP / 2;
-    while stride > 0 {
-        for lid in 0..stride {
-            for w in 0..MAX_WEIGHTS {
-                partial[lid * MAX_WEIGHTS + w] += partial[(lid + stride) * MAX_WEIGHTS + w];
-            }
-        }
-        stride /= 2;
-    }
-    // Invocation 0: the view part (the shader's `view_cosine`; its `view_part` writes out `view_features`).
+    // The view part (the shader's `view_cosine`; its `view_part` writes out `view_features`).
     let view_cosine = |s: f32, t: f32| -> f32 {
         let x = s * params.view[0] - t * params.view[1];
         let y = s * params.view[1] + t * params.view[0];
@@ -1201,18 +1233,25 @@ pub fn fast_scores_main(
     let cosine = view_cosine(record.lo[3], record.cell[3]);
     (0..weight_count)
         .map(|w| {
-            let mut score = partial[w];
+            let mut total = score[w];
             if use_view {
-                score += view_part(w, cosine);
+                total += view_part(w, cosine);
             }
-            (params.at[0] as usize + h * weight_count + w, score)
+            (params.at[0] as usize + h * weight_count + w, total)
         })
         .collect()
 }
 
-/// Element `n` of `data` viewed as an array of `vec4`s.
-fn vec4_at<T: Copy>(data: &[T], n: usize) -> [T; 4] {
-    [data[4 * n], data[4 * n + 1], data[4 * n + 2], data[4 * n + 3]]
+/// The shader's `texel`: where `vec4` element `n` of a buffer lies in its [`TexelRows`] texture.
+fn texel(n: usize) -> [usize; 2] {
+    let width = TexelRows::WIDTH as usize;
+    [n % width, n / width]
+}
+
+/// The texel `[x, y]` of the [`TexelRows`] texture copied from `data` (rows of `WIDTH` `vec4`s).
+fn texel_at<T: Copy>(data: &[T], [x, y]: [usize; 2]) -> [T; 4] {
+    let n = 4 * (y * TexelRows::WIDTH as usize + x);
+    [data[n], data[n + 1], data[n + 2], data[n + 3]]
 }
 
 /// Whether [`crate::backend::Backend::fast_scores`] runs the kernel on `ctx` (see there).

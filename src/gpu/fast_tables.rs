@@ -20,13 +20,12 @@
 
 use bytemuck::{Pod, Zeroable};
 
-use super::{BufferBinding, GpuContext, KernelSpec};
+use super::{Binding, GpuContext, KernelSpec};
 use crate::error::{Error, Result};
 use crate::features::fast::{LatticePoint, TableSpan, YawLattice, CHANNELS};
 use crate::features::feature_layout::COG;
 
-const BINDINGS: &[BufferBinding] =
-    &[BufferBinding::StorageRead, BufferBinding::StorageRead, BufferBinding::StorageReadWrite];
+const BINDINGS: &[Binding] = &[Binding::StorageRead, Binding::StorageRead, Binding::StorageReadWrite];
 
 /// The scatter entry point (registered in [`super::Kernels`]).
 pub const SCATTER_KERNEL: KernelSpec = KernelSpec {

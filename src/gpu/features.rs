@@ -8,7 +8,7 @@
 
 use bytemuck::{Pod, Zeroable};
 
-use super::{BufferBinding, GpuContext, KernelSpec};
+use super::{Binding, GpuContext, KernelSpec};
 use crate::error::{Error, Result};
 use crate::features::cpu::HypothesisRecord;
 use crate::features::feature_layout::{FeatureLayout, MAX_COLUMNS, MAX_GRID_Z};
@@ -20,13 +20,13 @@ pub const KERNEL: KernelSpec = KernelSpec {
     source: include_str!("../../shaders/features.wgsl"),
     entry_point: "main",
     bindings: &[
-        BufferBinding::Uniform,
-        BufferBinding::StorageRead,
-        BufferBinding::StorageRead,
-        BufferBinding::StorageRead,
-        BufferBinding::StorageRead,
-        BufferBinding::StorageReadWrite,
-        BufferBinding::StorageReadWrite,
+        Binding::Uniform,
+        Binding::StorageRead,
+        Binding::StorageRead,
+        Binding::StorageRead,
+        Binding::StorageRead,
+        Binding::StorageReadWrite,
+        Binding::StorageReadWrite,
     ],
 };
 

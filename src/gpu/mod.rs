@@ -60,9 +60,14 @@ const MAP_WAIT: std::time::Duration = std::time::Duration::from_secs(30);
 pub const PRIMARY_BACKENDS: wgpu::Backends =
     wgpu::Backends::VULKAN.union(wgpu::Backends::METAL).union(wgpu::Backends::DX12);
 
-/// How a kernel binds one buffer (binding numbers are the slice positions in [`KernelSpec::bindings`]).
+/// How a kernel binds one buffer or texture (binding numbers are the slice positions in
+/// [`KernelSpec::bindings`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum BufferBinding {
+pub enum Binding {
+    /// `texture_2d<u32>` read by `textureLoad` (a [`TexelRows`] copy of a buffer).
+    TextureU32,
+    /// `texture_2d<f32>` read by `textureLoad`, unfiltered (a [`TexelRows`] copy of a buffer).
+    TextureF32,
     /// `var<uniform>`.
     Uniform,
     /// `var<uniform>` bound with a dynamic offset: one bind group serves many dispatches, each with its own
@@ -84,7 +89,89 @@ pub struct KernelSpec {
     /// Name of the `@compute` entry point.
     pub entry_point: &'static str,
     /// The buffers of `@group(0)`, binding `i` at position `i`.
-    pub bindings: &'static [BufferBinding],
+    pub bindings: &'static [Binding],
+}
+
+/// The bind group layout entry type of `binding`.
+fn binding_type(binding: Binding) -> wgpu::BindingType {
+    let buffer = |ty| wgpu::BindingType::Buffer {
+        ty,
+        has_dynamic_offset: binding == Binding::UniformDynamic,
+        min_binding_size: None,
+    };
+    let texture = |sample_type| wgpu::BindingType::Texture {
+        sample_type,
+        view_dimension: wgpu::TextureViewDimension::D2,
+        multisampled: false,
+    };
+    match binding {
+        Binding::Uniform | Binding::UniformDynamic => buffer(wgpu::BufferBindingType::Uniform),
+        Binding::StorageRead => buffer(wgpu::BufferBindingType::Storage { read_only: true }),
+        Binding::StorageReadWrite => buffer(wgpu::BufferBindingType::Storage { read_only: false }),
+        Binding::TextureU32 => texture(wgpu::TextureSampleType::Uint),
+        Binding::TextureF32 => texture(wgpu::TextureSampleType::Float { filterable: false }),
+    }
+}
+
+/// A buffer of `vec4` elements seen as a 2D texture, [`TexelRows::WIDTH`] texels a row: element `n` is the
+/// texel `(n % WIDTH, n / WIDTH)` (WGSL twin: `TEXELS_PER_ROW` and `texel` in `shaders/fast_scores.wgsl`).
+///
+/// Why: lavapipe (Mesa's software Vulkan, CI's device) performs every storage-buffer load lane by lane,
+/// with a branch and a bounds check per lane and per component, whatever the address — about 13 ns per
+/// `vec4` on this project's 2-core machine, from cache or not, even when every lane reads the same word —
+/// while a `textureLoad` is a vectorised gather: 1.4 ns from cache, 4–5 ns over 16 MB (2²⁷ scattered
+/// `vec4` reads of each kind: `cargo run --release --example lavapipe_loads`, 2026-11-28). Scattered reads
+/// from large read-only arrays therefore go through textures; on hardware GPUs a texture read costs about
+/// what a buffer load does.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TexelRows {
+    /// Rows of the texture (at least 1).
+    pub rows: u32,
+}
+
+impl TexelRows {
+    /// Texels (`vec4` elements) per row: 8192, the WebGPU default of `max_texture_dimension_2d`.
+    pub const WIDTH: u32 = 8192;
+    /// Bytes of one row of 16-byte texels (a multiple of 256, as buffer-to-texture copies need).
+    pub const ROW_BYTES: u64 = Self::WIDTH as u64 * 16;
+
+    /// The rows that hold `bytes` bytes of `vec4` elements, or an error when they exceed `max_rows`.
+    pub fn for_bytes(bytes: u64, max_rows: u32, what: &str) -> Result<TexelRows> {
+        let rows = bytes.div_ceil(Self::ROW_BYTES).max(1);
+        match u32::try_from(rows) {
+            Ok(rows) if rows <= max_rows => Ok(TexelRows { rows }),
+            _ => Err(Error::Gpu(format!(
+                "{what}: {bytes} bytes need {rows} texture rows of {} texels, over the device's {max_rows}",
+                Self::WIDTH
+            ))),
+        }
+    }
+
+    /// Bytes a source buffer must hold for the copy of all rows.
+    pub fn bytes(self) -> u64 {
+        u64::from(self.rows) * Self::ROW_BYTES
+    }
+
+    /// The texture's size.
+    pub fn extent(self) -> wgpu::Extent3d {
+        wgpu::Extent3d { width: Self::WIDTH, height: self.rows, depth_or_array_layers: 1 }
+    }
+
+    /// Records the copy of the first [`TexelRows::bytes`] of `buffer` into `texture`.
+    pub fn encode_copy(self, encoder: &mut wgpu::CommandEncoder, buffer: &wgpu::Buffer, texture: &wgpu::Texture) {
+        encoder.copy_buffer_to_texture(
+            wgpu::TexelCopyBufferInfo {
+                buffer,
+                layout: wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(Self::ROW_BYTES as u32),
+                    rows_per_image: Some(self.rows),
+                },
+            },
+            texture.as_image_copy(),
+            self.extent(),
+        );
+    }
 }
 
 /// A compiled compute pipeline with its bind group layout and the workgroup size read from the WGSL.
@@ -113,15 +200,7 @@ impl Kernel {
             .map(|(i, binding)| wgpu::BindGroupLayoutEntry {
                 binding: i as u32,
                 visibility: wgpu::ShaderStages::COMPUTE,
-                ty: wgpu::BindingType::Buffer {
-                    ty: match binding {
-                        BufferBinding::Uniform | BufferBinding::UniformDynamic => wgpu::BufferBindingType::Uniform,
-                        BufferBinding::StorageRead => wgpu::BufferBindingType::Storage { read_only: true },
-                        BufferBinding::StorageReadWrite => wgpu::BufferBindingType::Storage { read_only: false },
-                    },
-                    has_dynamic_offset: matches!(binding, BufferBinding::UniformDynamic),
-                    min_binding_size: None,
-                },
+                ty: binding_type(*binding),
                 count: None,
             })
             .collect();
@@ -243,6 +322,8 @@ fn parse_pool_slots(value: Option<&str>) -> Result<usize> {
 #[derive(Default)]
 pub struct BufferPool {
     buffers: Vec<(&'static str, wgpu::BufferUsages, wgpu::Buffer)>,
+    /// Grow-only textures by role ([`BufferPool::texture`]).
+    textures: Vec<(&'static str, wgpu::TextureFormat, wgpu::Texture)>,
     /// Labels of the upload buffers (`MAP_WRITE`) unmapped by [`BufferPool::unmap_upload`] and not mapped
     /// since (wgpu 30 cannot be asked a buffer's map state).
     unmapped_uploads: Vec<&'static str>,
@@ -282,6 +363,41 @@ impl BufferPool {
         }
         self.unmapped_uploads.retain(|l| *l != label);
         buffer
+    }
+
+    /// The pooled texture of `label` and `format` ([`TexelRows::WIDTH`] wide, `TEXTURE_BINDING |
+    /// COPY_DST`) with at least `rows` rows: the kept one when it is tall enough, else a new one, half as
+    /// tall again as the one it replaces when that is more, never over `max_rows` unless `rows` is.
+    pub fn texture(
+        &mut self,
+        device: &wgpu::Device,
+        label: &'static str,
+        format: wgpu::TextureFormat,
+        rows: TexelRows,
+        max_rows: u32,
+    ) -> wgpu::Texture {
+        let slot = self.textures.iter().position(|(l, f, _)| *l == label && *f == format);
+        if let Some(n) = slot {
+            if self.textures[n].2.height() >= rows.rows {
+                return self.textures[n].2.clone();
+            }
+        }
+        let grown = slot.map_or(0, |n| self.textures[n].2.height() * 3 / 2).min(max_rows).max(rows.rows);
+        let texture = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some(label),
+            size: TexelRows { rows: grown }.extent(),
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            view_formats: &[],
+        });
+        match slot {
+            Some(n) => self.textures[n].2 = texture.clone(),
+            None => self.textures.push((label, format, texture.clone())),
+        }
+        texture
     }
 
     /// Unmaps the upload buffer `buffer` of `label` (from [`GpuContext::mapped_upload`]) before the
@@ -495,32 +611,28 @@ impl GpuContext {
 
     /// Bind group 0 of `kernel`, binding `i` = the whole of `buffers[i]`.
     pub fn bind_group(&self, kernel: &Kernel, buffers: &[&wgpu::Buffer]) -> wgpu::BindGroup {
-        let entries: Vec<wgpu::BindGroupEntry> = buffers
-            .iter()
-            .enumerate()
-            .map(|(i, buffer)| wgpu::BindGroupEntry { binding: i as u32, resource: buffer.as_entire_binding() })
-            .collect();
-        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some(kernel.label),
-            layout: &kernel.bind_group_layout,
-            entries: &entries,
-        })
+        let resources: Vec<wgpu::BindingResource> = buffers.iter().map(|b| b.as_entire_binding()).collect();
+        self.bind_group_resources(kernel, &resources)
     }
 
     /// Bind group 0 of `kernel`, binding `i` = the byte range `(offset, size)` of `ranges[i].0` (offsets
     /// must be multiples of the device's storage / uniform offset alignment, sizes non-zero).
     pub fn bind_group_ranges(&self, kernel: &Kernel, ranges: &[(&wgpu::Buffer, u64, u64)]) -> wgpu::BindGroup {
-        let entries: Vec<wgpu::BindGroupEntry> = ranges
+        let resources: Vec<wgpu::BindingResource> = ranges
+            .iter()
+            .map(|&(buffer, offset, size)| {
+                wgpu::BindingResource::Buffer(wgpu::BufferBinding { buffer, offset, size: wgpu::BufferSize::new(size) })
+            })
+            .collect();
+        self.bind_group_resources(kernel, &resources)
+    }
+
+    /// Bind group 0 of `kernel`, binding `i` = `resources[i]` (buffer ranges and texture views).
+    pub fn bind_group_resources(&self, kernel: &Kernel, resources: &[wgpu::BindingResource]) -> wgpu::BindGroup {
+        let entries: Vec<wgpu::BindGroupEntry> = resources
             .iter()
             .enumerate()
-            .map(|(i, &(buffer, offset, size))| wgpu::BindGroupEntry {
-                binding: i as u32,
-                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                    buffer,
-                    offset,
-                    size: wgpu::BufferSize::new(size),
-                }),
-            })
+            .map(|(i, resource)| wgpu::BindGroupEntry { binding: i as u32, resource: resource.clone() })
             .collect();
         self.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some(kernel.label),
@@ -548,7 +660,7 @@ impl GpuContext {
     }
 
     /// Records one compute pass of `kernel` (a 1-D kernel, whose binding 0 is a
-    /// [`BufferBinding::UniformDynamic`]) with one dispatch per job `(dynamic offset, invocations)`, all
+    /// [`Binding::UniformDynamic`]) with one dispatch per job `(dynamic offset, invocations)`, all
     /// through `bind_group`; the pass is timed as pass `index` of `timer` when there is one.
     pub fn encode_dispatches_at(
         &self,

@@ -8,7 +8,7 @@
 
 use bytemuck::{Pod, Zeroable};
 
-use super::{BufferBinding, GpuContext, KernelSpec};
+use super::{Binding, GpuContext, KernelSpec};
 use crate::error::{Error, Result};
 use crate::room_layout::voxels::{
     cubical_region, manhattan_region, Discretisation, ScoringTables, YawCells, NO_REGION,
@@ -21,12 +21,12 @@ pub const KERNEL: KernelSpec = KernelSpec {
     source: include_str!("../../shaders/room_layout.wgsl"),
     entry_point: "room_layout",
     bindings: &[
-        BufferBinding::Uniform,
-        BufferBinding::StorageRead,
-        BufferBinding::StorageRead,
-        BufferBinding::StorageRead,
-        BufferBinding::StorageRead,
-        BufferBinding::StorageReadWrite,
+        Binding::Uniform,
+        Binding::StorageRead,
+        Binding::StorageRead,
+        Binding::StorageRead,
+        Binding::StorageRead,
+        Binding::StorageReadWrite,
     ],
 };
 
