@@ -56,8 +56,9 @@ impl<'a> Backend<'a> {
     /// [`Backend::Cpu`]. A GPU failure (e.g. a table over the binding limit) is logged and the CPU path is
     /// taken, so the caller always gets scores.
     ///
-    /// On a software adapter (`DeviceType::Cpu`: lavapipe, llvmpipe, WARP) the kernel is ~15× slower than
-    /// the CPU path on the same cores (scattered table reads run lane by lane), so there the CPU path is
+    /// On a software adapter (`DeviceType::Cpu`: lavapipe, llvmpipe, WARP) the kernels are 8–13× slower than
+    /// the CPU path on the same cores (lavapipe, 2026-11-28: the bed window, a frame's 19 models), so there
+    /// the CPU path is
     /// used unless the environment sets `COG_GPU_FAST_KERNEL=always` ([`use_kernel_on`]; said once, at
     /// info level).
     pub fn fast_scores(&self, engine: &FastEngine, hypotheses: &[Hypothesis], weights: &[Vec<f32>]) -> Vec<f32> {
