@@ -68,7 +68,12 @@ fn main() {
         backends: cog_gpu::gpu::PRIMARY_BACKENDS,
         ..wgpu::InstanceDescriptor::new_without_display_handle()
     });
-    let adapter = pollster::block_on(instance.request_adapter(&Default::default())).expect("an adapter");
+    let Ok(adapter) = pollster::block_on(instance.request_adapter(&Default::default())) else {
+        eprintln!(
+            "lavapipe_loads: no Vulkan, Metal or DX12 adapter (for lavapipe: apt-get install mesa-vulkan-drivers)"
+        );
+        std::process::exit(1);
+    };
     println!("adapter: {}", adapter.get_info().name);
     let (device, queue) = pollster::block_on(adapter.request_device(&Default::default())).expect("a device");
     let words: Vec<u32> = (0..ELEMENTS * 4).map(|i| i.wrapping_mul(2_654_435_761)).collect();
