@@ -1017,6 +1017,23 @@ mod tests {
     use super::*;
 
     #[test]
+    fn texel_rows_hold_the_bytes_in_whole_rows_of_256_byte_multiples() {
+        // 8192 texels of 16 bytes: 131 072 bytes a row, a multiple of the copy alignment.
+        assert_eq!(TexelRows::ROW_BYTES, 131_072);
+        assert_eq!(TexelRows::ROW_BYTES % u64::from(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT), 0);
+        let rows = |bytes| TexelRows::for_bytes(bytes, 8192, "test").map(|r| r.rows);
+        assert_eq!(rows(0).unwrap(), 1, "an empty buffer still gets a texture of one row");
+        assert_eq!(rows(16).unwrap(), 1);
+        assert_eq!(rows(131_072).unwrap(), 1);
+        assert_eq!(rows(131_073).unwrap(), 2);
+        assert_eq!(TexelRows::for_bytes(131_073, 8192, "test").unwrap().bytes(), 262_144);
+        // 8192 rows are 1 GiB; one byte more needs a row the device does not have.
+        assert_eq!(rows(1 << 30).unwrap(), 8192);
+        let err = TexelRows::for_bytes((1 << 30) + 1, 8192, "the tables").unwrap_err().to_string();
+        assert!(err.contains("the tables") && err.contains("8193 texture rows"), "{err}");
+    }
+
+    #[test]
     fn pool_slots_default_to_two_and_take_one_to_eight() {
         assert_eq!(parse_pool_slots(None).unwrap(), DEFAULT_POOL_SLOTS);
         assert_eq!(DEFAULT_POOL_SLOTS, 2);
