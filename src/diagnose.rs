@@ -1,6 +1,6 @@
 //! Diagnosis of where a detector loses average precision (`cog-gpu eval --diagnose`).
 //!
-//! Four numbers, each isolating one stage of the pipeline:
+//! Six numbers, each isolating one stage of the pipeline or one kind of error:
 //!
 //! 1. **Window recall ceiling** ([`best_window_ious`], [`frame_window_best_ious`], [`WindowRecall`]): for
 //!    each ground-truth box, the largest 3D IoU ([`crate::geometry::iou_3d`]) of any hypothesis the model's
@@ -23,6 +23,8 @@
 //!    the category has ground-truth boxes) split into duplicates, poor localisation, confusion with
 //!    another category's object, and background in frames with or without the category — which of them
 //!    a better detector must push down.
+//! 6. **What each kind costs** ([`oracle_aps`]): the AP with every false positive of a kind removed (an
+//!    oracle), and with all of them — the AP a perfect rescoring of the same detections would reach.
 //!
 //! Detections are read through [`Detection::score`] only, so other fields a detections file may carry do
 //! not change the diagnosis.
@@ -32,7 +34,9 @@ use std::collections::BTreeMap;
 use serde::Serialize;
 
 use crate::detect::overlay_selection;
-use crate::eval::{average_precision, category_truth, scored_boxes, Detection, PrecisionRecall, ScoredBox};
+use crate::eval::{
+    average_precision, category_truth, interpolated_ap, scored_boxes, Detection, PrecisionRecall, ScoredBox,
+};
 use crate::features::hypotheses::{window, FrameYaws, Support, WindowOptions};
 use crate::features::surface::annotated_surfaces_by_category;
 use crate::features::{FeatureScene, Hypothesis, Preprocessed};
@@ -353,27 +357,15 @@ pub fn false_positive_kinds(
             continue;
         }
         out.examined += 1;
-        let det = &scored[d];
-        let own = ground_truth[det.image].iter().map(|t| iou_3d(&det.cuboid, t)).fold(0.0f32, f32::max);
-        let other = truth[det.image]
-            .iter()
-            .filter(|o| o.category != category)
-            .map(|o| (o.category.as_str(), iou_3d(&det.cuboid, &o.cuboid)))
-            .fold(None, |best: Option<(&str, f32)>, (c, iou)| match best {
-                Some((_, b)) if b >= iou => best,
-                _ => Some((c, iou)),
-            });
-        if own >= iou_threshold {
-            out.duplicate += 1;
-        } else if own >= TOUCH_IOU {
-            out.localisation += 1;
-        } else if let Some((other_category, _)) = other.filter(|(_, iou)| *iou >= TOUCH_IOU) {
-            out.confusion += 1;
-            *confused.entry(other_category).or_default() += 1;
-        } else if ground_truth[det.image].is_empty() {
-            out.background_elsewhere += 1;
-        } else {
-            out.background_in_frame += 1;
+        match false_positive_kind(truth, &ground_truth, &scored[d], category, iou_threshold) {
+            FalsePositiveKind::Duplicate => out.duplicate += 1,
+            FalsePositiveKind::Localisation => out.localisation += 1,
+            FalsePositiveKind::Confusion(other) => {
+                out.confusion += 1;
+                *confused.entry(other).or_default() += 1;
+            }
+            FalsePositiveKind::BackgroundInFrame => out.background_in_frame += 1,
+            FalsePositiveKind::BackgroundElsewhere => out.background_elsewhere += 1,
         }
     }
     // Largest count; among equal counts the first name (iteration is in name order, `>` keeps the first).
@@ -385,6 +377,115 @@ pub fn false_positive_kinds(
     }
     out.most_confused_with = most.map(|(c, _)| c.to_string());
     out
+}
+
+/// The kind of one false positive ([`FalsePositiveKinds`]' rules: the first that applies).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum FalsePositiveKind<'a> {
+    Duplicate,
+    Localisation,
+    /// With the category of the annotated object it overlaps most.
+    Confusion(&'a str),
+    BackgroundInFrame,
+    BackgroundElsewhere,
+}
+
+/// The kind of the false positive `det` of `category` (`ground_truth`: the category's boxes per image,
+/// `truth`: every object per image).
+fn false_positive_kind<'a>(
+    truth: &'a [Vec<Object>],
+    ground_truth: &[Vec<Cuboid>],
+    det: &ScoredBox,
+    category: &str,
+    iou_threshold: f32,
+) -> FalsePositiveKind<'a> {
+    let own = ground_truth[det.image].iter().map(|t| iou_3d(&det.cuboid, t)).fold(0.0f32, f32::max);
+    let other = truth[det.image]
+        .iter()
+        .filter(|o| o.category != category)
+        .map(|o| (o.category.as_str(), iou_3d(&det.cuboid, &o.cuboid)))
+        .fold(None, |best: Option<(&str, f32)>, (c, iou)| match best {
+            Some((_, b)) if b >= iou => best,
+            _ => Some((c, iou)),
+        });
+    if own >= iou_threshold {
+        FalsePositiveKind::Duplicate
+    } else if own >= TOUCH_IOU {
+        FalsePositiveKind::Localisation
+    } else if let Some((other_category, _)) = other.filter(|(_, iou)| *iou >= TOUCH_IOU) {
+        FalsePositiveKind::Confusion(other_category)
+    } else if ground_truth[det.image].is_empty() {
+        FalsePositiveKind::BackgroundElsewhere
+    } else {
+        FalsePositiveKind::BackgroundInFrame
+    }
+}
+
+// ---------------------------------------------------------------------------------------------------------
+// 6. What each kind of false positive costs
+
+/// The AP of one category with the false positives of some kinds removed — an oracle, to weigh each kind
+/// of error: **every** false positive (not only the highest-scoring, as [`FalsePositiveKinds`] counts) is
+/// classified by the same rules and the AP recomputed without those of the kinds named. A false positive
+/// takes no ground-truth box, so removing it changes no other detection's match. `without_false_positives`
+/// is the AP of the true positives alone: what a perfect rescoring of these same detections would reach
+/// (the recall they leave). All `None` without ground truth.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct OracleAps {
+    pub without_duplicates: Option<f32>,
+    pub without_localisation: Option<f32>,
+    pub without_confusion: Option<f32>,
+    /// Background in a frame with the category and in one without.
+    pub without_background: Option<f32>,
+    pub without_localisation_confusion_background: Option<f32>,
+    pub without_false_positives: Option<f32>,
+}
+
+/// [`OracleAps`] of `category`; `truth[i]` and `detections[i]` are image `i`'s objects (any category) and
+/// detections (a missing one: none).
+pub fn oracle_aps(
+    truth: &[Vec<Object>],
+    detections: &[Vec<Detection>],
+    category: &str,
+    iou_threshold: f32,
+) -> OracleAps {
+    let ground_truth = category_truth(truth, category);
+    let scored = scored_boxes(detections, category);
+    let pr = average_precision(&scored, &ground_truth, iou_threshold);
+    if pr.positives == 0 {
+        return OracleAps::default();
+    }
+    // In the AP's score order: None for a true positive, else the false positive's kind.
+    let kinds: Vec<Option<FalsePositiveKind>> = crate::eval::score_order(&scored)
+        .iter()
+        .zip(&pr.true_positive)
+        .map(|(&d, &hit)| {
+            (!hit).then(|| false_positive_kind(truth, &ground_truth, &scored[d], category, iou_threshold))
+        })
+        .collect();
+    let without = |removed: &dyn Fn(&FalsePositiveKind) -> bool| -> Option<f32> {
+        let (mut precision, mut recall) = (Vec::new(), Vec::new());
+        let (mut shown, mut hits) = (0usize, 0usize);
+        for kind in &kinds {
+            if kind.as_ref().is_some_and(removed) {
+                continue;
+            }
+            shown += 1;
+            hits += usize::from(kind.is_none());
+            precision.push(hits as f32 / shown as f32);
+            recall.push(hits as f32 / pr.positives as f32);
+        }
+        Some(interpolated_ap(&precision, &recall))
+    };
+    use FalsePositiveKind as K;
+    OracleAps {
+        without_duplicates: without(&|k| *k == K::Duplicate),
+        without_localisation: without(&|k| *k == K::Localisation),
+        without_confusion: without(&|k| matches!(k, K::Confusion(_))),
+        without_background: without(&|k| matches!(k, K::BackgroundInFrame | K::BackgroundElsewhere)),
+        without_localisation_confusion_background: without(&|k| *k != K::Duplicate),
+        without_false_positives: without(&|_| true),
+    }
 }
 
 // ---------------------------------------------------------------------------------------------------------
@@ -416,6 +517,8 @@ pub struct CategoryDiagnosis {
     pub rank_ap: Option<f32>,
     /// What the highest-scoring false positives are ([`false_positive_kinds`]).
     pub false_positives: FalsePositiveKinds,
+    /// The AP without the false positives of each kind ([`oracle_aps`]).
+    pub oracle_ap: OracleAps,
 }
 
 /// Diagnoses each of `categories` (numbers 2 and 3 of the module doc, and number 1 from `window`: the best
@@ -449,6 +552,7 @@ pub fn diagnose_categories(
                 ap: pr.ap,
                 rank_ap: rank.ap,
                 false_positives: false_positive_kinds(truth, detections, category, iou_threshold),
+                oracle_ap: oracle_aps(truth, detections, category, iou_threshold),
             }
         })
         .collect()

@@ -7,7 +7,7 @@ use std::process::Command;
 mod common;
 
 use cog_gpu::diagnose::{
-    best_window_ious, diagnose_categories, false_positive_kinds, frame_window_best_ious, in_frame_ranking,
+    best_window_ious, diagnose_categories, false_positive_kinds, frame_window_best_ious, in_frame_ranking, oracle_aps,
     overlay_precision, rank_average_precision, WindowRecall,
 };
 use cog_gpu::eval::{Detection, FrameDetections};
@@ -195,6 +195,43 @@ fn false_positive_kinds_by_hand() {
 }
 
 #[test]
+fn oracle_aps_by_hand() {
+    // Frame 0: chairs at 0, 3 and 30 (the one at 30 never detected), a sofa at 6; frame 1: a table, no chair.
+    let mut frame0: Vec<Object> = [0.0, 3.0, 30.0].map(|x| object("chair", unit_box(x, 0.0))).to_vec();
+    frame0.push(object("sofa", unit_box(6.0, 0.0)));
+    let truth = vec![frame0, vec![object("table", unit_box(0.0, 0.0))]];
+    let detections = vec![
+        vec![
+            det("chair", unit_box(6.0, 0.0), 0.9),  // on the sofa: confusion
+            det("chair", unit_box(0.0, 0.0), 0.8),  // true positive
+            det("chair", unit_box(3.8, 0.0), 0.6),  // IoU 0.2/1.8 = 0.11 with the chair at 3: localisation
+            det("chair", unit_box(3.0, 0.0), 0.5),  // true positive
+            det("chair", unit_box(0.3, 0.0), 0.45), // IoU 0.7/1.3 with the taken chair at 0: duplicate
+            det("chair", unit_box(10.0, 0.0), 0.4), // nothing there, frame with chairs
+        ],
+        vec![det("chair", unit_box(20.0, 0.0), 0.7)], // nothing there, frame without chairs
+    ];
+    // In score order: conf, TP, bg, loc, TP, dup, bg; 3 chairs. All-point interpolated AP, by hand:
+    //   all:            precision 0, 1/2, 1/3, 1/4, 2/5, …  → 1/3·1/2 + 1/3·2/5 = 0.3
+    //   without dup:    the same up to the last true positive → 0.3
+    //   without loc:    0, 1/2, 1/3, 2/4 → 1/3·1/2 + 1/3·1/2 = 1/3
+    //   without conf:   1, 1/2, 1/3, 2/4 → 1/3·1 + 1/3·1/2 = 1/2
+    //   without bg:     0, 1/2, 1/3, 2/4 → 1/3
+    //   without loc, conf and bg, or without every false positive: 1, 1 → 2/3 (the chair at 30 is missed)
+    let oracle = oracle_aps(&truth, &detections, "chair", 0.25);
+    let ap = diagnose_categories(&truth, &detections, &["chair".into()], 0.25, None)[0].ap;
+    assert!(close(ap, 0.3), "{ap:?}");
+    assert!(close(oracle.without_duplicates, 0.3), "{oracle:?}");
+    assert!(close(oracle.without_localisation, 1.0 / 3.0), "{oracle:?}");
+    assert!(close(oracle.without_confusion, 0.5), "{oracle:?}");
+    assert!(close(oracle.without_background, 1.0 / 3.0), "{oracle:?}");
+    assert!(close(oracle.without_localisation_confusion_background, 2.0 / 3.0), "{oracle:?}");
+    assert!(close(oracle.without_false_positives, 2.0 / 3.0), "{oracle:?}");
+    // Without ground truth: nothing to measure.
+    assert_eq!(oracle_aps(&truth, &detections, "bed", 0.25), Default::default());
+}
+
+#[test]
 fn window_recall_summary() {
     let r = WindowRecall::from_best_ious(&[0.1, 0.3, 0.6, 1.0]);
     assert_eq!(r.boxes, 4);
@@ -303,6 +340,7 @@ fn cli_diagnose_json_and_table() {
         "ap",
         "rank_ap",
         "false_positives",
+        "oracle_ap",
     ];
     let mut expected: Vec<&str> = keys.to_vec();
     expected.sort();
@@ -332,6 +370,17 @@ fn cli_diagnose_json_and_table() {
         ["bed", "2", "-", "-", "-", "2", "2", "100.0", "83.3", "100.0"]
     );
     assert!(table.contains("2/2 = 100.0"), "{table}");
+    // The oracle table: a's far box is background; without it both true positives come first.
+    let oracle = table.split("AP without the false positives").nth(1).expect("the oracle table");
+    for name in ["bed", "mean"] {
+        let line = oracle.lines().find(|l| l.starts_with(&format!("{name} "))).expect("a row");
+        assert_eq!(
+            line.split_whitespace().collect::<Vec<_>>(),
+            [name, "83.3", "83.3", "83.3", "83.3", "100.0", "100.0", "100.0"],
+            "{table}"
+        );
+    }
+    assert_eq!(bed["oracle_ap"]["without_background"].as_f64(), Some(1.0));
 
     // Flags: --models needs --diagnose; a missing models directory is named.
     let plain = Command::new(env!("CARGO_BIN_EXE_cog-gpu"))

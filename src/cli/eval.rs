@@ -728,6 +728,32 @@ fn print_diagnosis(
             share(fp.background_elsewhere)
         );
     }
+    println!("AP without the false positives of a kind (an oracle: every false positive, the kinds above):");
+    println!(
+        "{:<12} {:>7} {:>7} {:>7} {:>7} {:>7} {:>11} {:>7}",
+        "category", "AP", "-dup", "-loc", "-conf", "-bg", "-loc/conf/bg", "-allFP"
+    );
+    let row = |name: &str, values: [Option<f32>; 7]| {
+        let [ap, dup, loc, conf, bg, lcb, all] = values.map(percent);
+        println!("{name:<12} {ap:>7} {dup:>7} {loc:>7} {conf:>7} {bg:>7} {lcb:>11} {all:>7}");
+    };
+    let columns = |d: &CategoryDiagnosis| {
+        let o = &d.oracle_ap;
+        [
+            d.ap,
+            o.without_duplicates,
+            o.without_localisation,
+            o.without_confusion,
+            o.without_background,
+            o.without_localisation_confusion_background,
+            o.without_false_positives,
+        ]
+    };
+    for d in diagnosis {
+        row(&d.category, columns(d));
+    }
+    let all: Vec<[Option<f32>; 7]> = diagnosis.iter().map(columns).collect();
+    row("mean", std::array::from_fn(|c| mean_ap(all.iter().map(|v| &v[c]))));
     println!(
         "overlay precision (per frame the top k detections, k = its ground-truth boxes): {}/{} = {}",
         overlay.true_positives,
