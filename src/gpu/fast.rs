@@ -34,12 +34,13 @@
 //! weights are read as textures** ([`TexelRows`]: each is copied from its buffer into an `rgba32` texture
 //! 8192 texels wide after the tables are built), the records and scores stay buffers. Why, measured on
 //! lavapipe (CI's device): its storage-buffer loads run lane by lane with a branch per lane and component
-//! (~13 ns per `vec4`), texture reads are vectorised gathers (1.4–3.8 ns); a workgroup costs a coroutine
-//! per subgroup and every barrier switches them, so the workgroup per hypothesis spent 2.2 of its 5.7 s
-//! on the bed window's first 40 000 hypotheses outside its voxel loop; and lavapipe runs every `if` body
-//! and every iteration of a loop of constant length with the lanes masked, so the loop over the weights
-//! has the pass's own length, not `MAX_WEIGHTS`. The bed window on the standard frame went from 25.4 s
-//! to 6.5 s there (tables and scores; the CPU fast path 0.78 s; README, "The fast path"). On hardware
+//! (~13 ns per `vec4`), texture reads are vectorised gathers (1.4–4.9 ns; `examples/lavapipe_loads.rs`); a
+//! workgroup costs a coroutine per subgroup and every barrier switches them (the workgroup per hypothesis
+//! spent about 0.8 s of scoring outside its voxel loop on the bed window's first 40 000 hypotheses); and
+//! lavapipe runs every `if` body and every iteration of a loop of constant length with the lanes masked,
+//! so the loop over the weights has the pass's own length, not `MAX_WEIGHTS`. The bed window on the
+//! standard frame went from 25.4 s to 6.4 s there (tables and scores; the CPU fast path 0.76 s; README,
+//! "The fast path"). On hardware
 //! GPUs a thread per hypothesis is the usual shape (no barriers, the weights read at one address by a
 //! whole warp); its speed there is not measured yet.
 //!
@@ -823,8 +824,8 @@ fn run_batch(
     let record_size = std::mem::size_of::<FastParams>() as u64;
     let record_stride = record_size.next_multiple_of(u64::from(ctx.limits.min_uniform_buffer_offset_alignment));
     let params_bytes = record_stride * layout.params.len() as u64;
-    // The tables and the weights are read by the scoring kernel as textures (`TexelRows`: lavapipe reads
-    // storage buffers lane by lane), copies of their buffers; the buffers hold whole rows for the copies.
+    // The tables, boundaries and weights are read by the scoring kernel as textures (`TexelRows`: lavapipe
+    // reads storage buffers lane by lane), copies of their buffers; the buffers hold whole rows for the copies.
     let max_rows = ctx.limits.max_texture_dimension_2d;
     let table_rows = TexelRows::for_bytes(layout.tables.len, max_rows, "fast_scores: the batch's tables")?;
     let weight_rows = TexelRows::for_bytes(layout.weights.len, max_rows, "fast_scores: the batch's weights")?;

@@ -119,7 +119,7 @@ fn binding_type(binding: Binding) -> wgpu::BindingType {
 /// Why: lavapipe (Mesa's software Vulkan, CI's device) performs every storage-buffer load lane by lane,
 /// with a branch and a bounds check per lane and per component, whatever the address — about 13 ns per
 /// `vec4` on this project's 2-core machine, from cache or not, even when every lane reads the same word —
-/// while a `textureLoad` is a vectorised gather: 1.4 ns from cache, 4–5 ns over 16 MB (2²⁷ scattered
+/// while a `textureLoad` is a vectorised gather: 1.4 ns from cache, 3.8–4.9 ns over 16 MB (2²⁷ scattered
 /// `vec4` reads of each kind: `cargo run --release --example lavapipe_loads`, 2026-11-28). Scattered reads
 /// from large read-only arrays therefore go through textures; on hardware GPUs a texture read costs about
 /// what a buffer load does.
