@@ -344,20 +344,12 @@ pub fn false_positive_kinds(
     category: &str,
     iou_threshold: f32,
 ) -> FalsePositiveKinds {
-    let ground_truth = category_truth(truth, category);
-    let scored = scored_boxes(detections, category);
-    let pr = average_precision(&scored, &ground_truth, iou_threshold);
+    let (positives, ranked) = ranked_kinds(truth, detections, category, iou_threshold);
     let mut out = FalsePositiveKinds::default();
     let mut confused: BTreeMap<&str, usize> = BTreeMap::new();
-    for (&d, &hit) in crate::eval::score_order(&scored).iter().zip(&pr.true_positive) {
-        if out.examined >= pr.positives {
-            break;
-        }
-        if hit {
-            continue;
-        }
+    for kind in ranked.into_iter().flatten().take(positives) {
         out.examined += 1;
-        match false_positive_kind(truth, &ground_truth, &scored[d], category, iou_threshold) {
+        match kind {
             FalsePositiveKind::Duplicate => out.duplicate += 1,
             FalsePositiveKind::Localisation => out.localisation += 1,
             FalsePositiveKind::Confusion(other) => {
@@ -388,6 +380,27 @@ enum FalsePositiveKind<'a> {
     Confusion(&'a str),
     BackgroundInFrame,
     BackgroundElsewhere,
+}
+
+/// The number of the category's ground-truth boxes, and its detections in the AP's score order
+/// ([`crate::eval::score_order`]), each `None` when a true positive, else its [`FalsePositiveKind`].
+fn ranked_kinds<'a>(
+    truth: &'a [Vec<Object>],
+    detections: &[Vec<Detection>],
+    category: &str,
+    iou_threshold: f32,
+) -> (usize, Vec<Option<FalsePositiveKind<'a>>>) {
+    let ground_truth = category_truth(truth, category);
+    let scored = scored_boxes(detections, category);
+    let pr = average_precision(&scored, &ground_truth, iou_threshold);
+    let ranked = crate::eval::score_order(&scored)
+        .iter()
+        .zip(&pr.true_positive)
+        .map(|(&d, &hit)| {
+            (!hit).then(|| false_positive_kind(truth, &ground_truth, &scored[d], category, iou_threshold))
+        })
+        .collect();
+    (pr.positives, ranked)
 }
 
 /// The kind of the false positive `det` of `category` (`ground_truth`: the category's boxes per image,
@@ -449,20 +462,10 @@ pub fn oracle_aps(
     category: &str,
     iou_threshold: f32,
 ) -> OracleAps {
-    let ground_truth = category_truth(truth, category);
-    let scored = scored_boxes(detections, category);
-    let pr = average_precision(&scored, &ground_truth, iou_threshold);
-    if pr.positives == 0 {
+    let (positives, kinds) = ranked_kinds(truth, detections, category, iou_threshold);
+    if positives == 0 {
         return OracleAps::default();
     }
-    // In the AP's score order: None for a true positive, else the false positive's kind.
-    let kinds: Vec<Option<FalsePositiveKind>> = crate::eval::score_order(&scored)
-        .iter()
-        .zip(&pr.true_positive)
-        .map(|(&d, &hit)| {
-            (!hit).then(|| false_positive_kind(truth, &ground_truth, &scored[d], category, iou_threshold))
-        })
-        .collect();
     let without = |removed: &dyn Fn(&FalsePositiveKind) -> bool| -> Option<f32> {
         let (mut precision, mut recall) = (Vec::new(), Vec::new());
         let (mut shown, mut hits) = (0usize, 0usize);
@@ -473,7 +476,7 @@ pub fn oracle_aps(
             shown += 1;
             hits += usize::from(kind.is_none());
             precision.push(hits as f32 / shown as f32);
-            recall.push(hits as f32 / pr.positives as f32);
+            recall.push(hits as f32 / positives as f32);
         }
         Some(interpolated_ap(&precision, &recall))
     };

@@ -39,8 +39,8 @@
 //! spent about 0.8 s of scoring outside its voxel loop on the bed window's first 40 000 hypotheses); and
 //! lavapipe runs every `if` body and every iteration of a loop of constant length with the lanes masked,
 //! so the loop over the weights has the pass's own length, not `MAX_WEIGHTS`. The bed window on the
-//! standard frame went from 25.4 s to 6.4 s there (tables and scores; the CPU fast path 0.76 s; README,
-//! "The fast path"). On hardware
+//! standard frame went from 25.4–26.1 s to 6.4–6.7 s there (tables and scores; the CPU fast path
+//! 0.76–0.85 s; README, "The fast path"). On hardware
 //! GPUs a thread per hypothesis is the usual shape (no barriers, the weights read at one address by a
 //! whole warp); its speed there is not measured yet.
 //!
@@ -78,7 +78,7 @@ use super::fast_tables::{
     table_invocations, table_params, table_params_at, table_points, table_words, TableParams, TablePoint, SCAN_COLUMNS,
     SCAN_ROWS,
 };
-use super::{Binding, GpuContext, KernelSpec, TexelRows};
+use super::{buffer_range, Binding, GpuContext, KernelSpec, TexelRows};
 use crate::error::{Error, Result};
 use crate::features::cpu::{dot, ExpandedBox, VIEW_MIN_DISTANCE};
 use crate::features::fast::{group_by_table, FastEngine, LayerTable, TableKey, TableSpan, CHANNELS};
@@ -914,20 +914,17 @@ fn run_batch(
         }
     }
     let kernel = &ctx.kernels.fast_scores;
-    let range = |buffer, size: u64| {
-        wgpu::BindingResource::Buffer(wgpu::BufferBinding { buffer, offset: 0, size: wgpu::BufferSize::new(size) })
-    };
     let [table_view, bound_view, weight_view] =
         [&table_texture, &bound_texture, &weight_texture].map(|t| t.create_view(&Default::default()));
     let scoring = ctx.bind_group_resources(
         kernel,
         &[
-            range(&params_buffer, record_size),
+            buffer_range(&params_buffer, 0, record_size),
             wgpu::BindingResource::TextureView(&table_view),
-            range(&record_buffer, layout.records.len.max(4)),
+            buffer_range(&record_buffer, 0, layout.records.len.max(4)),
             wgpu::BindingResource::TextureView(&bound_view),
             wgpu::BindingResource::TextureView(&weight_view),
-            range(&out_buffer, layout.scores.len.max(4)),
+            buffer_range(&out_buffer, 0, layout.scores.len.max(4)),
         ],
     );
     times.bind_groups += split(&mut mark);

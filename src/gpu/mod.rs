@@ -92,6 +92,11 @@ pub struct KernelSpec {
     pub bindings: &'static [Binding],
 }
 
+/// The byte range `(offset, size)` of `buffer` as a binding (`size` non-zero).
+pub fn buffer_range(buffer: &wgpu::Buffer, offset: u64, size: u64) -> wgpu::BindingResource<'_> {
+    wgpu::BindingResource::Buffer(wgpu::BufferBinding { buffer, offset, size: wgpu::BufferSize::new(size) })
+}
+
 /// The bind group layout entry type of `binding`.
 fn binding_type(binding: Binding) -> wgpu::BindingType {
     let buffer = |ty| wgpu::BindingType::Buffer {
@@ -317,6 +322,17 @@ fn parse_pool_slots(value: Option<&str>) -> Result<usize> {
     }
 }
 
+/// The size of a pooled resource that must hold `wanted` and replaces one of size `kept`: half as large
+/// again as `kept` when that is more, so that slowly growing requests do not reallocate every time, but
+/// never over `max` unless `wanted` itself is.
+fn grown<T: Copy + Ord + std::ops::Mul<Output = T> + std::ops::Div<Output = T> + From<u8>>(
+    kept: Option<T>,
+    wanted: T,
+    max: T,
+) -> T {
+    kept.map_or(wanted, |k| k * T::from(3) / T::from(2)).min(max).max(wanted)
+}
+
 /// Grow-only buffers by role, reused across batches and frames instead of created (and zeroed by wgpu)
 /// each time: a per-frame arena. A kernel that needs zeros clears its range itself.
 #[derive(Default)]
@@ -331,9 +347,7 @@ pub struct BufferPool {
 
 impl BufferPool {
     /// The pooled buffer of `label` and `usage` with at least `size` bytes (rounded up to 4, at least 4):
-    /// the kept one when it is large enough, else a new one — half as large again as the one it replaces
-    /// when that is more, so that slowly growing requests do not reallocate every time, but never over
-    /// `max_size` unless `size` itself is.
+    /// the kept one when it is large enough, else a new one, half as large again when that is more (`grown`).
     pub fn buffer(
         &mut self,
         device: &wgpu::Device,
@@ -349,7 +363,7 @@ impl BufferPool {
                 return self.buffers[n].2.clone();
             }
         }
-        let grown = slot.map_or(0, |n| self.buffers[n].2.size() * 3 / 2).min(max_size).max(size);
+        let grown = grown(slot.map(|n| self.buffers[n].2.size()), size, max_size);
         let buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some(label),
             size: grown.next_multiple_of(wgpu::COPY_BUFFER_ALIGNMENT),
@@ -366,8 +380,8 @@ impl BufferPool {
     }
 
     /// The pooled texture of `label` and `format` ([`TexelRows::WIDTH`] wide, `TEXTURE_BINDING |
-    /// COPY_DST`) with at least `rows` rows: the kept one when it is tall enough, else a new one, half as
-    /// tall again as the one it replaces when that is more, never over `max_rows` unless `rows` is.
+    /// COPY_DST`) with at least `rows` rows: the kept one when it is tall enough, else a new one of the
+    /// height `grown` gives (half as tall again when that is more).
     pub fn texture(
         &mut self,
         device: &wgpu::Device,
@@ -382,7 +396,7 @@ impl BufferPool {
                 return self.textures[n].2.clone();
             }
         }
-        let grown = slot.map_or(0, |n| self.textures[n].2.height() * 3 / 2).min(max_rows).max(rows.rows);
+        let grown = grown(slot.map(|n| self.textures[n].2.height()), rows.rows, max_rows);
         let texture = device.create_texture(&wgpu::TextureDescriptor {
             label: Some(label),
             size: TexelRows { rows: grown }.extent(),
@@ -618,12 +632,8 @@ impl GpuContext {
     /// Bind group 0 of `kernel`, binding `i` = the byte range `(offset, size)` of `ranges[i].0` (offsets
     /// must be multiples of the device's storage / uniform offset alignment, sizes non-zero).
     pub fn bind_group_ranges(&self, kernel: &Kernel, ranges: &[(&wgpu::Buffer, u64, u64)]) -> wgpu::BindGroup {
-        let resources: Vec<wgpu::BindingResource> = ranges
-            .iter()
-            .map(|&(buffer, offset, size)| {
-                wgpu::BindingResource::Buffer(wgpu::BufferBinding { buffer, offset, size: wgpu::BufferSize::new(size) })
-            })
-            .collect();
+        let resources: Vec<wgpu::BindingResource> =
+            ranges.iter().map(|&(buffer, offset, size)| buffer_range(buffer, offset, size)).collect();
         self.bind_group_resources(kernel, &resources)
     }
 
@@ -1031,6 +1041,15 @@ mod tests {
         assert_eq!(rows(1 << 30).unwrap(), 8192);
         let err = TexelRows::for_bytes((1 << 30) + 1, 8192, "the tables").unwrap_err().to_string();
         assert!(err.contains("the tables") && err.contains("8193 texture rows"), "{err}");
+    }
+
+    #[test]
+    fn pooled_resources_grow_by_half_within_the_maximum() {
+        assert_eq!(grown(None, 120u64, 1000), 120, "a first request gets what it asks");
+        assert_eq!(grown(Some(100u64), 120, 1000), 150, "half as large again as the kept one");
+        assert_eq!(grown(Some(100u64), 400, 1000), 400, "or the request when that is more");
+        assert_eq!(grown(Some(100u32), 120, 130), 130, "capped at the maximum");
+        assert_eq!(grown(Some(100u32), 140, 130), 140, "unless the request itself is over it");
     }
 
     #[test]
