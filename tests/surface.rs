@@ -285,6 +285,57 @@ fn the_refined_surface_is_the_median_of_the_slice_upward_points() {
     assert_eq!((slice_at(&cube, -3.0), slice_at(&cube, 5.0)), (0, SLICES - 1));
 }
 
+/// The surface under a cover: a bed 0.55 m high whose duvet (400 upward points at 0.55 m) leaves a strip of
+/// the mattress (20 points, 5 % of the duvet's, at 0.50 m) in view, pillows on it (30 points at 0.62 m):
+/// the measured surface is the mattress, where the pillows rest. Without the strip, with a strip of fewer
+/// than `MEASURED_MIN_POINTS` points or (under 1 600 duvet points) of less than `MEASURED_COVER_SHARE` of
+/// the duvet's, with the strip 10 cm down (a shelf, beyond `MEASURED_COVER_DEPTH_M`), 2 cm down (the
+/// cover's own thickness, not a face under it) or joined to the duvet without a valley (a slope of
+/// points), it is the duvet.
+#[test]
+fn the_measured_surface_under_a_cover_is_the_face_below_it() {
+    use cog_gpu::features::surface::{
+        measured_surface_height, MEASURED_COVER_DEPTH_M, MEASURED_COVER_SHARE, MEASURED_MIN_POINTS,
+    };
+    let bed = Cuboid::new(Vec3::new(-0.4, 2.5, 0.275), Vec3::new(2.0, 1.6, 0.55), 20f32.to_radians());
+    // `side` × `side` duvet points.
+    let measure_on = |side: usize, strip: &[f32]| {
+        let mut points = Vec::new();
+        let mut add = |x: f32, y: f32, z: f32| points.push(bed.from_local(Vec3::new(x, y, z - 0.275)));
+        for i in 0..side {
+            for j in 0..side {
+                add(-0.9 + 1.2 * i as f32 / side as f32, -0.7 + 1.4 * j as f32 / side as f32, 0.55);
+            }
+        }
+        for (k, &z) in strip.iter().enumerate() {
+            add(0.95, -0.7 + 0.01 * k as f32, z);
+        }
+        for k in 0..30 {
+            add(0.8, -0.6 + 0.02 * k as f32, 0.62);
+        }
+        let normals = vec![Vec3::Z; points.len()];
+        let gradients = vec![Vec2::ZERO; points.len()];
+        let camera = Camera::new([500.0, 500.0, 320.5, 240.5], Mat3::IDENTITY);
+        let pre = Preprocessed { camera, image_size: [640, 480], points, normals, gradients, floor: 0.0 };
+        measured_surface_height(&pre, &bed).expect("the duvet is a surface")
+    };
+    let measure = |strip: &[f32]| measure_on(20, strip);
+    let near = |z: f32, want: f32| (z - want).abs() < 1e-4;
+    assert!(near(measure(&[0.50; 20]), 0.50), "{}", measure(&[0.50; 20]));
+    assert!(near(measure(&[]), 0.55));
+    assert!(near(measure(&[0.50; MEASURED_MIN_POINTS - 1]), 0.55));
+    // 1 600 duvet points need 16 under them: 20 are enough, 12 (more than MEASURED_MIN_POINTS) are not.
+    let need = (MEASURED_COVER_SHARE * 1600.0) as usize;
+    assert!(need > 12 && need <= 20 && MEASURED_MIN_POINTS <= 12);
+    assert!(near(measure_on(40, &[0.50; 20]), 0.50));
+    assert!(near(measure_on(40, &[0.50; 12]), 0.55));
+    const { assert!(MEASURED_COVER_DEPTH_M < 0.10) };
+    assert!(near(measure(&[0.45; 20]), 0.55));
+    assert!(near(measure(&[0.53; 20]), 0.55));
+    let slope: Vec<f32> = (0..60).map(|k| 0.50 + 0.05 * k as f32 / 60.0).collect();
+    assert!(near(measure(&slope), 0.55));
+}
+
 /// The surface measured from the points alone (models without latent surfaces): the fullest 2 cm height bin
 /// of the upward points in the footprint, with its neighbours, gives the median; a smaller, higher face
 /// (things standing on the top), the floor around and under the box, sideways normals and points outside
