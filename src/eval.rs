@@ -501,6 +501,35 @@ pub struct SurfaceAccuracy {
     /// Median distance to the nearest true surface (metres).
     pub median_error_m: Option<f32>,
     pub tolerance_m: f32,
+    /// The distances to the nearest true surface of the `measured` true positives, ascending (metres; not
+    /// written to JSON).
+    #[serde(skip)]
+    pub errors_m: Vec<f32>,
+}
+
+impl SurfaceAccuracy {
+    /// Several categories' accuracies together (named `"all"`): the sums of their counts and the median over
+    /// all their errors — how `eval --surfaces` states a target set on several categories at once (the
+    /// accuracy issue's beds, tables, desks, dressers and nightstands). The parts share one tolerance.
+    pub fn pooled(parts: &[SurfaceAccuracy]) -> SurfaceAccuracy {
+        let mut all = SurfaceAccuracy { category: "all".to_string(), ..Default::default() };
+        for part in parts {
+            all.true_positives += part.true_positives;
+            all.measured += part.measured;
+            all.within_nearest += part.within_nearest;
+            all.within_main += part.within_main;
+            all.tolerance_m = part.tolerance_m;
+            all.errors_m.extend(&part.errors_m);
+        }
+        all.median_error_m = upper_median(&mut all.errors_m);
+        all
+    }
+}
+
+/// Sorts `values` and gives their upper median (element `n/2`), `None` for none.
+fn upper_median(values: &mut [f32]) -> Option<f32> {
+    values.sort_by(f32::total_cmp);
+    values.get(values.len() / 2).copied()
 }
 
 /// [`SurfaceAccuracy`] of `category`: `truth[i]` are image `i`'s annotated objects, `supports[i][k]` the
@@ -544,7 +573,7 @@ pub fn surface_accuracy(
         result.within_main += ((main - z).abs() <= tolerance_m) as usize;
         errors.push(nearest);
     }
-    errors.sort_by(f32::total_cmp);
-    result.median_error_m = (!errors.is_empty()).then(|| errors[errors.len() / 2]);
+    result.median_error_m = upper_median(&mut errors);
+    result.errors_m = errors;
     result
 }

@@ -167,6 +167,9 @@ struct Report {
     /// `--surfaces`: the support-surface accuracy of each category with inferred surfaces.
     #[serde(skip_serializing_if = "Option::is_none")]
     surfaces: Option<Vec<SurfaceAccuracy>>,
+    /// `--surfaces` with two or more such categories: theirs together (`"category": "all"`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    surfaces_pooled: Option<SurfaceAccuracy>,
 }
 
 /// The requested categories, checked against the 19 known ones.
@@ -366,8 +369,12 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     if let Some(dir) = &args.plots {
         write_plots(dir, &results)?;
     }
-    let surfaces =
-        if args.surfaces { Some(surface_report(&frames, &truth, &detections, &categories, args.iou)?) } else { None };
+    let (surfaces, surfaces_pooled) = if args.surfaces {
+        let (each, pooled) = surface_report(&frames, &truth, &detections, &categories, args.iou)?;
+        (Some(each), pooled)
+    } else {
+        (None, None)
+    };
     if args.json {
         let report = Report {
             iou: args.iou,
@@ -379,6 +386,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
             detections: results.iter().map(|r| (r.category.clone(), r.detections)).collect(),
             bootstrap,
             surfaces,
+            surfaces_pooled,
         };
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
@@ -387,7 +395,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
             print_bootstrap(&results, map, summary);
         }
         if let Some(surfaces) = &surfaces {
-            print_surfaces(surfaces);
+            print_surfaces(surfaces, surfaces_pooled.as_ref());
         }
     }
     super::batch_result(&failures, names.len())
@@ -397,14 +405,15 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
 const SURFACE_TOLERANCE_M: f32 = 0.05;
 
 /// `--surfaces`: [`surface_accuracy`] of every category whose detections carry a surface, against the true
-/// surfaces of the frames' support files (frames without one are counted in a warning and give none).
+/// surfaces of the frames' support files (frames without one are counted in a warning and give none), and
+/// [`SurfaceAccuracy::pooled`] of those categories when there are two or more.
 fn surface_report(
     frames: &[PathBuf],
     truth: &[Vec<Object>],
     detections: &[Vec<Detection>],
     categories: &[String],
     iou: f32,
-) -> anyhow::Result<Vec<SurfaceAccuracy>> {
+) -> anyhow::Result<(Vec<SurfaceAccuracy>, Option<SurfaceAccuracy>)> {
     let supports: Vec<Vec<Vec<f32>>> = frames
         .par_iter()
         .zip(truth)
@@ -414,36 +423,40 @@ fn surface_report(
     if without > 0 {
         log::warn!("{without} frames with objects have no {SUPPORT_FILE} (not synthetic): no true surfaces there");
     }
-    Ok(categories
+    let each: Vec<SurfaceAccuracy> = categories
         .iter()
         .filter(|c| detections.iter().flatten().any(|d| &d.category == *c && d.surface_z.is_some()))
         .map(|c| surface_accuracy(truth, &supports, detections, c, iou, SURFACE_TOLERANCE_M))
-        .collect())
+        .collect();
+    let pooled = (each.len() >= 2).then(|| SurfaceAccuracy::pooled(&each));
+    Ok((each, pooled))
 }
 
-fn print_surfaces(surfaces: &[SurfaceAccuracy]) {
+fn print_surfaces(surfaces: &[SurfaceAccuracy], pooled: Option<&SurfaceAccuracy>) {
     if surfaces.is_empty() {
         println!("support surfaces: no detection carries an inferred surface (no model with surfaces)");
         return;
     }
     println!(
-        "support surfaces of the true positives (inferred surface_z against the true support heights, ≤ {} cm):",
+        "support surfaces of the true positives (inferred surface_z against the true support heights, ≤ {} cm; \
+         nearest and main of those measured, main also of all true positives):",
         SURFACE_TOLERANCE_M * 100.0
     );
     println!(
-        "{:<12} {:>8} {:>9} {:>15} {:>13} {:>14}",
-        "category", "TP", "measured", "nearest ≤ tol", "main ≤ tol", "median error"
+        "{:<12} {:>8} {:>9} {:>15} {:>13} {:>13} {:>14}",
+        "category", "TP", "measured", "nearest ≤ tol", "main ≤ tol", "main, all TP", "median error"
     );
     let share =
         |n: usize, of: usize| if of > 0 { format!("{:.1} %", 100.0 * n as f32 / of as f32) } else { "-".into() };
-    for s in surfaces {
+    for s in surfaces.iter().chain(pooled) {
         println!(
-            "{:<12} {:>8} {:>9} {:>15} {:>13} {:>14}",
+            "{:<12} {:>8} {:>9} {:>15} {:>13} {:>13} {:>14}",
             s.category,
             s.true_positives,
             s.measured,
             share(s.within_nearest, s.measured),
             share(s.within_main, s.measured),
+            share(s.within_main, s.true_positives),
             s.median_error_m.map_or("-".into(), |e| format!("{:.1} cm", 100.0 * e))
         );
     }
