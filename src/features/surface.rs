@@ -179,8 +179,9 @@ pub const MEASURED_COVER_SHARE: f32 = 0.01;
 /// **A surface under a cover** (since 2026-11-28): a duvet over a mattress, a cloth on a table, is the
 /// fullest face, a few centimetres above the surface that things put beside it rest on (the generator
 /// lays pillows on the mattress, under the duvet's level). So the surface is instead the lowest face
-/// (`covered_face`) at most [`MEASURED_COVER_DEPTH_M`] and at least 2.5 cm below the fullest one that
-/// holds [`MEASURED_COVER_SHARE`] of its points and is parted from it by a valley. The rule and its
+/// (`covered_face`) about 3 cm to [`MEASURED_COVER_DEPTH_M`] below the fullest one (in 1 cm bins: at
+/// least three bins under the fullest face's bin) that holds [`MEASURED_COVER_SHARE`] of its points and is
+/// parted from it by a valley. The rule and its
 /// constants were chosen on the calibration set's annotated boxes (the fullest face was within 5 cm of the
 /// true support of 46 % of its beds, this rule of 77 %, no table, desk, dresser, nightstand, sofa or counter
 /// lost), then measured once on the test set (README, "Surfaces measured from the points").
