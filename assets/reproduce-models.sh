@@ -235,6 +235,10 @@ case "$mode" in
         # (3x3x3 pillows and lamps, 3x1x3 monitors and TVs; 3x3x3 sinks). The floor and free ones are
         # calibrated first, so that the counters' calibrated scores choose the surfaces the sinks are
         # searched on; then the surface two; then the test set with all nineteen models, evaluated.
+        # Since 2026-11-28 the measured support surfaces find the surface under a cover (a bed's mattress
+        # under its duvet), and the surface models train on those surfaces, so the monitor and sink this
+        # mode trains differ from the shipped ones (equal within the noise on the test set; the shipped
+        # files stay because the cascade is tied to them: README, "Small objects: numbers").
         dir="$WORK/small"
         large=bed,chair,sofa,table,desk,toilet,bathtub,dresser,nightstand,bookshelf
         floor=box,door,counter,garbage_bin,pillow,lamp,tv
