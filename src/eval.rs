@@ -521,15 +521,9 @@ impl SurfaceAccuracy {
             all.tolerance_m = part.tolerance_m;
             all.errors_m.extend(&part.errors_m);
         }
-        all.median_error_m = upper_median(&mut all.errors_m);
+        all.median_error_m = crate::frame::upper_median(&mut all.errors_m);
         all
     }
-}
-
-/// Sorts `values` and gives their upper median (element `n/2`), `None` for none.
-fn upper_median(values: &mut [f32]) -> Option<f32> {
-    values.sort_by(f32::total_cmp);
-    values.get(values.len() / 2).copied()
 }
 
 /// [`SurfaceAccuracy`] of `category`: `truth[i]` are image `i`'s annotated objects, `supports[i][k]` the
@@ -573,7 +567,7 @@ pub fn surface_accuracy(
         result.within_main += ((main - z).abs() <= tolerance_m) as usize;
         errors.push(nearest);
     }
-    result.median_error_m = upper_median(&mut errors);
+    result.median_error_m = crate::frame::upper_median(&mut errors);
     result.errors_m = errors;
     result
 }

@@ -162,6 +162,13 @@ impl PointCloud {
     }
 }
 
+/// The upper median of `values` (element `n/2` in ascending order: an order statistic, never an
+/// interpolation); reorders `values`. `None` when empty.
+pub fn upper_median(values: &mut [f32]) -> Option<f32> {
+    values.sort_by(f32::total_cmp);
+    values.get(values.len() / 2).copied()
+}
+
 /// The `q`-quantile (0 ≤ q ≤ 1) of `values` with linear interpolation between order statistics
 /// (numpy's default); reorders `values`. `None` when empty.
 pub fn quantile_of_unsorted(values: &mut [f32], q: f32) -> Option<f32> {

@@ -33,6 +33,7 @@ use super::hypotheses::{Hypothesis, SupportSurface};
 use super::preprocess::{normal_bin, Preprocessed};
 use super::scene::FeatureScene;
 use crate::error::{Error, Result};
+use crate::frame::upper_median;
 use crate::geometry::Cuboid;
 
 /// Number of slices, i.e. of latent surface heights.
@@ -124,7 +125,7 @@ pub fn surface_height(hyp: &Hypothesis, h: usize) -> f32 {
 pub fn refined_surface_height(pre: &Preprocessed, cuboid: &Cuboid, h: usize) -> f32 {
     let thickness = cuboid.size.z / SLICES as f32;
     let low = cuboid.bottom() + h as f32 * thickness;
-    upper_median(upward_heights(pre, cuboid, low, low + thickness)).unwrap_or(low + 0.5 * thickness)
+    upper_median(&mut upward_heights(pre, cuboid, low, low + thickness)).unwrap_or(low + 0.5 * thickness)
 }
 
 /// Heights of the points inside `cuboid`'s footprint, between `low` and `high` (inclusive, upright z),
@@ -141,12 +142,6 @@ fn upward_heights(pre: &Preprocessed, cuboid: &Cuboid, low: f32, high: f32) -> V
         })
         .map(|(p, _)| p.z)
         .collect()
-}
-
-/// The upper median (element `n/2` in ascending order), `None` for no values.
-fn upper_median(mut values: Vec<f32>) -> Option<f32> {
-    values.sort_by(f32::total_cmp);
-    values.get(values.len() / 2).copied()
 }
 
 /// Height bins (metres) of [`measured_surface_height`]'s histogram of upward-facing points.
@@ -208,7 +203,8 @@ fn fullest_face(heights: &[f32], low: f32, high: f32) -> Option<(f32, usize)> {
     if around[peak] < MEASURED_MIN_POINTS {
         return None;
     }
-    let face = upper_median(heights.iter().copied().filter(|&z| bin_of(z).abs_diff(peak) <= 1).collect())?;
+    let mut face_heights: Vec<f32> = heights.iter().copied().filter(|&z| bin_of(z).abs_diff(peak) <= 1).collect();
+    let face = upper_median(&mut face_heights)?;
     Some((face, around[peak]))
 }
 
@@ -234,7 +230,8 @@ fn covered_face(heights: &[f32], low: f32, high: f32, fullest: f32, fullest_poin
         let valley = counts[b + 1..top].iter().copied().min().unwrap_or(usize::MAX);
         counts[b] >= left && counts[b] >= counts[b + 1] && with_neighbours >= need && 2 * valley <= counts[b]
     })?;
-    upper_median(heights.iter().copied().filter(|&z| bin_of(z).abs_diff(covered) <= 1).collect())
+    let mut face_heights: Vec<f32> = heights.iter().copied().filter(|&z| bin_of(z).abs_diff(covered) <= 1).collect();
+    upper_median(&mut face_heights)
 }
 
 /// The support surfaces of a frame's annotated `objects` (training, and the window recall of

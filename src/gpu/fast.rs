@@ -1121,10 +1121,12 @@ pub fn fast_scores_main(
         |acc: f32, a: [f32; 4], b: [f32; 4]| (((acc + a[0] * b[0]) + a[1] * b[1]) + a[2] * b[2]) + a[3] * b[3];
     let to_f32 = |s: [u32; 4]| s.map(|x| x as f32);
     let mul = |a: [f32; 4], m: [f32; 4]| [a[0] * m[0], a[1] * m[1], a[2] * m[2], a[3] * m[3]];
-    // Boundary k of the hypothesis (two 16-bit boundaries per word, four words per texel).
+    // Boundary k of the hypothesis: its word read from its texel (four words per texel), unpacked by
+    // `packed_boundary` (that word is word 0 of the slice; k & 1 picks its half).
     let boundary = |k: usize| -> usize {
         let word = b + (k >> 1);
-        ((texel_at(bounds, texel(word / 4))[word % 4] >> ((k & 1) * 16)) & 0xffff) as usize
+        let words = texel_at(bounds, texel(word / 4));
+        packed_boundary(&words[word % 4..], k & 1) as usize
     };
     // The entry whose first vec4 is element e: the 36 channels of a corner, as 9 vec4.
     let corner = |e: usize| -> [[u32; 4]; 9] { std::array::from_fn(|c| texel_at(table, texel(e + c))) };
