@@ -74,7 +74,12 @@
 //! from [`C_GRID`] by two-fold cross-validation over the frames (even and odd frames), maximising the
 //! mean AP of the combined score; ties go to the smaller `C`. A category whose cross-validated AP with
 //! the context is not above its first stage's gets no second stage (its scores are left alone rather
-//! than made worse).
+//! than made worse). **Per-category feature sets** (`cascade --features best`; our addition): each
+//! category's stage is trained with v4 and with v5 and keeps the set whose cross-validated AP is higher
+//! (ties: v4, the smaller); the same folds and the same first-stage AP for both, so the choice is made on
+//! the cascade's own held-out frames, never on a test set. The file's `features` is then v4 and a v5
+//! stage names its own set ([`SecondStage::features`]); since v4's ψ is a prefix of v5's, rescoring
+//! computes v5's ψ once and a v4 stage reads its prefix.
 //!
 //! # Prediction (paper §6.3)
 //! The second-stage score is `z'_i = w·ψ_i + b` and the combined score `z_i + z'_i`, with `z_i` the first
@@ -164,6 +169,14 @@ impl FeatureSet {
             V4_FEATURES => Some(FeatureSet::V4),
             _ if all_large && PREVIOUS_FEATURES.contains(&name) => Some(FeatureSet::V4),
             _ => None,
+        }
+    }
+
+    /// The short name `cascade --features` takes: `v4` or `v5`.
+    pub fn short_name(self) -> &'static str {
+        match self {
+            FeatureSet::V4 => "v4",
+            FeatureSet::V5 => "v5",
         }
     }
 
@@ -266,6 +279,10 @@ pub fn wall_context(cuboid: &Cuboid, room: &[Vec2]) -> Option<(f64, f64)> {
 /// One category's second stage.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SecondStage {
+    /// The stage's own feature set, when it is not the file's [`Cascade::features`] (a cascade trained
+    /// with `cascade --features best` picks each category's set by cross-validation); absent otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub features: Option<String>,
     pub weights: Vec<f64>,
     pub bias: f64,
     /// The SVM's C (chosen by cross-validation).
@@ -373,11 +390,14 @@ impl Cascade {
                 self.format, self.version
             ));
         }
-        let set = self.feature_set().ok_or_else(|| {
-            format!("feature set '{}' is not this build's '{V5_FEATURES}' nor '{V4_FEATURES}'", self.features)
-        })?;
-        let dim = set.dim(self.categories.len());
+        let unknown =
+            |name: &str| format!("feature set '{name}' is not this build's '{V5_FEATURES}' nor '{V4_FEATURES}'");
+        self.feature_set().ok_or_else(|| unknown(&self.features))?;
         for (category, stage) in &self.stages {
+            let set = self
+                .stage_feature_set(stage)
+                .ok_or_else(|| format!("'{category}': {}", unknown(stage.features.as_deref().unwrap_or_default())))?;
+            let dim = set.dim(self.categories.len());
             if stage.weights.len() != dim {
                 return Err(format!("'{category}': {} weights, expected {dim}", stage.weights.len()));
             }
@@ -389,9 +409,24 @@ impl Cascade {
         Ok(())
     }
 
-    /// The feature set the file names (`None` when this build cannot compute it).
+    /// The feature set the file names (`None` when this build cannot compute it): every stage's, but for
+    /// a stage that names its own ([`SecondStage::features`]).
     pub fn feature_set(&self) -> Option<FeatureSet> {
-        FeatureSet::named(&self.features, self.categories.iter().all(|c| is_large(c)))
+        FeatureSet::named(&self.features, self.all_large())
+    }
+
+    /// The feature set `stage` reads: its own when it names one, else the file's ([`Cascade::feature_set`]);
+    /// `None` when this build cannot compute it.
+    pub fn stage_feature_set(&self, stage: &SecondStage) -> Option<FeatureSet> {
+        match &stage.features {
+            Some(name) => FeatureSet::named(name, self.all_large()),
+            None => self.feature_set(),
+        }
+    }
+
+    /// Whether every context category is large (the earlier feature sets are read only then).
+    fn all_large(&self) -> bool {
+        self.categories.iter().all(|c| is_large(c))
     }
 
     /// Rescores one frame's first-stage detections (module doc) in the frame's predicted `room` (floor
@@ -400,11 +435,22 @@ impl Cascade {
     pub fn rescore(&self, detections: &mut [Detection], room: Option<&Room>) -> Result<()> {
         check_first_stage(detections)?;
         self.check_scores(detections)?;
-        let set = self.feature_set().ok_or_else(|| Error::Input(format!("unknown feature set '{}'", self.features)))?;
-        let features = frame_context_features(detections, &self.categories, room, set);
+        // ψ of the widest set any stage reads: v4's ψ is a prefix of v5's (module doc), so a stage's weights
+        // (as long as its own set's ψ) take their prefix of it.
+        let mut widest = FeatureSet::V4;
+        for stage in self.stages.values() {
+            let set = self.stage_feature_set(stage).ok_or_else(|| {
+                Error::Input(format!("unknown feature set '{}'", stage.features.as_deref().unwrap_or(&self.features)))
+            })?;
+            if set == FeatureSet::V5 {
+                widest = FeatureSet::V5;
+            }
+        }
+        let features = frame_context_features(detections, &self.categories, room, widest);
         let rescored: Vec<Option<(f32, f32)>> = (0..detections.len())
             .map(|i| {
                 let stage = self.stages.get(&detections[i].category)?;
+                // Zipping stops at the stage's own length: its set's prefix of ψ.
                 let decision: f64 = stage.weights.iter().zip(&features[i]).map(|(w, v)| w * v).sum::<f64>();
                 let context = (decision + stage.bias) as f32;
                 Some((context, stage.calibration.probability(combined(&detections[i], context))))
@@ -650,37 +696,54 @@ fn cross_validate(s: &Samples, c: f64, iou_threshold: f32) -> Option<(f32, f32)>
 /// Outcome of training one category: its stage, or why there is none.
 pub type StageResult = std::result::Result<SecondStage, String>;
 
+/// What training did for one category: the stage it keeps (or why none), and each candidate feature set's
+/// own outcome, in the order the sets were given (one entry when one set was given).
+#[derive(Clone, Debug)]
+pub struct StageOutcome {
+    pub chosen: StageResult,
+    pub candidates: Vec<(FeatureSet, StageResult)>,
+}
+
 /// Trains the second stage of each of `categories` on `frames` (annotated objects and first-stage
-/// detections per frame), with `categories` also the context categories and ψ of the feature `set`. A category whose detections
-/// hold no true or no false positive, whose cross-validation folds do, or whose cross-validated AP the
-/// context does not raise gets no stage (the reason is returned): its detections keep their first-stage
-/// scores.
+/// detections per frame), with `categories` also the context categories. Each category's stage is trained
+/// with every feature set of `sets` (not empty) and keeps the one with the highest cross-validated AP
+/// (ties: the earlier in `sets`); the file's [`Cascade::features`] is `sets[0]` and a stage of another set
+/// names its own ([`SecondStage::features`]). A category whose detections hold no true or no false
+/// positive, whose cross-validation folds do, or whose cross-validated AP the context does not raise with
+/// any of the sets gets no stage (the reasons are returned): its detections keep their first-stage scores.
 pub fn train_cascade(
     frames: &[CascadeFrame],
     categories: &[String],
     iou_threshold: f32,
     training: CascadeTraining,
-    set: FeatureSet,
-) -> Result<(Cascade, BTreeMap<String, StageResult>)> {
+    sets: &[FeatureSet],
+) -> Result<(Cascade, BTreeMap<String, StageOutcome>)> {
+    let Some(&file_set) = sets.first() else {
+        return Err(Error::Input("the cascade needs at least one feature set to train with".to_string()));
+    };
     for frame in frames {
         check_first_stage(&frame.detections)?;
     }
     // Progress: a category's stage takes minutes with ~10 000 detections (the SVM's QP solves).
     let finished = std::sync::atomic::AtomicUsize::new(0);
-    let results: Vec<(String, StageResult)> = categories
+    let results: Vec<(String, StageOutcome)> = categories
         .par_iter()
         .map(|category| {
-            let result = train_stage(frames, category, categories, iou_threshold, set);
+            let candidates: Vec<(FeatureSet, StageResult)> = sets
+                .iter()
+                .map(|&set| (set, train_stage(frames, category, categories, iou_threshold, set, file_set)))
+                .collect();
+            let chosen = choose_stage(&candidates);
             let done = finished.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
             log::info!("cascade: '{category}' done ({done} of {})", categories.len());
-            (category.clone(), result)
+            (category.clone(), StageOutcome { chosen, candidates })
         })
         .collect();
-    let stages = results.iter().filter_map(|(c, r)| r.as_ref().ok().map(|s| (c.clone(), s.clone()))).collect();
+    let stages = results.iter().filter_map(|(c, r)| r.chosen.as_ref().ok().map(|s| (c.clone(), s.clone()))).collect();
     let cascade = Cascade {
         format: FORMAT.into(),
         version: VERSION,
-        features: set.name().into(),
+        features: file_set.name().into(),
         categories: categories.to_vec(),
         stages,
         training,
@@ -688,13 +751,43 @@ pub fn train_cascade(
     Ok((cascade, results.into_iter().collect()))
 }
 
+/// The stage with the highest cross-validated AP among the `candidates` that have one (ties: the
+/// earlier); without any, the reasons of each, named by set when there are several.
+fn choose_stage(candidates: &[(FeatureSet, StageResult)]) -> StageResult {
+    let mut best: Option<&SecondStage> = None;
+    for stage in candidates.iter().filter_map(|(_, r)| r.as_ref().ok()) {
+        if best.is_none_or(|b| stage.cv_ap_cascade > b.cv_ap_cascade) {
+            best = Some(stage);
+        }
+    }
+    if let Some(stage) = best {
+        return Ok(stage.clone());
+    }
+    let reasons: Vec<String> = candidates
+        .iter()
+        .filter_map(|(set, r)| r.as_ref().err().map(|reason| (set, reason)))
+        .map(
+            |(set, reason)| {
+                if candidates.len() > 1 {
+                    format!("{}: {reason}", set.short_name())
+                } else {
+                    reason.clone()
+                }
+            },
+        )
+        .collect();
+    Err(reasons.join("; "))
+}
+
 /// One category's stage (module doc): C by cross-validation, then the SVM and calibration on all frames.
+/// `file_set` is the cascade file's set: a stage of another set names its own.
 fn train_stage(
     frames: &[CascadeFrame],
     category: &str,
     categories: &[String],
     iou_threshold: f32,
     set: FeatureSet,
+    file_set: FeatureSet,
 ) -> StageResult {
     let s = samples_of(frames, category, categories, iou_threshold, set);
     let positives = s.labels.iter().filter(|&&y| y).count();
@@ -724,6 +817,7 @@ fn train_stage(
         all.iter().map(|&n| (s.raw[n] + svm.decision(&s.psi[n]) as f32, s.labels[n])).collect();
     let (a, b) = fit_logistic(&scored).map_err(|e| e.to_string())?;
     Ok(SecondStage {
+        features: (set != file_set).then(|| set.name().to_string()),
         weights: svm.weights,
         bias: svm.bias,
         c,

@@ -182,7 +182,8 @@ fn small_objects_see_their_supporters_from_above() {
 fn earlier_feature_sets_are_read_and_rescore_with_their_own_features() {
     let training: Vec<_> = (0..20).map(frame).collect();
     let (mut cascade, _) =
-        train_cascade(&training, &names(&["bed", "table"]), 0.25, CascadeTraining::default(), FeatureSet::V5).unwrap();
+        train_cascade(&training, &names(&["bed", "table"]), 0.25, CascadeTraining::default(), &[FeatureSet::V5])
+            .unwrap();
     assert_eq!(cascade.features, V5_FEATURES);
     assert_eq!(FEATURES, V4_FEATURES, "the default set");
     let dir = tempfile::tempdir().unwrap();
@@ -293,10 +294,10 @@ fn the_cascade_learns_that_a_table_on_a_bed_is_a_piece_of_the_bed() {
     let training: Vec<_> = (0..40).map(frame).collect();
     let categories = names(&["bed", "table"]);
     let (cascade, results) =
-        train_cascade(&training, &categories, 0.25, CascadeTraining::default(), FeatureSet::V4).unwrap();
+        train_cascade(&training, &categories, 0.25, CascadeTraining::default(), &[FeatureSet::V4]).unwrap();
     // Every bed detection is correct: no second stage can be learnt for it.
-    assert!(results["bed"].is_err(), "{:?}", results["bed"]);
-    let stage = results["table"].as_ref().unwrap();
+    assert!(results["bed"].chosen.is_err(), "{:?}", results["bed"].chosen);
+    let stage = results["table"].chosen.as_ref().unwrap();
     assert!(stage.cv_ap_cascade > stage.cv_ap_first_stage + 0.1, "{stage:?}");
 
     // Held-out frames: the first stage ranks the pieces of beds above most real tables; after the
@@ -332,7 +333,8 @@ fn the_cascade_learns_that_a_table_on_a_bed_is_a_piece_of_the_bed() {
 fn cascade_files_round_trip_and_are_checked() {
     let training: Vec<_> = (0..20).map(frame).collect();
     let (cascade, _) =
-        train_cascade(&training, &names(&["bed", "table"]), 0.25, CascadeTraining::default(), FeatureSet::V4).unwrap();
+        train_cascade(&training, &names(&["bed", "table"]), 0.25, CascadeTraining::default(), &[FeatureSet::V4])
+            .unwrap();
     let dir = std::env::temp_dir().join(format!("cog-cascade-test-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("cascade.json");
@@ -438,6 +440,23 @@ fn cli_trains_a_cascade_and_rescores_files() {
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.lines().any(|l| l.starts_with("bed") && l.contains("no second stage")), "{text}");
     assert!(text.contains("wrote the cascade (1 of 2 categories)"), "{text}");
+    // `--features best` trains both sets and reports each one's cross-validated AP beside the choice.
+    let best_file = tmp.path().join("best.json");
+    let mut args: Vec<String> = ["cascade", "--data", data.to_str().unwrap(), "--detections", first.to_str().unwrap()]
+        .map(String::from)
+        .to_vec();
+    args.extend(["--models", models, "--out", best_file.to_str().unwrap(), "--features", "best"].map(String::from));
+    let out = Command::new(env!("CARGO_BIN_EXE_cog-gpu")).args(&args).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let best_text = String::from_utf8_lossy(&out.stdout);
+    assert!(best_text.lines().next().is_some_and(|h| h.contains("CV AP v4") && h.contains("CV AP v5")), "{best_text}");
+    let best = Cascade::read(&best_file).unwrap();
+    assert_eq!(best.features, V4_FEATURES);
+    let table = &best.stages["table"];
+    let set = best.stage_feature_set(table).unwrap();
+    let row = best_text.lines().find(|l| l.starts_with("table")).unwrap();
+    assert_eq!(row.split_whitespace().nth(1), Some(set.short_name()), "{best_text}");
+
     let cascade = Cascade::read(&cascade_file).unwrap();
     assert_eq!(cascade.categories, names(&["bed", "table"]));
     assert_eq!(cascade.training.frames, 30);
@@ -603,8 +622,8 @@ fn the_cascade_learns_that_nightstands_stand_against_walls() {
     let categories = names(&["nightstand"]);
     let training: Vec<_> = (0..40).map(|f| make(f, true)).collect();
     let (cascade, results) =
-        train_cascade(&training, &categories, 0.25, CascadeTraining::default(), FeatureSet::V4).unwrap();
-    let stage = results["nightstand"].as_ref().unwrap();
+        train_cascade(&training, &categories, 0.25, CascadeTraining::default(), &[FeatureSet::V4]).unwrap();
+    let stage = results["nightstand"].chosen.as_ref().unwrap();
     assert!(stage.cv_ap_cascade > stage.cv_ap_first_stage + 0.1, "{stage:?}");
     let mut test: Vec<_> = (100..140).map(|f| make(f, true)).collect();
     let before = category_ap(&test, "nightstand");
@@ -616,7 +635,8 @@ fn the_cascade_learns_that_nightstands_stand_against_walls() {
     assert!((category_ap(&test, "nightstand") - 1.0).abs() < 1e-6, "{}", category_ap(&test, "nightstand"));
     // Trained and applied without rooms, the context has nothing to go on: far from separated.
     let roomless: Vec<_> = (0..40).map(|f| make(f, false)).collect();
-    let (blind, _) = train_cascade(&roomless, &categories, 0.25, CascadeTraining::default(), FeatureSet::V4).unwrap();
+    let (blind, _) =
+        train_cascade(&roomless, &categories, 0.25, CascadeTraining::default(), &[FeatureSet::V4]).unwrap();
     let mut test: Vec<_> = (100..140).map(|f| make(f, false)).collect();
     for frame in &mut test {
         blind.rescore(&mut frame.detections, None).unwrap();
@@ -665,7 +685,7 @@ fn the_v5_cascade_learns_a_tables_proportions() {
     let before = category_ap(&(100..140).map(make).collect::<Vec<_>>(), "table");
     assert!(before < 0.8, "first-stage AP {before}");
     let ap_with = |set: FeatureSet| {
-        let (cascade, _) = train_cascade(&training, &categories, 0.25, CascadeTraining::default(), set).unwrap();
+        let (cascade, _) = train_cascade(&training, &categories, 0.25, CascadeTraining::default(), &[set]).unwrap();
         assert_eq!(cascade.features, set.name());
         let mut test: Vec<_> = (100..140).map(make).collect();
         for frame in &mut test {
@@ -678,4 +698,111 @@ fn the_v5_cascade_learns_a_tables_proportions() {
     // v4 gets no stage (cross-validation) or one that cannot separate them.
     let v4 = ap_with(FeatureSet::V4);
     assert!(v4 < 0.9, "v4 AP {v4}");
+}
+
+/// v4's ψ is a prefix of v5's, detection by detection, with and without a room (what a cascade with stages
+/// of both sets relies on when it computes v5's ψ once).
+#[test]
+fn v4_features_are_a_prefix_of_v5_features() {
+    let room = Room {
+        corners: vec![Vec2::new(-1.0, -1.0), Vec2::new(6.0, -1.0), Vec2::new(6.0, 5.0), Vec2::new(-1.0, 5.0)],
+        floor: -0.1,
+    };
+    let categories = names(&["bed", "table", "pillow"]);
+    let mut detections = frame(5).detections;
+    detections.push(detection("pillow", [0.1, 2.1, 1.05], [0.5, 0.3, 0.1], 0.4, -0.3));
+    for room in [None, Some(&room)] {
+        let v4 = frame_context_features(&detections, &categories, room, FeatureSet::V4);
+        let v5 = frame_context_features(&detections, &categories, room, FeatureSet::V5);
+        for (a, b) in v4.iter().zip(&v5) {
+            assert_eq!(a.len(), FeatureSet::V4.dim(3));
+            assert_eq!(b.len(), FeatureSet::V5.dim(3));
+            assert_eq!(a[..], b[..a.len()]);
+        }
+    }
+}
+
+/// `--features best`: each category keeps the set whose cross-validated AP is higher (ties: v4), each
+/// stage equal to the one that set alone trains; the table, whose true and false boxes differ only in
+/// proportions, takes v5. The file names v4, the v5 stage names its own set; written, read back, and
+/// rescoring gives each category the scores of the cascade of its own set.
+#[test]
+fn the_best_feature_set_is_chosen_per_category_by_cross_validation() {
+    let room = vec![Vec2::new(0.0, 0.0), Vec2::new(5.0, 0.0), Vec2::new(5.0, 4.0), Vec2::new(0.0, 4.0)];
+    let make = |f: usize| -> CascadeFrame {
+        // Tables: only the depth of the box tells (1.0 m true, 0.6 m false); nightstands: the wall.
+        let true_table = ([1.0 + 0.1 * (f % 5) as f32, 1.0, 0.375], [1.2, 1.0, 0.75]);
+        let false_table = ([4.0, 3.0 + 0.1 * (f % 3) as f32, 0.375], [1.2, 0.6, 0.75]);
+        let size = [0.5, 0.4, 0.6];
+        let wall = ([0.3 + 0.1 * (f % 7) as f32, 0.25, 0.3], size);
+        let middle = ([2.5, 2.0 + 0.1 * (f % 5) as f32, 0.3], size);
+        let room = Some(Room { corners: room.clone(), floor: 0.0 });
+        if f.is_multiple_of(3) {
+            true_and_false_frame("nightstand", wall, middle, f, room)
+        } else {
+            true_and_false_frame("table", true_table, false_table, f, room)
+        }
+    };
+    let categories = names(&["nightstand", "table"]);
+    let training: Vec<_> = (0..60).map(make).collect();
+    let train =
+        |sets: &[FeatureSet]| train_cascade(&training, &categories, 0.25, CascadeTraining::default(), sets).unwrap();
+    let (v4, v4_results) = train(&[FeatureSet::V4]);
+    let (v5, v5_results) = train(&[FeatureSet::V5]);
+    let (best, best_results) = train(&[FeatureSet::V4, FeatureSet::V5]);
+    assert_eq!(best.features, V4_FEATURES);
+    for category in &categories {
+        let (a, b) = (v4_results[category].chosen.as_ref(), v5_results[category].chosen.as_ref());
+        let expected = match (a, b) {
+            (Ok(a), Ok(b)) if b.cv_ap_cascade > a.cv_ap_cascade => Some((FeatureSet::V5, b)),
+            (Ok(a), _) => Some((FeatureSet::V4, a)),
+            (Err(_), Ok(b)) => Some((FeatureSet::V5, b)),
+            (Err(_), Err(_)) => None,
+        };
+        let outcome = &best_results[category];
+        assert_eq!(outcome.candidates.len(), 2);
+        match expected {
+            None => assert!(outcome.chosen.is_err()),
+            Some((set, stage)) => {
+                let chosen = outcome.chosen.as_ref().unwrap();
+                assert_eq!(best.stage_feature_set(chosen), Some(set), "{category}");
+                assert_eq!(chosen.features.as_deref(), (set == FeatureSet::V5).then_some(V5_FEATURES));
+                assert_eq!(chosen.weights, stage.weights, "{category}: the stage its set alone trains");
+                assert_eq!((chosen.bias, chosen.c), (stage.bias, stage.c));
+                assert_eq!(chosen.calibration, stage.calibration);
+            }
+        }
+    }
+    let table = best.stages["table"].clone();
+    assert_eq!(best.stage_feature_set(&table), Some(FeatureSet::V5), "the table needs its proportions");
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("cascade.json");
+    best.write(&path).unwrap();
+    let read = Cascade::read(&path).unwrap();
+    assert_eq!(read, best);
+    // Rescoring: each category's scores are those of the cascade of its chosen set.
+    for f in 100..130 {
+        let rescored_by = |cascade: &Cascade| {
+            let mut frame = make(f);
+            let room = frame.room.clone();
+            cascade.rescore(&mut frame.detections, room.as_ref()).unwrap();
+            frame.detections
+        };
+        let got = rescored_by(&read);
+        for category in &categories {
+            let Some(stage) = read.stages.get(category) else { continue };
+            let own = if read.stage_feature_set(stage) == Some(FeatureSet::V5) { &v5 } else { &v4 };
+            let want = rescored_by(own);
+            let pick = |d: &[Detection]| -> Vec<(f32, f32)> {
+                d.iter().filter(|d| &d.category == category).map(|d| (d.raw_score.unwrap(), d.score)).collect()
+            };
+            assert_eq!(pick(&got), pick(&want), "frame {f}, {category}");
+        }
+    }
+    // A stage naming a set this build does not know: refused, the file and the category named.
+    let mut broken = read.clone();
+    broken.stages.get_mut("table").unwrap().features = Some("object-overlap-v9".to_string());
+    broken.write(&path).unwrap();
+    let err = Cascade::read(&path).unwrap_err().to_string();
+    assert!(err.contains("cascade.json") && err.contains("'table'") && err.contains("object-overlap-v9"), "{err}");
 }

@@ -9,10 +9,11 @@
 //! categories); a category whose detections hold no true or no false positive gets no second stage and
 //! keeps its first-stage scores (reported, not an error).
 
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use anyhow::bail;
-use cog_gpu::cascade::{train_cascade, CascadeFrame, CascadeTraining, FeatureSet, FILE_NAME};
+use cog_gpu::cascade::{train_cascade, Cascade, CascadeFrame, CascadeTraining, FeatureSet, StageOutcome, FILE_NAME};
 
 use super::calibrate::{read_labelled_detections, HeldOutArgs, LabelledDetections};
 use super::GlobalOptions;
@@ -24,8 +25,9 @@ pub struct Args {
     /// Where to write the cascade; default `<models>/cascade.json`.
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// The feature set: v4 (the paper's overlap and layout features, the shipped cascade's) or v5 (also
-    /// each detection's neighbourhood and its box's geometry; README, "Context cascade").
+    /// The feature set: v4 (the paper's overlap and layout features), v5 (also each detection's
+    /// neighbourhood and its box's geometry) or best (per category the one of the two with the higher
+    /// cross-validated AP on these frames; trains both); README, "Context cascade".
     #[arg(long, value_enum, default_value = "v4")]
     pub features: FeaturesArg,
 }
@@ -35,13 +37,16 @@ pub struct Args {
 pub enum FeaturesArg {
     V4,
     V5,
+    Best,
 }
 
-impl From<FeaturesArg> for FeatureSet {
-    fn from(arg: FeaturesArg) -> FeatureSet {
-        match arg {
-            FeaturesArg::V4 => FeatureSet::V4,
-            FeaturesArg::V5 => FeatureSet::V5,
+impl FeaturesArg {
+    /// The candidate sets, the file's own first.
+    fn sets(self) -> Vec<FeatureSet> {
+        match self {
+            FeaturesArg::V4 => vec![FeatureSet::V4],
+            FeaturesArg::V5 => vec![FeatureSet::V5],
+            FeaturesArg::Best => vec![FeatureSet::V4, FeatureSet::V5],
         }
     }
 }
@@ -82,25 +87,9 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         calibrations: models.iter().filter_map(|m| Some((m.category.clone(), m.calibration.clone()?))).collect(),
     };
     log::info!("training the second stage of {} categories on {frames} frames", categories.len());
-    let (cascade, results) = train_cascade(&inputs, &categories, held_out.iou, training, args.features.into())?;
-    println!(
-        "{:<12} {:>10} {:>6} {:>7} {:>12} {:>12}",
-        "category", "detections", "TP", "C", "CV AP first", "CV AP cascade"
-    );
-    for (category, result) in &results {
-        match result {
-            Ok(stage) => println!(
-                "{:<12} {:>10} {:>6} {:>7} {:>12.1} {:>12.1}",
-                category,
-                stage.calibration.detections,
-                stage.calibration.true_positives,
-                stage.c,
-                100.0 * stage.cv_ap_first_stage,
-                100.0 * stage.cv_ap_cascade
-            ),
-            Err(reason) => println!("{category:<12} no second stage (keeps its first-stage scores): {reason}"),
-        }
-    }
+    let sets = args.features.sets();
+    let (cascade, results) = train_cascade(&inputs, &categories, held_out.iou, training, &sets)?;
+    print_stages(&cascade, &results, &sets);
     if cascade.stages.is_empty() {
         bail!("{}: no category could be trained; nothing written", held_out.detections.display());
     }
@@ -108,4 +97,44 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     cascade.write(&out)?;
     println!("wrote the cascade ({} of {} categories) to {}", cascade.stages.len(), categories.len(), out.display());
     Ok(())
+}
+
+/// The stages' table: per category the chosen stage (its feature set, detections, true positives, C and
+/// cross-validated APs) or why it has none; with several candidate sets, each one's cross-validated AP.
+fn print_stages(cascade: &Cascade, results: &BTreeMap<String, StageOutcome>, sets: &[FeatureSet]) {
+    let several = sets.len() > 1;
+    let mut header = format!(
+        "{:<12} {:>8} {:>10} {:>6} {:>7} {:>12} {:>13}",
+        "category", "features", "detections", "TP", "C", "CV AP first", "CV AP cascade"
+    );
+    if several {
+        for set in sets {
+            header.push_str(&format!(" {:>12}", format!("CV AP {}", set.short_name())));
+        }
+    }
+    println!("{header}");
+    for (category, outcome) in results {
+        let mut line = match &outcome.chosen {
+            Ok(stage) => format!(
+                "{:<12} {:>8} {:>10} {:>6} {:>7} {:>12.1} {:>13.1}",
+                category,
+                cascade.stage_feature_set(stage).map_or("?", FeatureSet::short_name),
+                stage.calibration.detections,
+                stage.calibration.true_positives,
+                stage.c,
+                100.0 * stage.cv_ap_first_stage,
+                100.0 * stage.cv_ap_cascade
+            ),
+            Err(reason) => format!("{category:<12} no second stage (keeps its first-stage scores): {reason}"),
+        };
+        if several && outcome.chosen.is_ok() {
+            for (_, result) in &outcome.candidates {
+                match result {
+                    Ok(stage) => line.push_str(&format!(" {:>12.1}", 100.0 * stage.cv_ap_cascade)),
+                    Err(_) => line.push_str(&format!(" {:>12}", "none")),
+                }
+            }
+        }
+        println!("{line}");
+    }
 }
