@@ -211,7 +211,7 @@ case "$mode" in
             echo "$cascade_frames" > "$dir/cascade-detections/.done"
             echo "cascade detect $((SECONDS - started)) s" >> "$dir/times.txt"
         fi
-        "$BIN" cascade --data "$WORK/cascade-set" --detections "$dir/cascade-detections" --models "$dir/models" \
+        "$BIN" cascade --data "$WORK/cascade-set" --detections "$dir/cascade-detections" --models "$dir/models" --features best \
             --out "$dir/cascade.json" | tee "$dir/cascade.txt"
         rm -rf "$dir/cascade-test-detections"
         "$BIN" rescore --detections "$dir/detections" --out "$dir/cascade-test-detections" --cascade "$dir/cascade.json"
