@@ -696,12 +696,34 @@ fn cross_validate(s: &Samples, c: f64, iou_threshold: f32) -> Option<(f32, f32)>
 /// Outcome of training one category: its stage, or why there is none.
 pub type StageResult = std::result::Result<SecondStage, String>;
 
-/// What training did for one category: the stage it keeps (or why none), and each candidate feature set's
-/// own outcome, in the order the sets were given (one entry when one set was given).
+/// What training did for one category: each candidate feature set's own outcome, in the order the sets
+/// were given (one entry when one set was given); [`StageOutcome::chosen`] is the stage it keeps.
 #[derive(Clone, Debug)]
 pub struct StageOutcome {
-    pub chosen: StageResult,
     pub candidates: Vec<(FeatureSet, StageResult)>,
+}
+
+impl StageOutcome {
+    /// The stage with the highest cross-validated AP among the candidates that have one (ties: the
+    /// earlier); without any, the reasons of each, named by set when there are several.
+    pub fn chosen(&self) -> std::result::Result<&SecondStage, String> {
+        let mut best: Option<&SecondStage> = None;
+        for stage in self.candidates.iter().filter_map(|(_, r)| r.as_ref().ok()) {
+            if best.is_none_or(|b| stage.cv_ap_cascade > b.cv_ap_cascade) {
+                best = Some(stage);
+            }
+        }
+        best.ok_or_else(|| {
+            let several = self.candidates.len() > 1;
+            let reasons: Vec<String> = self
+                .candidates
+                .iter()
+                .filter_map(|(set, r)| r.as_ref().err().map(|reason| (set, reason)))
+                .map(|(set, reason)| if several { format!("{}: {reason}", set.short_name()) } else { reason.clone() })
+                .collect();
+            reasons.join("; ")
+        })
+    }
 }
 
 /// Trains the second stage of each of `categories` on `frames` (annotated objects and first-stage
@@ -733,13 +755,12 @@ pub fn train_cascade(
                 .iter()
                 .map(|&set| (set, train_stage(frames, category, categories, iou_threshold, set, file_set)))
                 .collect();
-            let chosen = choose_stage(&candidates);
             let done = finished.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
             log::info!("cascade: '{category}' done ({done} of {})", categories.len());
-            (category.clone(), StageOutcome { chosen, candidates })
+            (category.clone(), StageOutcome { candidates })
         })
         .collect();
-    let stages = results.iter().filter_map(|(c, r)| r.chosen.as_ref().ok().map(|s| (c.clone(), s.clone()))).collect();
+    let stages = results.iter().filter_map(|(c, r)| r.chosen().ok().map(|s| (c.clone(), s.clone()))).collect();
     let cascade = Cascade {
         format: FORMAT.into(),
         version: VERSION,
@@ -749,34 +770,6 @@ pub fn train_cascade(
         training,
     };
     Ok((cascade, results.into_iter().collect()))
-}
-
-/// The stage with the highest cross-validated AP among the `candidates` that have one (ties: the
-/// earlier); without any, the reasons of each, named by set when there are several.
-fn choose_stage(candidates: &[(FeatureSet, StageResult)]) -> StageResult {
-    let mut best: Option<&SecondStage> = None;
-    for stage in candidates.iter().filter_map(|(_, r)| r.as_ref().ok()) {
-        if best.is_none_or(|b| stage.cv_ap_cascade > b.cv_ap_cascade) {
-            best = Some(stage);
-        }
-    }
-    if let Some(stage) = best {
-        return Ok(stage.clone());
-    }
-    let reasons: Vec<String> = candidates
-        .iter()
-        .filter_map(|(set, r)| r.as_ref().err().map(|reason| (set, reason)))
-        .map(
-            |(set, reason)| {
-                if candidates.len() > 1 {
-                    format!("{}: {reason}", set.short_name())
-                } else {
-                    reason.clone()
-                }
-            },
-        )
-        .collect();
-    Err(reasons.join("; "))
 }
 
 /// One category's stage (module doc): C by cross-validation, then the SVM and calibration on all frames.

@@ -296,8 +296,8 @@ fn the_cascade_learns_that_a_table_on_a_bed_is_a_piece_of_the_bed() {
     let (cascade, results) =
         train_cascade(&training, &categories, 0.25, CascadeTraining::default(), &[FeatureSet::V4]).unwrap();
     // Every bed detection is correct: no second stage can be learnt for it.
-    assert!(results["bed"].chosen.is_err(), "{:?}", results["bed"].chosen);
-    let stage = results["table"].chosen.as_ref().unwrap();
+    assert!(results["bed"].chosen().is_err(), "{:?}", results["bed"].chosen());
+    let stage = results["table"].chosen().unwrap();
     assert!(stage.cv_ap_cascade > stage.cv_ap_first_stage + 0.1, "{stage:?}");
 
     // Held-out frames: the first stage ranks the pieces of beds above most real tables; after the
@@ -623,7 +623,7 @@ fn the_cascade_learns_that_nightstands_stand_against_walls() {
     let training: Vec<_> = (0..40).map(|f| make(f, true)).collect();
     let (cascade, results) =
         train_cascade(&training, &categories, 0.25, CascadeTraining::default(), &[FeatureSet::V4]).unwrap();
-    let stage = results["nightstand"].chosen.as_ref().unwrap();
+    let stage = results["nightstand"].chosen().unwrap();
     assert!(stage.cv_ap_cascade > stage.cv_ap_first_stage + 0.1, "{stage:?}");
     let mut test: Vec<_> = (100..140).map(|f| make(f, true)).collect();
     let before = category_ap(&test, "nightstand");
@@ -752,7 +752,7 @@ fn the_best_feature_set_is_chosen_per_category_by_cross_validation() {
     let (best, best_results) = train(&[FeatureSet::V4, FeatureSet::V5]);
     assert_eq!(best.features, V4_FEATURES);
     for category in &categories {
-        let (a, b) = (v4_results[category].chosen.as_ref(), v5_results[category].chosen.as_ref());
+        let (a, b) = (v4_results[category].chosen(), v5_results[category].chosen());
         let expected = match (a, b) {
             (Ok(a), Ok(b)) if b.cv_ap_cascade > a.cv_ap_cascade => Some((FeatureSet::V5, b)),
             (Ok(a), _) => Some((FeatureSet::V4, a)),
@@ -762,9 +762,9 @@ fn the_best_feature_set_is_chosen_per_category_by_cross_validation() {
         let outcome = &best_results[category];
         assert_eq!(outcome.candidates.len(), 2);
         match expected {
-            None => assert!(outcome.chosen.is_err()),
+            None => assert!(outcome.chosen().is_err()),
             Some((set, stage)) => {
-                let chosen = outcome.chosen.as_ref().unwrap();
+                let chosen = outcome.chosen().unwrap();
                 assert_eq!(best.stage_feature_set(chosen), Some(set), "{category}");
                 assert_eq!(chosen.features.as_deref(), (set == FeatureSet::V5).then_some(V5_FEATURES));
                 assert_eq!(chosen.weights, stage.weights, "{category}: the stage its set alone trains");
