@@ -21,9 +21,10 @@
 #                 40 living rooms (2003) -- the first 200, listed in WORK/test-first200.txt -- and 60
 #                 bathrooms (2004), 45 bedrooms (2005), 20 offices (2006), so that every one of the ten
 #                 categories has at least 30 test boxes (bathtub and dresser 30, bookshelf 33);
-#   cascade-set  500 frames (held out: trains the context cascade): 80 of the default mix (seed 1700),
+#   cascade-set 1000 frames (held out: trains the context cascade): 80 of the default mix (seed 1700),
 #                 40 bathrooms (1701), 40 bedrooms (1702), 40 living rooms (1703), as the test set; and 120
-#                 of the default mix (1704), 60 bathrooms (1705), 60 bedrooms (1706), 60 living rooms (1707).
+#                 of the default mix (1704), 60 bathrooms (1705), 60 bedrooms (1706), 60 living rooms (1707);
+#                 then the same 500 again with seeds 1708-1715 (frames dmixed-*, dbath-*, ..., dliving2-*).
 # ANNOTATE (default visible) is synth's --annotate rule for every set: the shipped models' sets were made
 # by generator synth-1, which annotated every object with enough visible pixels, depth or not; synth's
 # default now is `depth` (only objects the sensor sees; README "Synthetic scenes"). `models` also
@@ -202,6 +203,15 @@ case "$mode" in
         synth_set "$WORK/cascade-set/bathroom-2" bathroom 60 1705 cbath2
         synth_set "$WORK/cascade-set/bedroom-2" bedroom 60 1706 cbed2
         synth_set "$WORK/cascade-set/living_room-2" living_room 60 1707 cliving2
+        # 500 more, the same mix again (README "Context cascade": the 1 000-frame set).
+        synth_set "$WORK/cascade-set/mixed-3" "$all_rooms" 80 1708 dmixed
+        synth_set "$WORK/cascade-set/bathroom-3" bathroom 40 1709 dbath
+        synth_set "$WORK/cascade-set/bedroom-3" bedroom 40 1710 dbed
+        synth_set "$WORK/cascade-set/living_room-3" living_room 40 1711 dliving
+        synth_set "$WORK/cascade-set/mixed-4" "$all_rooms" 120 1712 dmixed2
+        synth_set "$WORK/cascade-set/bathroom-4" bathroom 60 1713 dbath2
+        synth_set "$WORK/cascade-set/bedroom-4" bedroom 60 1714 dbed2
+        synth_set "$WORK/cascade-set/living_room-4" living_room 60 1715 dliving2
         started=$SECONDS
         # The marker holds the number of frames detected, so that a set that grew is detected again.
         cascade_frames=$(find "$WORK/cascade-set" -mindepth 2 -maxdepth 2 -type d | wc -l)
