@@ -56,6 +56,18 @@
 //! and `2 + 6·K + 13 + 8` for v5 ([`FeatureSet::dim`]). The room is the frame's predicted
 //! layout (its floor polygon and floor height, written by `detect` under `"layout"` when the models
 //! directory has a layout model; [`read_detections_and_room`]).
+//! Then (feature set v6, [`V6_FEATURES`], `cascade --features v6`; our addition) the **scene**:
+//!
+//! ```text
+//!   ++ for each k: s_k
+//! ```
+//!
+//! `s_k` is the largest confidence `p_j` of a detection of `k` other than `i` anywhere in the frame (0 when
+//! there is none): what kind of room the frame shows, which the overlap and the neighbourhood, both local,
+//! do not say — a toilet in a frame with a bed and a desk but no sink, a TV in a bathroom. The synthetic
+//! test set's highest-scoring false positives of the bathtub, door, lamp, sink and TV are mostly in frames
+//! without the category at all (README, "Diagnosis"). A maximum, not a sum, so that the many weak
+//! detections every model leaves in every frame do not add up to a room. `dim = V5's + K`.
 //! `D` ([`wall_context`]) is the smallest distance from a corner of the cuboid's footprint to a wall
 //! segment of the polygon, negative when the cuboid's centre lies outside the polygon; the closest wall
 //! is the segment that gives it. `A` is the angle between the cuboid's width axis and that wall, folded
@@ -75,11 +87,13 @@
 //! mean AP of the combined score; ties go to the smaller `C`. A category whose cross-validated AP with
 //! the context is not above its first stage's gets no second stage (its scores are left alone rather
 //! than made worse). **Per-category feature sets** (`cascade --features best`; our addition): each
-//! category's stage is trained with v4 and with v5 and keeps the set whose cross-validated AP is higher
-//! (ties: v4, the smaller); the same folds and the same first-stage AP for both, so the choice is made on
-//! the cascade's own held-out frames, never on a test set. The file's `features` is then v4 and a v5
-//! stage names its own set ([`SecondStage::features`]); since v4's ψ is a prefix of v5's, rescoring
-//! computes v5's ψ once and a v4 stage reads its prefix.
+//! category's stage is trained with v4, v5 and v6 and keeps the set whose cross-validated AP is highest
+//! (ties: the smaller set); the same folds and the same first-stage AP for all, so the choice is made on
+//! the cascade's own held-out frames, never on a test set. The file's `features` is then v4 and a stage of
+//! another set names its own ([`SecondStage::features`]); since each set's ψ is a prefix of the next one's,
+//! rescoring computes the widest ψ once and a stage reads its prefix. A stage's training reads only its
+//! own set, so cascades of different sets trained on the same detections can be merged afterwards with
+//! the same rule ([`Cascade::merged_with`], `cog-gpu merge-cascades`).
 //!
 //! # Prediction (paper §6.3)
 //! The second-stage score is `z'_i = w·ψ_i + b` and the combined score `z_i + z'_i`, with `z_i` the first
@@ -111,6 +125,8 @@ pub const FORMAT: &str = "cog-gpu-cascade";
 pub const VERSION: u32 = 1;
 /// Name of the feature set with the neighbourhood and geometry parts (module doc; `cascade --features v5`).
 pub const V5_FEATURES: &str = "object-overlap-layout-geometry-v5";
+/// Name of the feature set that adds the scene part to v5 (module doc; `cascade --features v6`).
+pub const V6_FEATURES: &str = "object-overlap-layout-geometry-scene-v6";
 /// The feature set without them: ψ's first part, a prefix of [`V5_FEATURES`]'s (the shipped cascade's).
 pub const V4_FEATURES: &str = "object-overlap-layout-v4";
 /// The feature set `cascade` trains by default ([`FeatureSet::DEFAULT`]): v4 until v5 has been measured
@@ -140,13 +156,16 @@ pub const NEIGHBOURHOOD_MARGIN: f32 = 0.5;
 /// Length of the geometry part of ψ: `l, l², s, s², h, h², b, b²` (module doc).
 pub const GEOMETRY_FEATURES: usize = 8;
 
-/// A cascade's feature set: which parts ψ has (module doc).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// A cascade's feature set: which parts ψ has (module doc). Each set's ψ is a prefix of the next one's,
+/// so the order is that of inclusion.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
 pub enum FeatureSet {
     /// Overlap and layout parts ([`V4_FEATURES`], and [`PREVIOUS_FEATURES`] for large categories).
     V4,
     /// Also the neighbourhood and geometry parts ([`V5_FEATURES`]).
     V5,
+    /// Also the scene part ([`V6_FEATURES`]).
+    V6,
 }
 
 impl FeatureSet {
@@ -158,6 +177,7 @@ impl FeatureSet {
         match self {
             FeatureSet::V4 => V4_FEATURES,
             FeatureSet::V5 => V5_FEATURES,
+            FeatureSet::V6 => V6_FEATURES,
         }
     }
 
@@ -165,6 +185,7 @@ impl FeatureSet {
     /// build cannot compute it.
     pub fn named(name: &str, all_large: bool) -> Option<FeatureSet> {
         match name {
+            V6_FEATURES => Some(FeatureSet::V6),
             V5_FEATURES => Some(FeatureSet::V5),
             V4_FEATURES => Some(FeatureSet::V4),
             _ if all_large && PREVIOUS_FEATURES.contains(&name) => Some(FeatureSet::V4),
@@ -172,20 +193,23 @@ impl FeatureSet {
         }
     }
 
-    /// The short name `cascade --features` takes: `v4` or `v5`.
+    /// The short name `cascade --features` takes: `v4`, `v5` or `v6`.
     pub fn short_name(self) -> &'static str {
         match self {
             FeatureSet::V4 => "v4",
             FeatureSet::V5 => "v5",
+            FeatureSet::V6 => "v6",
         }
     }
 
     /// Length of ψ for `context_categories` categories.
     pub fn dim(self, context_categories: usize) -> usize {
         let v4 = 2 + PER_CATEGORY * context_categories + LAYOUT_FEATURES;
+        let v5 = v4 + context_categories + GEOMETRY_FEATURES;
         match self {
             FeatureSet::V4 => v4,
-            FeatureSet::V5 => v4 + context_categories + GEOMETRY_FEATURES,
+            FeatureSet::V5 => v5,
+            FeatureSet::V6 => v5 + context_categories,
         }
     }
 }
@@ -390,8 +414,9 @@ impl Cascade {
                 self.format, self.version
             ));
         }
-        let unknown =
-            |name: &str| format!("feature set '{name}' is not this build's '{V5_FEATURES}' nor '{V4_FEATURES}'");
+        let unknown = |name: &str| {
+            format!("feature set '{name}' is not one of this build's '{V6_FEATURES}', '{V5_FEATURES}', '{V4_FEATURES}'")
+        };
         self.feature_set().ok_or_else(|| unknown(&self.features))?;
         for (category, stage) in &self.stages {
             let set = self
@@ -424,6 +449,51 @@ impl Cascade {
         }
     }
 
+    /// Combines `self` with `other`, a cascade trained on the same frames, detections and first-stage
+    /// models (the same [`Cascade::categories`], in order, and the same [`CascadeTraining`]) with other
+    /// feature sets: per category the stage with the higher cross-validated AP (ties: `self`'s), as
+    /// `cascade --features best` chooses among its sets. A stage's training reads only its own set, so
+    /// merging a cascade of `--features best` (v4 and v5) with one of `--features v6` gives the cascade
+    /// that the three sets together would train. The merged file names `self`'s set, and a stage taken
+    /// from `other` whose set differs names its own ([`SecondStage::features`]). Errors say what differs.
+    pub fn merged_with(&self, other: &Cascade) -> std::result::Result<Cascade, String> {
+        if self.categories != other.categories {
+            return Err(format!(
+                "the cascades have different categories ({} and {}): they were not trained on the same detections",
+                self.categories.join(","),
+                other.categories.join(",")
+            ));
+        }
+        if self.training != other.training {
+            return Err(format!(
+                "the cascades were trained on different frames, detections or models (data '{}' and '{}', \
+                 detections '{}' and '{}', {} and {} frames, IoU {} and {}, or the models' calibrations)",
+                self.training.data,
+                other.training.data,
+                self.training.detections,
+                other.training.detections,
+                self.training.frames,
+                other.training.frames,
+                self.training.iou,
+                other.training.iou
+            ));
+        }
+        let file_set = self.feature_set().ok_or_else(|| format!("unknown feature set '{}'", self.features))?;
+        let mut merged = self.clone();
+        for (category, stage) in &other.stages {
+            let set = other
+                .stage_feature_set(stage)
+                .ok_or_else(|| format!("'{category}': unknown feature set of the second cascade"))?;
+            let better = merged.stages.get(category).is_none_or(|own| stage.cv_ap_cascade > own.cv_ap_cascade);
+            if better {
+                let features = (set != file_set).then(|| set.name().to_string());
+                merged.stages.insert(category.clone(), SecondStage { features, ..stage.clone() });
+            }
+        }
+        merged.check()?;
+        Ok(merged)
+    }
+
     /// Whether every context category is large (the earlier feature sets are read only then).
     fn all_large(&self) -> bool {
         self.categories.iter().all(|c| is_large(c))
@@ -435,16 +505,14 @@ impl Cascade {
     pub fn rescore(&self, detections: &mut [Detection], room: Option<&Room>) -> Result<()> {
         check_first_stage(detections)?;
         self.check_scores(detections)?;
-        // ψ of the widest set any stage reads: v4's ψ is a prefix of v5's (module doc), so a stage's weights
-        // (as long as its own set's ψ) take their prefix of it.
+        // ψ of the widest set any stage reads: each set's ψ is a prefix of the next one's (module doc), so
+        // a stage's weights (as long as its own set's ψ) take their prefix of it.
         let mut widest = FeatureSet::V4;
         for stage in self.stages.values() {
             let set = self.stage_feature_set(stage).ok_or_else(|| {
                 Error::Input(format!("unknown feature set '{}'", stage.features.as_deref().unwrap_or(&self.features)))
             })?;
-            if set == FeatureSet::V5 {
-                widest = FeatureSet::V5;
-            }
+            widest = widest.max(set);
         }
         let features = frame_context_features(detections, &self.categories, room, widest);
         let rescored: Vec<Option<(f32, f32)>> = (0..detections.len())
@@ -555,14 +623,33 @@ fn context_features(
             }
         }
     }
-    if set == FeatureSet::V5 {
+    if set >= FeatureSet::V5 {
         let neighbourhood = layout + LAYOUT_FEATURES;
         psi[neighbourhood..neighbourhood + categories.len()]
             .copy_from_slice(&neighbourhood_confidences(detections, boxes, i, categories));
         let geometry = neighbourhood + categories.len();
         psi[geometry..geometry + GEOMETRY_FEATURES].copy_from_slice(&geometry_features(&own, room));
     }
+    if set >= FeatureSet::V6 {
+        let scene = FeatureSet::V5.dim(categories.len());
+        psi[scene..scene + categories.len()].copy_from_slice(&scene_confidences(detections, i, categories));
+    }
     psi
+}
+
+/// For each context category `k`, `s_k`: the largest confidence of a detection of `k` other than `i`
+/// anywhere in the frame, 0 when there is none (the scene part, module doc).
+fn scene_confidences(detections: &[Detection], i: usize, categories: &[String]) -> Vec<f64> {
+    let mut maxima = vec![0.0f64; categories.len()];
+    for (j, detection) in detections.iter().enumerate() {
+        if j == i {
+            continue;
+        }
+        if let Some(k) = categories.iter().position(|c| c == &detection.category) {
+            maxima[k] = maxima[k].max(f64::from(detection.score));
+        }
+    }
+    maxima
 }
 
 /// For each context category `k`, `n_k`: the sum of the confidences of the detections of `k` other than

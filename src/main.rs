@@ -38,6 +38,8 @@ enum Command {
     Cascade(cli::cascade::Args),
     /// Apply a context cascade to first-stage detections files without detecting again.
     Rescore(cli::rescore::Args),
+    /// Combine cascades trained with different feature sets: per category the best cross-validated stage.
+    MergeCascades(cli::merge_cascades::Args),
     /// Train one category's detector (structural SVM) on annotated frames and write a model file.
     Train(cli::train::Args),
     /// Room layout of frames: a Manhattan cuboid per frame (JSON, overlay picture, optional PLY).
@@ -80,6 +82,7 @@ fn main() {
         Command::Calibrate(args) => cli::calibrate::run(args, &options),
         Command::Cascade(args) => cli::cascade::run(args, &options),
         Command::Rescore(args) => cli::rescore::run(args, &options),
+        Command::MergeCascades(args) => cli::merge_cascades::run(args, &options),
         Command::Layout(args) => cli::layout::run(args, &options),
         Command::TrainLayout(args) => cli::train_layout::run(args, &options),
     };

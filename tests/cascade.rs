@@ -9,7 +9,7 @@ mod common;
 use cog_gpu::cascade::{
     feature_dim, frame_context_features, train_cascade, wall_context, Cascade, CascadeFrame, CascadeTraining,
     FeatureSet, Room, FEATURES, GEOMETRY_FEATURES, LAYOUT_FEATURES, NEIGHBOURHOOD_MARGIN, PREVIOUS_FEATURES,
-    RBF_CENTRES, RBF_WIDTHS, V4_FEATURES, V5_FEATURES,
+    RBF_CENTRES, RBF_WIDTHS, V4_FEATURES, V5_FEATURES, V6_FEATURES,
 };
 use cog_gpu::eval::{average_precision, Detection, FrameDetections, ScoredBox};
 use cog_gpu::frame::Object;
@@ -456,6 +456,38 @@ fn cli_trains_a_cascade_and_rescores_files() {
     let set = best.stage_feature_set(table).unwrap();
     let row = best_text.lines().find(|l| l.starts_with("table")).unwrap();
     assert_eq!(row.split_whitespace().nth(1), Some(set.short_name()), "{best_text}");
+    assert!(best_text.lines().next().is_some_and(|h| h.contains("CV AP v6")), "{best_text}");
+    // `merge-cascades` of the three sets trained one at a time gives the cascade `best` trains.
+    let one_set = |set: &str| {
+        let file = tmp.path().join(format!("{set}.json"));
+        let mut args = args.clone();
+        let n = args.len();
+        args[n - 3] = file.to_str().unwrap().to_string();
+        args[n - 1] = set.to_string();
+        let out = Command::new(env!("CARGO_BIN_EXE_cog-gpu")).args(&args).output().unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        file.to_str().unwrap().to_string()
+    };
+    let (v4_file, v5_file, v6_file) = (one_set("v4"), one_set("v5"), one_set("v6"));
+    let merged_file = tmp.path().join("merged.json");
+    let merged_path = merged_file.to_str().unwrap();
+    let out = run(&["merge-cascades", &v4_file, &v5_file, &v6_file, "--out", merged_path]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(Cascade::read(&merged_file).unwrap(), best);
+    let merge_text = String::from_utf8_lossy(&out.stdout);
+    assert!(merge_text.lines().any(|l| l.starts_with("table") && l.contains(".json")), "{merge_text}");
+    // A cascade of other frames: refused, both files named.
+    let mut other = Cascade::read(std::path::Path::new(&v6_file)).unwrap();
+    other.training.frames += 1;
+    let other_file = tmp.path().join("other.json");
+    other.write(&other_file).unwrap();
+    let out = run(&["merge-cascades", &v4_file, other_file.to_str().unwrap(), "--out", merged_path]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("other.json") && err.contains("v4.json") && err.contains("different frames"), "{err}");
+    // The output may not overwrite an input.
+    let out = run(&["merge-cascades", &v4_file, &v6_file, "--out", &v6_file]);
+    assert!(!out.status.success() && String::from_utf8_lossy(&out.stderr).contains("--out"));
 
     let cascade = Cascade::read(&cascade_file).unwrap();
     assert_eq!(cascade.categories, names(&["bed", "table"]));
@@ -700,8 +732,88 @@ fn the_v5_cascade_learns_a_tables_proportions() {
     assert!(v4 < 0.9, "v4 AP {v4}");
 }
 
-/// v4's ψ is a prefix of v5's, detection by detection, with and without a room (what a cascade with stages
-/// of both sets relies on when it computes v5's ψ once).
+/// The scene part of ψ (v6) against a hand computation: per context category the largest confidence of
+/// its detections anywhere in the frame (near or far, overlapping or not), the detection itself left out,
+/// 0 for a category without a detection.
+#[test]
+fn scene_features_match_a_hand_computation() {
+    let detections = vec![
+        detection("toilet", [0.0, 0.0, 0.4], [0.4, 0.7, 0.8], 0.6, 0.0),
+        // A sink 3 m away (no overlap, no neighbour) and a weaker one on the toilet.
+        detection("sink", [3.0, 0.0, 0.85], [0.5, 0.4, 0.2], 0.7, 0.0),
+        detection("sink", [0.0, 0.0, 0.5], [0.5, 0.4, 0.2], 0.2, 0.0),
+        // Two more toilets: the stronger one far away.
+        detection("toilet", [0.0, 4.0, 0.4], [0.4, 0.7, 0.8], 0.9, 0.0),
+        detection("toilet", [0.5, 0.0, 0.4], [0.4, 0.7, 0.8], 0.3, 0.0),
+    ];
+    let categories = names(&["bed", "sink", "toilet"]);
+    let psi = frame_context_features(&detections, &categories, None, FeatureSet::V6);
+    let scene = FeatureSet::V5.dim(3);
+    assert_eq!(psi[0].len(), scene + 3);
+    assert_eq!(FeatureSet::V6.dim(3), scene + 3);
+    // The first toilet: no bed; sinks 0.7 (the far one); other toilets 0.9.
+    assert_close(&psi[0][scene..], &[0.0, 0.7, 0.9], "toilet 0");
+    // The strongest toilet sees the best of the others, 0.6; the far sink sees the near one, 0.2.
+    assert_close(&psi[3][scene..], &[0.0, 0.7, 0.6], "toilet 3");
+    assert_close(&psi[1][scene..], &[0.0, 0.2, 0.9], "sink 1");
+}
+
+/// A frame of the scene test: one toilet detection (true when `truth_here`) and, 3 m away, a sink (with a
+/// true toilet) or a bed (with a false one). True and false toilets draw their raw scores from one
+/// distribution, so no function of the score alone can rank them.
+fn toilet_frame(f: usize, truth_here: bool) -> CascadeFrame {
+    let toilet_at = [1.0 + 0.1 * (f % 5) as f32, 1.0, 0.4];
+    let toilet_size = [0.4, 0.7, 0.8];
+    let sigmoid = |s: f32| 1.0 / (1.0 + (-s).exp());
+    let raw = 1.0 + 0.5 * (f as f32 * 1.3).sin();
+    let context = if truth_here { "sink" } else { "bed" };
+    let p_context = 0.6 + 0.3 * (f as f32 * 0.7).sin().abs();
+    let truth = if truth_here {
+        vec![Object {
+            category: "toilet".into(),
+            label: None,
+            cuboid: Cuboid::new(Vec3::from(toilet_at), Vec3::from(toilet_size), 0.0),
+        }]
+    } else {
+        vec![]
+    };
+    let detections = vec![
+        detection("toilet", toilet_at, toilet_size, sigmoid(raw), raw),
+        detection(context, [4.5, 3.5, 0.5], [0.6, 0.5, 0.3], p_context, 0.0),
+    ];
+    CascadeFrame { truth, detections, room: None }
+}
+
+/// A constructed set where only the scene tells true from false: a true toilet shares its frame with a
+/// sink detected 3 m away, a false one (scored like the true ones by the first stage) with a bed as far away; nothing
+/// overlaps or neighbours the toilet, and every toilet has the same box. The v6 cascade (scene part) ranks
+/// every true toilet first on held-out frames; v5 cannot.
+#[test]
+fn the_v6_cascade_learns_which_rooms_hold_toilets() {
+    // Not every other frame: the cross-validation folds are the even and the odd frames.
+    let make = |f: usize| toilet_frame(f, f % 4 < 2);
+    let categories = names(&["bed", "sink", "toilet"]);
+    let training: Vec<_> = (0..40).map(make).collect();
+    let before = category_ap(&(100..140).map(make).collect::<Vec<_>>(), "toilet");
+    assert!(before < 0.8, "first-stage AP {before}");
+    let ap_with = |set: FeatureSet| {
+        // Beds and sinks have no true positive here, so no stage; they are context.
+        let (cascade, _) = train_cascade(&training, &categories, 0.25, CascadeTraining::default(), &[set]).unwrap();
+        assert_eq!(cascade.stages.keys().collect::<Vec<_>>(), ["toilet"]);
+        let mut test: Vec<_> = (100..140).map(make).collect();
+        for frame in &mut test {
+            cascade.rescore(&mut frame.detections, None).unwrap();
+        }
+        category_ap(&test, "toilet")
+    };
+    let v6 = ap_with(FeatureSet::V6);
+    assert!((v6 - 1.0).abs() < 1e-6, "v6 AP {v6}");
+    let v5 = ap_with(FeatureSet::V5);
+    assert!(v5 < 0.9, "v5 AP {v5}");
+}
+
+/// Each set's ψ is a prefix of the next one's (v4 of v5, v5 of v6), detection by detection, with and
+/// without a room (what a cascade with stages of several sets relies on when it computes the widest ψ once).
 #[test]
 fn v4_features_are_a_prefix_of_v5_features() {
     let room = Room {
@@ -718,6 +830,11 @@ fn v4_features_are_a_prefix_of_v5_features() {
             assert_eq!(a.len(), FeatureSet::V4.dim(3));
             assert_eq!(b.len(), FeatureSet::V5.dim(3));
             assert_eq!(a[..], b[..a.len()]);
+        }
+        let v6 = frame_context_features(&detections, &categories, room, FeatureSet::V6);
+        for (b, c) in v5.iter().zip(&v6) {
+            assert_eq!(c.len(), FeatureSet::V6.dim(3));
+            assert_eq!(b[..], c[..b.len()]);
         }
     }
 }
@@ -805,4 +922,67 @@ fn the_best_feature_set_is_chosen_per_category_by_cross_validation() {
     broken.write(&path).unwrap();
     let err = Cascade::read(&path).unwrap_err().to_string();
     assert!(err.contains("cascade.json") && err.contains("'table'") && err.contains("object-overlap-v9"), "{err}");
+}
+
+/// Merging a cascade of v4 and v5 (`--features best` before v6) with one of v6 gives exactly the cascade
+/// the three sets train together: per category the stage of the highest cross-validated AP, ties to the
+/// earlier set. Three kinds of frames make each set win somewhere: nightstands told by the wall (v4),
+/// tables by their proportions (v5), toilets by the scene (v6). Cascades of other frames or categories
+/// are refused.
+#[test]
+fn merging_cascades_of_different_sets_equals_training_them_together() {
+    let room = vec![Vec2::new(0.0, 0.0), Vec2::new(5.0, 0.0), Vec2::new(5.0, 4.0), Vec2::new(0.0, 4.0)];
+    let make = |f: usize| -> CascadeFrame {
+        let room = Some(Room { corners: room.clone(), floor: 0.0 });
+        match f % 3 {
+            0 => {
+                let size = [0.5, 0.4, 0.6];
+                let wall = ([0.3 + 0.1 * (f % 7) as f32, 0.25, 0.3], size);
+                let middle = ([2.5, 2.0 + 0.1 * (f % 5) as f32, 0.3], size);
+                true_and_false_frame("nightstand", wall, middle, f, room)
+            }
+            1 => {
+                let true_table = ([1.0 + 0.1 * (f % 5) as f32, 1.0, 0.375], [1.2, 1.0, 0.75]);
+                let false_table = ([4.0, 3.0 + 0.1 * (f % 3) as f32, 0.375], [1.2, 0.6, 0.75]);
+                true_and_false_frame("table", true_table, false_table, f, room)
+            }
+            // f = 2, 5, 8, 11, ...: f / 6 alternates within the even and within the odd frames.
+            _ => toilet_frame(f, (f / 6) % 2 == 0),
+        }
+    };
+    let categories = names(&["bed", "nightstand", "sink", "table", "toilet"]);
+    let training: Vec<_> = (0..90).map(make).collect();
+    let train =
+        |sets: &[FeatureSet]| train_cascade(&training, &categories, 0.25, CascadeTraining::default(), sets).unwrap().0;
+    let v4_v5 = train(&[FeatureSet::V4, FeatureSet::V5]);
+    let v6 = train(&[FeatureSet::V6]);
+    let together = train(&[FeatureSet::V4, FeatureSet::V5, FeatureSet::V6]);
+    let merged = v4_v5.merged_with(&v6).unwrap();
+    assert_eq!(merged, together);
+    assert_eq!(
+        together.stage_feature_set(&together.stages["toilet"]),
+        Some(FeatureSet::V6),
+        "the toilet needs the scene: {:?}",
+        together.stages.get("toilet").map(|s| s.cv_ap_cascade)
+    );
+    assert!(together.stages.values().any(|s| together.stage_feature_set(s) != Some(FeatureSet::V6)));
+    // The merged file names v4 and each stage of another set its own.
+    assert_eq!(merged.features, V4_FEATURES);
+    assert_eq!(merged.stages["toilet"].features.as_deref(), Some(V6_FEATURES));
+    // Other frames (their number) or other categories: refused, saying what differs.
+    let fewer = train_cascade(
+        &training[..60],
+        &categories,
+        0.25,
+        CascadeTraining { frames: 60, ..Default::default() },
+        &[FeatureSet::V6],
+    )
+    .unwrap()
+    .0;
+    let err = v4_v5.merged_with(&fewer).unwrap_err();
+    assert!(err.contains("different frames") && err.contains("60"), "{err}");
+    let mut other_categories = v6.clone();
+    other_categories.categories.pop();
+    let err = v4_v5.merged_with(&other_categories).unwrap_err();
+    assert!(err.contains("different categories"), "{err}");
 }

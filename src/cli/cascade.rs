@@ -1,5 +1,5 @@
 //! `cog-gpu cascade --data DIR --detections DIR [--models assets/models] [--out FILE] [--iou 0.25]
-//! [--categories a,b,...] [--features v4|v5]`: trains the context cascade ([`cog_gpu::cascade`]) on the first-stage detections
+//! [--categories a,b,...] [--features v4|v5|v6|best]`: trains the context cascade ([`cog_gpu::cascade`]) on the first-stage detections
 //! of held-out frames and writes it as `<models>/cascade.json`, which `detect` then applies.
 //!
 //! The detections are those of `cog-gpu detect --no-cascade --min-score -3` with the calibrated models the
@@ -26,8 +26,9 @@ pub struct Args {
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// The feature set: v4 (the paper's overlap and layout features), v5 (also each detection's
-    /// neighbourhood and its box's geometry) or best (per category the one of the two with the higher
-    /// cross-validated AP on these frames; trains both); README, "Context cascade".
+    /// neighbourhood and its box's geometry), v6 (also the scene: each category's best detection in the
+    /// frame) or best (per category the one of the three with the highest cross-validated AP on these
+    /// frames; trains all three); README, "Context cascade".
     #[arg(long, value_enum, default_value = "v4")]
     pub features: FeaturesArg,
 }
@@ -37,6 +38,7 @@ pub struct Args {
 pub enum FeaturesArg {
     V4,
     V5,
+    V6,
     Best,
 }
 
@@ -46,7 +48,8 @@ impl FeaturesArg {
         match self {
             FeaturesArg::V4 => vec![FeatureSet::V4],
             FeaturesArg::V5 => vec![FeatureSet::V5],
-            FeaturesArg::Best => vec![FeatureSet::V4, FeatureSet::V5],
+            FeaturesArg::V6 => vec![FeatureSet::V6],
+            FeaturesArg::Best => vec![FeatureSet::V4, FeatureSet::V5, FeatureSet::V6],
         }
     }
 }

@@ -10,6 +10,7 @@ pub mod eval_layout;
 pub mod in_flight;
 pub mod info;
 pub mod layout;
+pub mod merge_cascades;
 pub mod options;
 pub mod rescore;
 pub mod score;
