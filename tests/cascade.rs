@@ -947,7 +947,7 @@ fn merging_cascades_of_different_sets_equals_training_them_together() {
                 true_and_false_frame("table", true_table, false_table, f, room)
             }
             // f = 2, 5, 8, 11, ...: f / 6 alternates within the even and within the odd frames.
-            _ => toilet_frame(f, (f / 6) % 2 == 0),
+            _ => toilet_frame(f, (f / 6).is_multiple_of(2)),
         }
     };
     let categories = names(&["bed", "nightstand", "sink", "table", "toilet"]);

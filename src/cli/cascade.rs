@@ -117,7 +117,8 @@ fn print_stages(cascade: &Cascade, results: &BTreeMap<String, StageOutcome>, set
     }
     println!("{header}");
     for (category, outcome) in results {
-        let mut line = match outcome.chosen() {
+        let chosen = outcome.chosen();
+        let mut line = match &chosen {
             Ok(stage) => format!(
                 "{:<12} {:>8} {:>10} {:>6} {:>7} {:>12.1} {:>13.1}",
                 category,
@@ -130,7 +131,7 @@ fn print_stages(cascade: &Cascade, results: &BTreeMap<String, StageOutcome>, set
             ),
             Err(reason) => format!("{category:<12} no second stage (keeps its first-stage scores): {reason}"),
         };
-        if several && outcome.chosen().is_ok() {
+        if several && chosen.is_ok() {
             for (_, result) in &outcome.candidates {
                 match result {
                     Ok(stage) => line.push_str(&format!(" {:>12.1}", 100.0 * stage.cv_ap_cascade)),
