@@ -531,6 +531,11 @@ fn cli_trains_a_cascade_and_rescores_files() {
     assert!(tables.iter().all(|d| d.context_score.is_some() && d.first_stage_score.is_some()));
     // The real table (x = 4) now outranks the piece of the bed.
     assert!(tables[0].centre[0] > 3.0, "{tables:?}");
+    // Numbers are written as `detect` writes them: each f32 in its shortest form, not widened to f64.
+    let score = tables[0].score;
+    let text = std::fs::read_to_string(rescored.join("f03.json")).unwrap();
+    let written = [",", "\n"].iter().any(|end| text.contains(&format!("\"score\": {score}{end}")));
+    assert!(written, "{score} not written as {score}: {text}");
 
     // Files whose scores another calibration made (a bed at 0.5 for raw 2) are refused, the file named.
     let other = tmp.path().join("other-model");
