@@ -181,7 +181,8 @@ case "$mode" in
     cascade)
         # The context cascade (paper section 6) over the 19 models of `models` and `small` (run those
         # first): first-stage detections of the cascade set, the cascade trained on them (`--features best`:
-        # per category the best of v4, v5 and v6 by cross-validation; about 2 h of the 2-core machine)
+        # per category the best of v4, v5 and v6 by cross-validation; about 2 h of the 2-core machine;
+        # interrupted, a rerun resumes from the stage checkpoints in WORK/small/cascade.json.stages)
         # (WORK/small/cascade.json; copy it to assets/models/ to ship it), the test set's first-stage
         # detections of the 19 (from `small`) rescored, and both evaluated.
         dir="$WORK/small"

@@ -116,6 +116,7 @@ use crate::eval::{average_precision, true_positives_in_input_order, Detection, F
 use crate::frame::Object;
 use crate::geometry::{footprint_overlap_area, intersection_volume, polygon_contains, Cuboid};
 use crate::learn::binary_svm::{balanced_costs, train_linear_svm, LinearSvm};
+use crate::learn::checkpoint::{fnv1a, FNV_OFFSET};
 use crate::model::Model;
 use glam::{Vec2, Vec3};
 
@@ -827,26 +828,67 @@ pub fn train_cascade(
     training: CascadeTraining,
     sets: &[FeatureSet],
 ) -> Result<(Cascade, BTreeMap<String, StageOutcome>)> {
+    train_cascade_resumable(frames, categories, iou_threshold, training, sets, None).map(|(c, r, _)| (c, r))
+}
+
+/// [`train_cascade`] with checkpoints: with `checkpoints` (a directory, created when missing), each
+/// (category, feature set) training writes its outcome there as soon as it is done
+/// ([`stage_checkpoint_path`]), and one whose checkpoint is already there — for the same categories,
+/// IoU, feature set and first-stage detections and ground truth ([`frames_fingerprint`]) — is read
+/// instead of trained again, so an interrupted run resumes where it stopped with the same result. A
+/// checkpoint of other inputs is trained over (and replaced). Also returns how many outcomes were read.
+pub fn train_cascade_resumable(
+    frames: &[CascadeFrame],
+    categories: &[String],
+    iou_threshold: f32,
+    training: CascadeTraining,
+    sets: &[FeatureSet],
+    checkpoints: Option<&Path>,
+) -> Result<(Cascade, BTreeMap<String, StageOutcome>, usize)> {
     let Some(&file_set) = sets.first() else {
         return Err(Error::Input("the cascade needs at least one feature set to train with".to_string()));
     };
     for frame in frames {
         check_first_stage(&frame.detections)?;
     }
+    if let Some(dir) = checkpoints {
+        std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    }
+    let fingerprint = format!("{:016x}", frames_fingerprint(frames));
     // Progress: a category's stage takes minutes with ~10 000 detections (the SVM's QP solves).
     let finished = std::sync::atomic::AtomicUsize::new(0);
+    let resumed = std::sync::atomic::AtomicUsize::new(0);
     let results: Vec<(String, StageOutcome)> = categories
         .par_iter()
-        .map(|category| {
-            let candidates: Vec<(FeatureSet, StageResult)> = sets
-                .iter()
-                .map(|&set| (set, train_stage(frames, category, categories, iou_threshold, set, file_set)))
-                .collect();
+        .map(|category| -> Result<(String, StageOutcome)> {
+            let mut candidates: Vec<(FeatureSet, StageResult)> = Vec::with_capacity(sets.len());
+            for &set in sets {
+                let key = StageKey { category, set, categories, iou: iou_threshold, fingerprint: &fingerprint };
+                let stored = checkpoints.and_then(|dir| key.read(dir));
+                let result = match stored {
+                    Some(result) => {
+                        resumed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        result
+                    }
+                    None => {
+                        let result = train_stage(frames, category, categories, iou_threshold, set, file_set);
+                        if let Some(dir) = checkpoints {
+                            key.write(dir, &result)?;
+                        }
+                        result
+                    }
+                };
+                // The stage names its own set when it is not the file's (a checkpoint may come from a run
+                // whose file set was another).
+                let result = result
+                    .map(|stage| SecondStage { features: (set != file_set).then(|| set.name().to_string()), ..stage });
+                candidates.push((set, result));
+            }
             let done = finished.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
             log::info!("cascade: '{category}' done ({done} of {})", categories.len());
-            (category.clone(), StageOutcome { candidates })
+            Ok((category.clone(), StageOutcome { candidates }))
         })
-        .collect();
+        .collect::<Result<_>>()?;
     let stages = results.iter().filter_map(|(c, r)| r.chosen().ok().map(|s| (c.clone(), s.clone()))).collect();
     let cascade = Cascade {
         format: FORMAT.into(),
@@ -856,7 +898,137 @@ pub fn train_cascade(
         stages,
         training,
     };
-    Ok((cascade, results.into_iter().collect()))
+    Ok((cascade, results.into_iter().collect(), resumed.into_inner()))
+}
+
+/// The `format` of a stage checkpoint file ([`train_cascade_resumable`]).
+pub const STAGE_CHECKPOINT_FORMAT: &str = "cog-gpu-cascade-stage";
+
+/// Where [`train_cascade_resumable`] keeps the outcome of `category`'s training with `set` inside the
+/// checkpoint directory `dir`: `<category>.<set's short name>.json`.
+pub fn stage_checkpoint_path(dir: &Path, category: &str, set: FeatureSet) -> std::path::PathBuf {
+    dir.join(format!("{category}.{}.json", set.short_name()))
+}
+
+/// A 64-bit FNV-1a fingerprint of a cascade's training inputs: every frame's ground truth (categories and
+/// boxes), first-stage detections (categories, boxes, scores, raw scores) and room, in order, as raw bits.
+/// Two runs on the same detections files give the same fingerprint; a re-detection that changes any score
+/// or box changes it (up to hash collisions), so a checkpoint of other detections is not resumed.
+pub fn frames_fingerprint(frames: &[CascadeFrame]) -> u64 {
+    let floats = |hash: u64, values: &[f32]| values.iter().fold(hash, |h, v| fnv1a(h, &v.to_bits().to_le_bytes()));
+    let text = |hash: u64, value: &str| fnv1a(fnv1a(hash, &(value.len() as u64).to_le_bytes()), value.as_bytes());
+    let mut hash = fnv1a(FNV_OFFSET, &(frames.len() as u64).to_le_bytes());
+    for frame in frames {
+        hash = fnv1a(hash, &(frame.truth.len() as u64).to_le_bytes());
+        for object in &frame.truth {
+            let c = object.cuboid;
+            hash = floats(
+                text(hash, &object.category),
+                &[c.centre.x, c.centre.y, c.centre.z, c.size.x, c.size.y, c.size.z, c.yaw],
+            );
+        }
+        hash = fnv1a(hash, &(frame.detections.len() as u64).to_le_bytes());
+        for d in &frame.detections {
+            hash = floats(text(hash, &d.category), &d.centre);
+            hash = floats(hash, &d.size);
+            hash = floats(hash, &[d.yaw, d.score, d.raw_score.unwrap_or(f32::NAN)]);
+        }
+        match &frame.room {
+            None => hash = fnv1a(hash, &[0]),
+            Some(room) => {
+                hash = fnv1a(hash, &[1]);
+                hash = floats(hash, &[room.floor]);
+                for corner in &room.corners {
+                    hash = floats(hash, &[corner.x, corner.y]);
+                }
+            }
+        }
+    }
+    hash
+}
+
+/// What a stage checkpoint must match to be resumed ([`train_cascade_resumable`]).
+struct StageKey<'a> {
+    category: &'a str,
+    set: FeatureSet,
+    categories: &'a [String],
+    iou: f32,
+    fingerprint: &'a str,
+}
+
+/// A stage checkpoint file: the outcome of one (category, feature set) training and what it was trained on.
+#[derive(Serialize, Deserialize)]
+struct StageCheckpoint {
+    format: String,
+    version: u32,
+    category: String,
+    features: String,
+    categories: Vec<String>,
+    iou: f32,
+    /// [`frames_fingerprint`] in hexadecimal (JSON numbers do not hold 64 bits).
+    inputs: String,
+    /// The stage, or why there is none.
+    stage: Option<SecondStage>,
+    no_stage: Option<String>,
+}
+
+impl StageKey<'_> {
+    /// The stored outcome when the checkpoint exists, reads and matches; `None` (train it) otherwise,
+    /// with a warning naming the file when one is there but unusable.
+    fn read(&self, dir: &Path) -> Option<StageResult> {
+        let path = stage_checkpoint_path(dir, self.category, self.set);
+        let text = std::fs::read_to_string(&path).ok()?;
+        let stored: StageCheckpoint = match serde_json::from_str(&text) {
+            Ok(stored) => stored,
+            Err(e) => {
+                log::warn!("{}: not a stage checkpoint ({e}); training the stage again", path.display());
+                return None;
+            }
+        };
+        let same = stored.format == STAGE_CHECKPOINT_FORMAT
+            && stored.version == VERSION
+            && stored.category == self.category
+            && stored.features == self.set.name()
+            && stored.categories == self.categories
+            && stored.iou == self.iou
+            && stored.inputs == self.fingerprint;
+        if !same {
+            log::warn!(
+                "{}: a checkpoint of other detections, categories, IoU or feature set; training the stage again",
+                path.display()
+            );
+            return None;
+        }
+        match (stored.stage, stored.no_stage) {
+            (Some(stage), None) if stage.weights.len() == self.set.dim(self.categories.len()) => Some(Ok(stage)),
+            (None, Some(reason)) => Some(Err(reason)),
+            _ => {
+                log::warn!("{}: an inconsistent stage checkpoint; training the stage again", path.display());
+                None
+            }
+        }
+    }
+
+    /// Writes `result` as the checkpoint (to a temporary file renamed over it: an interruption mid-write
+    /// leaves no half-written checkpoint).
+    fn write(&self, dir: &Path, result: &StageResult) -> Result<()> {
+        let path = stage_checkpoint_path(dir, self.category, self.set);
+        let checkpoint = StageCheckpoint {
+            format: STAGE_CHECKPOINT_FORMAT.to_string(),
+            version: VERSION,
+            category: self.category.to_string(),
+            features: self.set.name().to_string(),
+            categories: self.categories.to_vec(),
+            iou: self.iou,
+            inputs: self.fingerprint.to_string(),
+            stage: result.as_ref().ok().cloned(),
+            no_stage: result.as_ref().err().cloned(),
+        };
+        let text = serde_json::to_string(&checkpoint).map_err(|e| Error::invalid(&path, e.to_string()))?;
+        let partial = path.with_extension("json.tmp");
+        std::fs::write(&partial, text).map_err(|e| Error::io(&partial, e))?;
+        std::fs::rename(&partial, &path).map_err(|e| Error::io(&path, e))
+    }
 }
 
 /// One category's stage (module doc): C by cross-validation, then the SVM and calibration on all frames.

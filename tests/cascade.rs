@@ -7,9 +7,9 @@ use std::process::Command;
 mod common;
 
 use cog_gpu::cascade::{
-    feature_dim, frame_context_features, train_cascade, wall_context, Cascade, CascadeFrame, CascadeTraining,
-    FeatureSet, Room, FEATURES, GEOMETRY_FEATURES, LAYOUT_FEATURES, NEIGHBOURHOOD_MARGIN, PREVIOUS_FEATURES,
-    RBF_CENTRES, RBF_WIDTHS, V4_FEATURES, V5_FEATURES, V6_FEATURES,
+    feature_dim, frame_context_features, stage_checkpoint_path, train_cascade, train_cascade_resumable, wall_context,
+    Cascade, CascadeFrame, CascadeTraining, FeatureSet, Room, FEATURES, GEOMETRY_FEATURES, LAYOUT_FEATURES,
+    NEIGHBOURHOOD_MARGIN, PREVIOUS_FEATURES, RBF_CENTRES, RBF_WIDTHS, V4_FEATURES, V5_FEATURES, V6_FEATURES,
 };
 use cog_gpu::eval::{average_precision, Detection, FrameDetections, ScoredBox};
 use cog_gpu::frame::Object;
@@ -440,6 +440,10 @@ fn cli_trains_a_cascade_and_rescores_files() {
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.lines().any(|l| l.starts_with("bed") && l.contains("no second stage")), "{text}");
     assert!(text.contains("wrote the cascade (1 of 2 categories)"), "{text}");
+    // Its stage checkpoints (default `<out>.stages`) are gone once the cascade is written.
+    let mut stages_dir = cascade_file.clone().into_os_string();
+    stages_dir.push(".stages");
+    assert!(!std::path::Path::new(&stages_dir).exists());
     // `--features best` trains both sets and reports each one's cross-validated AP beside the choice.
     let best_file = tmp.path().join("best.json");
     let mut args: Vec<String> = ["cascade", "--data", data.to_str().unwrap(), "--detections", first.to_str().unwrap()]
@@ -457,6 +461,18 @@ fn cli_trains_a_cascade_and_rescores_files() {
     let row = best_text.lines().find(|l| l.starts_with("table")).unwrap();
     assert_eq!(row.split_whitespace().nth(1), Some(set.short_name()), "{best_text}");
     assert!(best_text.lines().next().is_some_and(|h| h.contains("CV AP v6")), "{best_text}");
+    // With kept checkpoints, a rerun reads every stage's outcome and writes the same cascade.
+    let kept = tmp.path().join("kept-stages");
+    let mut resumable = args.clone();
+    resumable.extend(["--checkpoints".to_string(), kept.to_str().unwrap().to_string(), "--keep-checkpoints".into()]);
+    for round in 0..2 {
+        let out = Command::new(env!("CARGO_BIN_EXE_cog-gpu")).args(&resumable).output().unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert_eq!(text.contains("resumed"), round == 1, "{text}");
+        assert_eq!(Cascade::read(&best_file).unwrap(), best, "round {round}");
+    }
+    assert!(kept.join("table.v6.json").is_file());
     // `merge-cascades` of the three sets trained one at a time gives the cascade `best` trains.
     let one_set = |set: &str| {
         let file = tmp.path().join(format!("{set}.json"));
@@ -990,4 +1006,53 @@ fn merging_cascades_of_different_sets_equals_training_them_together() {
     other_categories.categories.pop();
     let err = v4_v5.merged_with(&other_categories).unwrap_err();
     assert!(err.contains("different categories"), "{err}");
+}
+
+/// An interrupted cascade training resumes from its stage checkpoints: a second run reads every
+/// (category, set) outcome instead of training it (a checkpoint altered on disk comes back as altered)
+/// and gives the same cascade; a run on other detections, or a checkpoint that does not parse, trains
+/// again; a checkpoint read by a run with another file set names its own set.
+#[test]
+fn cascade_training_resumes_from_its_stage_checkpoints() {
+    let frames: Vec<_> = (0..20).map(frame).collect();
+    let categories = names(&["bed", "table"]);
+    let sets = [FeatureSet::V4, FeatureSet::V5];
+    let dir = tempfile::tempdir().unwrap();
+    let run = |frames: &[CascadeFrame], sets: &[FeatureSet]| {
+        train_cascade_resumable(frames, &categories, 0.25, CascadeTraining::default(), sets, Some(dir.path())).unwrap()
+    };
+    let (fresh, _, resumed) = run(&frames, &sets);
+    assert_eq!(resumed, 0);
+    assert_eq!(fresh, train_cascade(&frames, &categories, 0.25, CascadeTraining::default(), &sets).unwrap().0);
+    for category in &categories {
+        for set in sets {
+            assert!(stage_checkpoint_path(dir.path(), category, set).is_file(), "{category} {set:?}");
+        }
+    }
+    let (again, _, resumed) = run(&frames, &sets);
+    assert_eq!((resumed, &again), (4, &fresh));
+    // The table's v5 checkpoint altered: the resumed run reads it (and keeps it: its CV AP is now best).
+    let path = stage_checkpoint_path(dir.path(), "table", FeatureSet::V5);
+    let mut stored: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    stored["stage"]["cv_ap_cascade"] = serde_json::json!(2.0);
+    stored["stage"]["bias"] = serde_json::json!(-123.0);
+    std::fs::write(&path, stored.to_string()).unwrap();
+    let (altered, _, resumed) = run(&frames, &sets);
+    assert_eq!(resumed, 4);
+    assert_eq!((altered.stages["table"].bias, altered.stages["table"].cv_ap_cascade), (-123.0, 2.0));
+    assert_eq!(altered.stages["table"].features.as_deref(), Some(V5_FEATURES));
+    // Read by a run whose file set is v5, the same checkpoint's stage names no set of its own.
+    let (v5_only, _, resumed) = run(&frames, &[FeatureSet::V5]);
+    assert_eq!((resumed, v5_only.stages["table"].bias, v5_only.stages["table"].features.clone()), (2, -123.0, None));
+    // Other detections (one score changed): nothing is resumed, the result is a fresh training's.
+    let mut other = frames.clone();
+    other[3].detections[1].raw_score = Some(0.1);
+    other[3].detections[1].score = 1.0 / (1.0 + (-0.1f32).exp());
+    let (retrained, _, resumed) = run(&other, &sets);
+    assert_eq!(resumed, 0);
+    assert_eq!(retrained, train_cascade(&other, &categories, 0.25, CascadeTraining::default(), &sets).unwrap().0);
+    // A checkpoint that does not parse is trained again.
+    std::fs::write(stage_checkpoint_path(dir.path(), "bed", FeatureSet::V4), "{ not json").unwrap();
+    let (_, _, resumed) = run(&other, &sets);
+    assert_eq!(resumed, 3);
 }

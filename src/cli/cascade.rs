@@ -1,5 +1,5 @@
 //! `cog-gpu cascade --data DIR --detections DIR [--models assets/models] [--out FILE] [--iou 0.25]
-//! [--categories a,b,...] [--features v4|v5|v6|best]`: trains the context cascade ([`cog_gpu::cascade`]) on the first-stage detections
+//! [--categories a,b,...] [--features v4|v5|v6|best] [--checkpoints DIR] [--keep-checkpoints]`: trains the context cascade ([`cog_gpu::cascade`]) on the first-stage detections
 //! of held-out frames and writes it as `<models>/cascade.json`, which `detect` then applies.
 //!
 //! The detections are those of `cog-gpu detect --no-cascade --min-score -3` with the calibrated models the
@@ -12,8 +12,11 @@
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
-use anyhow::bail;
-use cog_gpu::cascade::{train_cascade, Cascade, CascadeFrame, CascadeTraining, FeatureSet, StageOutcome, FILE_NAME};
+use anyhow::{bail, Context};
+use cog_gpu::cascade::{
+    stage_checkpoint_path, train_cascade_resumable, Cascade, CascadeFrame, CascadeTraining, FeatureSet, StageOutcome,
+    FILE_NAME,
+};
 
 use super::calibrate::{read_labelled_detections, HeldOutArgs, LabelledDetections};
 use super::GlobalOptions;
@@ -31,6 +34,15 @@ pub struct Args {
     /// frames; trains all three); README, "Context cascade".
     #[arg(long, value_enum, default_value = "v4")]
     pub features: FeaturesArg,
+    /// Directory of the per-stage checkpoints (default: the output path with `.stages` appended): each
+    /// category's training with each feature set is written there when done, and a rerun of an
+    /// interrupted training on the same detections reads them instead of training again.
+    #[arg(long)]
+    pub checkpoints: Option<PathBuf>,
+    /// Keep the checkpoints after the cascade is written (by default they are removed then), e.g. to
+    /// train another `--features` choice on the same detections reusing the stages already trained.
+    #[arg(long)]
+    pub keep_checkpoints: bool,
 }
 
 /// `--features`.
@@ -89,16 +101,46 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         // Checked above: every model is calibrated.
         calibrations: models.iter().filter_map(|m| Some((m.category.clone(), m.calibration.clone()?))).collect(),
     };
-    log::info!("training the second stage of {} categories on {frames} frames", categories.len());
+    let out = args.out.clone().unwrap_or_else(|| held_out.models.join(FILE_NAME));
+    let checkpoints = args.checkpoints.clone().unwrap_or_else(|| {
+        let mut name = out.clone().into_os_string();
+        name.push(".stages");
+        PathBuf::from(name)
+    });
+    log::info!(
+        "training the second stage of {} categories on {frames} frames (checkpoints in {})",
+        categories.len(),
+        checkpoints.display()
+    );
     let sets = args.features.sets();
-    let (cascade, results) = train_cascade(&inputs, &categories, held_out.iou, training, &sets)?;
+    let (cascade, results, resumed) =
+        train_cascade_resumable(&inputs, &categories, held_out.iou, training, &sets, Some(&checkpoints))?;
+    if resumed > 0 {
+        println!(
+            "resumed {resumed} of {} stage trainings from the checkpoints in {}",
+            categories.len() * sets.len(),
+            checkpoints.display()
+        );
+    }
     print_stages(&cascade, &results, &sets);
     if cascade.stages.is_empty() {
         bail!("{}: no category could be trained; nothing written", held_out.detections.display());
     }
-    let out = args.out.clone().unwrap_or_else(|| held_out.models.join(FILE_NAME));
     cascade.write(&out)?;
     println!("wrote the cascade ({} of {} categories) to {}", cascade.stages.len(), categories.len(), out.display());
+    if !args.keep_checkpoints {
+        // Only the files this training reads and writes, then the directory if that left it empty: a
+        // `--checkpoints` directory may hold other things.
+        for category in &categories {
+            for &set in &sets {
+                let path = stage_checkpoint_path(&checkpoints, category, set);
+                if path.exists() {
+                    std::fs::remove_file(&path).with_context(|| format!("removing {}", path.display()))?;
+                }
+            }
+        }
+        let _ = std::fs::remove_dir(&checkpoints);
+    }
     Ok(())
 }
 
