@@ -834,7 +834,8 @@ pub fn train_cascade(
 /// [`train_cascade`] with checkpoints: with `checkpoints` (a directory, created when missing), each
 /// (category, feature set) training writes its outcome there as soon as it is done
 /// ([`stage_checkpoint_path`]), and one whose checkpoint is already there — for the same categories,
-/// IoU, feature set and first-stage detections and ground truth ([`frames_fingerprint`]) — is read
+/// IoU, feature set, `C` grid ([`C_GRID`]) and first-stage detections and ground truth
+/// ([`frames_fingerprint`]) — is read
 /// instead of trained again, so an interrupted run resumes where it stopped with the same result. A
 /// checkpoint of other inputs is trained over (and replaced). Also returns how many outcomes were read.
 pub fn train_cascade_resumable(
@@ -967,6 +968,8 @@ struct StageCheckpoint {
     iou: f32,
     /// [`frames_fingerprint`] in hexadecimal (JSON numbers do not hold 64 bits).
     inputs: String,
+    /// The `C` values the cross-validation tried ([`C_GRID`]): a build with another grid trains again.
+    c_grid: Vec<f64>,
     /// The stage, or why there is none.
     stage: Option<SecondStage>,
     no_stage: Option<String>,
@@ -991,10 +994,12 @@ impl StageKey<'_> {
             && stored.features == self.set.name()
             && stored.categories == self.categories
             && stored.iou == self.iou
-            && stored.inputs == self.fingerprint;
+            && stored.inputs == self.fingerprint
+            && stored.c_grid == C_GRID;
         if !same {
             log::warn!(
-                "{}: a checkpoint of other detections, categories, IoU or feature set; training the stage again",
+                "{}: a checkpoint of other detections, categories, IoU, feature set or C grid; training the stage \
+                 again",
                 path.display()
             );
             return None;
@@ -1021,6 +1026,7 @@ impl StageKey<'_> {
             categories: self.categories.to_vec(),
             iou: self.iou,
             inputs: self.fingerprint.to_string(),
+            c_grid: C_GRID.to_vec(),
             stage: result.as_ref().ok().cloned(),
             no_stage: result.as_ref().err().cloned(),
         };

@@ -1051,6 +1051,14 @@ fn cascade_training_resumes_from_its_stage_checkpoints() {
     let (retrained, _, resumed) = run(&other, &sets);
     assert_eq!(resumed, 0);
     assert_eq!(retrained, train_cascade(&other, &categories, 0.25, CascadeTraining::default(), &sets).unwrap().0);
+    // A checkpoint of another C grid (another build's) is trained again.
+    let path = stage_checkpoint_path(dir.path(), "table", FeatureSet::V4);
+    let mut stored: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    assert_eq!(stored["c_grid"], serde_json::json!(cog_gpu::cascade::C_GRID));
+    stored["c_grid"] = serde_json::json!([0.001, 0.01, 0.1, 1.0, 10.0]);
+    std::fs::write(&path, stored.to_string()).unwrap();
+    let (_, _, resumed) = run(&other, &sets);
+    assert_eq!(resumed, 3);
     // A checkpoint that does not parse is trained again.
     std::fs::write(stage_checkpoint_path(dir.path(), "bed", FeatureSet::V4), "{ not json").unwrap();
     let (_, _, resumed) = run(&other, &sets);
