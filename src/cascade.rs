@@ -182,6 +182,12 @@ impl FeatureSet {
         }
     }
 
+    /// What a stage of this set stores as its [`SecondStage::features`] in a file of `file_set`: its name
+    /// when the two differ, else nothing (it reads the file's).
+    pub fn name_unless(self, file_set: FeatureSet) -> Option<String> {
+        (self != file_set).then(|| self.name().to_string())
+    }
+
     /// The set a cascade file names, given whether its context categories are all large; `None` when this
     /// build cannot compute it.
     pub fn named(name: &str, all_large: bool) -> Option<FeatureSet> {
@@ -317,6 +323,15 @@ pub struct SecondStage {
     pub cv_ap_cascade: f32,
     /// Maps the combined score `z + z'` to a probability.
     pub calibration: Calibration,
+}
+
+impl SecondStage {
+    /// Whether this stage replaces `incumbent` when stages of several feature sets compete for a category
+    /// (`--features best`, [`StageOutcome::chosen`], [`Cascade::merged_with`]): a strictly higher
+    /// cross-validated AP, so that ties keep the incumbent (the earlier set or file).
+    pub fn outranks(&self, incumbent: Option<&SecondStage>) -> bool {
+        incumbent.is_none_or(|other| self.cv_ap_cascade > other.cv_ap_cascade)
+    }
 }
 
 /// Where a cascade came from.
@@ -485,9 +500,8 @@ impl Cascade {
             let set = other
                 .stage_feature_set(stage)
                 .ok_or_else(|| format!("'{category}': unknown feature set of the second cascade"))?;
-            let better = merged.stages.get(category).is_none_or(|own| stage.cv_ap_cascade > own.cv_ap_cascade);
-            if better {
-                let features = (set != file_set).then(|| set.name().to_string());
+            if stage.outranks(merged.stages.get(category)) {
+                let features = set.name_unless(file_set);
                 merged.stages.insert(category.clone(), SecondStage { features, ..stage.clone() });
             }
         }
@@ -570,13 +584,15 @@ pub fn frame_context_features(
     set: FeatureSet,
 ) -> Vec<Vec<f64>> {
     let boxes: Vec<Cuboid> = detections.iter().map(Detection::cuboid).collect();
-    (0..detections.len()).map(|i| context_features(detections, &boxes, i, categories, room, set)).collect()
+    let scene = scene_maxima(detections, categories);
+    (0..detections.len()).map(|i| context_features(detections, &boxes, &scene, i, categories, room, set)).collect()
 }
 
-/// ψ of detection `i`; `boxes` are the detections' cuboids.
+/// ψ of detection `i`; `boxes` are the detections' cuboids and `scene` their [`scene_maxima`].
 fn context_features(
     detections: &[Detection],
     boxes: &[Cuboid],
+    scene: &[TopTwo],
     i: usize,
     categories: &[String],
     room: Option<&Room>,
@@ -632,25 +648,43 @@ fn context_features(
         psi[geometry..geometry + GEOMETRY_FEATURES].copy_from_slice(&geometry_features(&own, room));
     }
     if set >= FeatureSet::V6 {
-        let scene = FeatureSet::V5.dim(categories.len());
-        psi[scene..scene + categories.len()].copy_from_slice(&scene_confidences(detections, i, categories));
+        let start = FeatureSet::V5.dim(categories.len());
+        for (value, top) in psi[start..].iter_mut().zip(scene) {
+            *value = scene_confidence(top, i);
+        }
     }
     psi
 }
 
-/// For each context category `k`, `s_k`: the largest confidence of a detection of `k` other than `i`
-/// anywhere in the frame, 0 when there is none (the scene part, module doc).
-fn scene_confidences(detections: &[Detection], i: usize, categories: &[String]) -> Vec<f64> {
-    let mut maxima = vec![0.0f64; categories.len()];
+/// A category's two most confident detections in a frame, `(confidence, index)`, best first (ties: the
+/// earlier in the frame's list first); `None` where the frame has fewer.
+type TopTwo = [Option<(f32, usize)>; 2];
+
+/// Per context category its [`TopTwo`] in the frame: computed once per frame, so that each detection's
+/// scene part ([`scene_confidence`]) is read off rather than searched for.
+fn scene_maxima(detections: &[Detection], categories: &[String]) -> Vec<TopTwo> {
+    let mut maxima = vec![[None; 2]; categories.len()];
     for (j, detection) in detections.iter().enumerate() {
-        if j == i {
-            continue;
-        }
-        if let Some(k) = categories.iter().position(|c| c == &detection.category) {
-            maxima[k] = maxima[k].max(f64::from(detection.score));
+        let Some(k) = categories.iter().position(|c| c == &detection.category) else { continue };
+        let entry = Some((detection.score, j));
+        let top = &mut maxima[k];
+        if top[0].is_none_or(|(p, _)| detection.score > p) {
+            *top = [entry, top[0]];
+        } else if top[1].is_none_or(|(p, _)| detection.score > p) {
+            top[1] = entry;
         }
     }
     maxima
+}
+
+/// `s_k` of detection `i` from its category's [`TopTwo`]: the largest confidence of a detection of `k`
+/// other than `i` anywhere in the frame, 0 when there is none (the scene part, module doc).
+fn scene_confidence(top: &TopTwo, i: usize) -> f64 {
+    let other = match top {
+        [Some((_, j)), second] if *j == i => *second,
+        [first, _] => *first,
+    };
+    other.map_or(0.0, |(p, _)| f64::from(p))
 }
 
 /// For each context category `k`, `n_k`: the sum of the confidences of the detections of `k` other than
@@ -731,9 +765,11 @@ fn samples_of(
         s.truth.push(frame.truth.iter().filter(|o| o.category == category).map(|o| o.cuboid).collect());
         let detections = &frame.detections;
         let frame_boxes: Vec<Cuboid> = detections.iter().map(Detection::cuboid).collect();
+        let scene = scene_maxima(detections, categories);
         for (i, d) in detections.iter().enumerate().filter(|(_, d)| d.category == category) {
             // ψ of this category's detections only (every category's stage reads the same frames).
-            s.psi.push(context_features(detections, &frame_boxes, i, categories, frame.room.as_ref(), set));
+            let room = frame.room.as_ref();
+            s.psi.push(context_features(detections, &frame_boxes, &scene, i, categories, room, set));
             s.raw.push(d.raw_score.unwrap_or(d.score));
             s.frame.push(f);
             s.cuboids.push(d.cuboid());
@@ -797,7 +833,7 @@ impl StageOutcome {
     pub fn chosen(&self) -> std::result::Result<&SecondStage, String> {
         let mut best: Option<&SecondStage> = None;
         for stage in self.candidates.iter().filter_map(|(_, r)| r.as_ref().ok()) {
-            if best.is_none_or(|b| stage.cv_ap_cascade > b.cv_ap_cascade) {
+            if stage.outranks(best) {
                 best = Some(stage);
             }
         }
@@ -872,17 +908,16 @@ pub fn train_cascade_resumable(
                         result
                     }
                     None => {
-                        let result = train_stage(frames, category, categories, iou_threshold, set, file_set);
+                        let result = train_stage(frames, category, categories, iou_threshold, set);
                         if let Some(dir) = checkpoints {
                             key.write(dir, &result)?;
                         }
                         result
                     }
                 };
-                // The stage names its own set when it is not the file's (a checkpoint may come from a run
-                // whose file set was another).
-                let result = result
-                    .map(|stage| SecondStage { features: (set != file_set).then(|| set.name().to_string()), ..stage });
+                // Named here, for fresh and resumed stages alike (a checkpoint may come from a run whose
+                // file set was another).
+                let result = result.map(|stage| SecondStage { features: set.name_unless(file_set), ..stage });
                 candidates.push((set, result));
             }
             let done = finished.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
@@ -1038,14 +1073,13 @@ impl StageKey<'_> {
 }
 
 /// One category's stage (module doc): C by cross-validation, then the SVM and calibration on all frames.
-/// `file_set` is the cascade file's set: a stage of another set names its own.
+/// Its `features` is left `None`: the caller names the set when it is not the file's.
 fn train_stage(
     frames: &[CascadeFrame],
     category: &str,
     categories: &[String],
     iou_threshold: f32,
     set: FeatureSet,
-    file_set: FeatureSet,
 ) -> StageResult {
     let s = samples_of(frames, category, categories, iou_threshold, set);
     let positives = s.labels.iter().filter(|&&y| y).count();
@@ -1075,7 +1109,7 @@ fn train_stage(
         all.iter().map(|&n| (s.raw[n] + svm.decision(&s.psi[n]) as f32, s.labels[n])).collect();
     let (a, b) = fit_logistic(&scored).map_err(|e| e.to_string())?;
     Ok(SecondStage {
-        features: (set != file_set).then(|| set.name().to_string()),
+        features: None,
         weights: svm.weights,
         bias: svm.bias,
         c,
