@@ -38,6 +38,14 @@ impl<'a> Backend<'a> {
         }
     }
 
+    /// Ends a frame: on the GPU, trims the context's pooled buffers ([`GpuContext::end_frame`]); nothing on
+    /// the CPU.
+    pub fn end_frame(&self) {
+        if let Backend::Gpu(ctx) = self {
+            ctx.end_frame();
+        }
+    }
+
     /// Exact-path fused scores (`hypotheses.len() × weights.len()`) and the point·voxel updates.
     pub fn scores(
         &self,

@@ -550,6 +550,7 @@ pub fn detect_preprocessed_timed(
         lap();
     }
     stages.tables_thread_s += engines.table_thread_seconds();
+    backend.end_frame();
     calibrate(&mut detections, models);
     stages.add(Stage::Nms, lap());
     Ok(FrameDetections { frame: name.to_string(), detections })

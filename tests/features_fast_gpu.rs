@@ -22,7 +22,7 @@ use cog_gpu::gpu::fast::{
     fast_scores_gpu, fast_scores_gpu_chunked, fast_scores_gpu_jobs, fast_scores_reference, fast_scores_reference_jobs,
     FastChunking, FastJob,
 };
-use cog_gpu::gpu::GpuContext;
+use cog_gpu::gpu::{GpuContext, TRIM_FRAMES};
 use cog_gpu::synth::{self, SynthOptions};
 
 const FRAME: &str = "../shared/data/sunrgbd/kv1-b3dodata-img_0063";
@@ -279,4 +279,50 @@ fn concurrent_calls_on_one_context_equal_the_calls_one_after_the_other() {
         let magnitude = engines[n % 2].scores(&hyps, &abs_weights);
         assert_scores_match(got, &twin, &magnitude, &format!("call {n}: concurrent GPU vs CPU twin"));
     }
+}
+
+#[test]
+fn trimmed_pools_shrink_to_the_recent_frames_and_score_the_same() {
+    // A long run's pools follow its recent frames: after one large call, TRIM_FRAMES + 1 frames of a small
+    // one (each ended by `end_frame`, as `detect` does) leave the pools exactly as a fresh context's after
+    // the small call alone, and the small call's scores are the same bits before, during and after.
+    let Some(ctx) = context() else { return };
+    let window = synthetic_window("bed");
+    let layout = FeatureLayout::default();
+    let engine = FastEngine::new(&window.scene, &layout, FastOptions::default());
+    let large = sample(&window, 3000);
+    // The small call: 40 hypotheses of one table (same yaw, bottom and height).
+    let first = window.set.hypotheses[0];
+    let small: Vec<Hypothesis> = window
+        .set
+        .hypotheses
+        .iter()
+        .filter(|h| h.yaw_index == first.yaw_index && h.bottom == first.bottom && h.size.z == first.size.z)
+        .take(40)
+        .copied()
+        .collect();
+    assert!(small.len() >= 10, "{} hypotheses share the first one's table", small.len());
+    let weights = random_weights(&layout, 1, 11);
+    let score = |ctx: &GpuContext, hyps: &[Hypothesis]| fast_scores_gpu(ctx, &engine, hyps, &weights).unwrap();
+
+    let Some(fresh) = context() else { return };
+    let small_alone = score(&fresh, &small);
+    let small_pools = fresh.pooled_bytes();
+    assert!(small_pools > 0);
+
+    score(&ctx, &large);
+    ctx.end_frame();
+    let large_pools = ctx.pooled_bytes();
+    assert!(large_pools > 2 * small_pools, "the large call's pools {large_pools} B, the small one's {small_pools} B");
+    for frame in 1..=TRIM_FRAMES + 1 {
+        assert_eq!(bits(&score(&ctx, &small)), bits(&small_alone), "small call, frame {frame} after the large one");
+        ctx.end_frame();
+        let pooled = ctx.pooled_bytes();
+        if frame < TRIM_FRAMES {
+            assert_eq!(pooled, large_pools, "frame {frame}: the large frame is recent, nothing let go");
+        }
+    }
+    assert_eq!(ctx.pooled_bytes(), small_pools, "trimmed to what the small call alone makes");
+    // Made again at the small call's sizes (the upload buffer mapped at creation): still the same bits.
+    assert_eq!(bits(&score(&ctx, &small)), bits(&small_alone), "small call after the trim");
 }

@@ -31,6 +31,9 @@
 //! fast path's tables, summed over threads. On the GPU path the read-back is inside `score_s`. The two
 //! paths' detections are compared frame by frame (same categories and boxes, scores within a relative
 //! tolerance): the GPU path must not change what is detected.
+//!
+//! On the GPU path, `pooled_mb` gives the GPU memory the context's buffer pools hold after each timed frame
+//! (`max` and `last`; `GpuContext::pooled_bytes`, after the frame's trim, `gpu::BufferPool::trim`).
 
 use std::path::Path;
 
@@ -111,11 +114,16 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         }
         let mut times = Vec::new();
         let mut detections = Vec::new();
+        // GPU memory kept in the context's pools after each frame (trimmed at each frame's end).
+        let mut pooled_mb = Vec::new();
         for dir in &frames {
             for _ in 0..args.repeat {
                 let (frame_times, found) = bench.frame(dir, *backend, &detect_options)?;
                 times.push(frame_times);
                 detections.push(found);
+                if let Backend::Gpu(ctx) = backend {
+                    pooled_mb.push(ctx.pooled_bytes() as f64 * 1e-6);
+                }
             }
         }
         let pipelined = match args.in_flight {
@@ -139,6 +147,13 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
                 "mean": mean_times(&times),
                 "frames": times,
                 "in_flight": pipelined,
+                "pooled_mb": match backend {
+                    Backend::Gpu(_) => json!({
+                        "max": pooled_mb.iter().copied().fold(0.0, f64::max),
+                        "last": pooled_mb.last().copied().unwrap_or(0.0),
+                    }),
+                    Backend::Cpu => serde_json::Value::Null,
+                },
             }),
         );
         detections_per_path.push(detections);
@@ -357,6 +372,16 @@ fn print_report(report: &serde_json::Value) {
             path["fast_kernel"],
             path["adapter"].as_str().unwrap_or("?")
         );
+    }
+    for (name, path) in &paths {
+        if let Some(pooled) = path["pooled_mb"].as_object() {
+            println!(
+                "{name:>5}: GPU memory kept in the buffer pools after a frame: {:.1} MB at most, {:.1} MB after the \
+                 last",
+                pooled["max"].as_f64().unwrap_or(0.0),
+                pooled["last"].as_f64().unwrap_or(0.0)
+            );
+        }
     }
     for (name, path) in &paths {
         if let Some(pass) = path["in_flight"].as_object() {

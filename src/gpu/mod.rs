@@ -333,13 +333,58 @@ fn grown<T: Copy + Ord + std::ops::Mul<Output = T> + std::ops::Div<Output = T> +
     kept.map_or(wanted, |k| k * T::from(3) / T::from(2)).min(max).max(wanted)
 }
 
-/// Grow-only buffers by role, reused across batches and frames instead of created (and zeroed by wgpu)
-/// each time: a per-frame arena. A kernel that needs zeros clears its range itself.
+/// Frames over which a pooled resource's largest request is remembered ([`BufferPool::trim`]): a resource
+/// more than [`TRIM_SLACK`] times the largest request of its last `TRIM_FRAMES` frames is let go.
+///
+/// Chosen so that a run over a data set keeps a resource through the ordinary spread of room sizes
+/// (a bathroom between two bedrooms does not reallocate the bedrooms' tables), while one large room does
+/// not hold its memory for the rest of a long run.
+pub const TRIM_FRAMES: usize = 8;
+
+/// How much larger than its recent largest request a pooled resource may stay ([`TRIM_FRAMES`]): at 2,
+/// the half-again growth of `grown` never triggers a trim on its own.
+pub const TRIM_SLACK: u64 = 2;
+
+/// One pooled resource with the largest request of each of its last [`TRIM_FRAMES`] frames (`peaks[0]`
+/// the current frame's), in bytes for buffers and rows for textures.
+struct Pooled<K, R> {
+    label: &'static str,
+    kind: K,
+    resource: R,
+    peaks: [u64; TRIM_FRAMES],
+}
+
+impl<K, R> Pooled<K, R> {
+    fn new(label: &'static str, kind: K, resource: R, wanted: u64) -> Self {
+        let mut peaks = [0; TRIM_FRAMES];
+        peaks[0] = wanted;
+        Pooled { label, kind, resource, peaks }
+    }
+
+    fn want(&mut self, wanted: u64) {
+        self.peaks[0] = self.peaks[0].max(wanted);
+    }
+
+    /// Ends a frame: whether the resource, of `size`, is worth keeping (it is at most [`TRIM_SLACK`] times
+    /// the largest request of the last [`TRIM_FRAMES`] frames); the frames' peaks move on by one.
+    fn keep_after_frame(&mut self, size: u64) -> bool {
+        let recent = self.peaks.iter().copied().max().unwrap_or(0);
+        self.peaks.rotate_right(1);
+        self.peaks[0] = 0;
+        size <= recent.saturating_mul(TRIM_SLACK)
+    }
+}
+
+/// Buffers and textures by role, reused across batches and frames instead of created (and zeroed by wgpu)
+/// each time: a per-frame arena. A kernel that needs zeros clears its range itself. They grow to the
+/// largest request (half as large again, `grown`) and shrink only through [`BufferPool::trim`], which
+/// [`GpuContext::end_frame`] calls after each frame: a resource much larger than its recent requests, or
+/// not asked for in [`TRIM_FRAMES`] frames, is dropped and made again, at the size asked, when next needed.
 #[derive(Default)]
 pub struct BufferPool {
-    buffers: Vec<(&'static str, wgpu::BufferUsages, wgpu::Buffer)>,
-    /// Grow-only textures by role ([`BufferPool::texture`]).
-    textures: Vec<(&'static str, wgpu::TextureFormat, wgpu::Texture)>,
+    buffers: Vec<Pooled<wgpu::BufferUsages, wgpu::Buffer>>,
+    /// Textures by role ([`BufferPool::texture`]).
+    textures: Vec<Pooled<wgpu::TextureFormat, wgpu::Texture>>,
     /// Labels of the upload buffers (`MAP_WRITE`) unmapped by [`BufferPool::unmap_upload`] and not mapped
     /// since (wgpu 30 cannot be asked a buffer's map state).
     unmapped_uploads: Vec<&'static str>,
@@ -357,13 +402,14 @@ impl BufferPool {
         max_size: u64,
     ) -> wgpu::Buffer {
         let size = size.max(4).next_multiple_of(wgpu::COPY_BUFFER_ALIGNMENT);
-        let slot = self.buffers.iter().position(|(l, u, _)| *l == label && *u == usage);
+        let slot = self.buffers.iter().position(|b| b.label == label && b.kind == usage);
         if let Some(n) = slot {
-            if self.buffers[n].2.size() >= size {
-                return self.buffers[n].2.clone();
+            self.buffers[n].want(size);
+            if self.buffers[n].resource.size() >= size {
+                return self.buffers[n].resource.clone();
             }
         }
-        let grown = grown(slot.map(|n| self.buffers[n].2.size()), size, max_size);
+        let grown = grown(slot.map(|n| self.buffers[n].resource.size()), size, max_size);
         let buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some(label),
             size: grown.next_multiple_of(wgpu::COPY_BUFFER_ALIGNMENT),
@@ -372,8 +418,8 @@ impl BufferPool {
             mapped_at_creation: usage.contains(wgpu::BufferUsages::MAP_WRITE),
         });
         match slot {
-            Some(n) => self.buffers[n].2 = buffer.clone(),
-            None => self.buffers.push((label, usage, buffer.clone())),
+            Some(n) => self.buffers[n].resource = buffer.clone(),
+            None => self.buffers.push(Pooled::new(label, usage, buffer.clone(), size)),
         }
         self.unmapped_uploads.retain(|l| *l != label);
         buffer
@@ -390,13 +436,14 @@ impl BufferPool {
         rows: TexelRows,
         max_rows: u32,
     ) -> wgpu::Texture {
-        let slot = self.textures.iter().position(|(l, f, _)| *l == label && *f == format);
+        let slot = self.textures.iter().position(|t| t.label == label && t.kind == format);
         if let Some(n) = slot {
-            if self.textures[n].2.height() >= rows.rows {
-                return self.textures[n].2.clone();
+            self.textures[n].want(u64::from(rows.rows));
+            if self.textures[n].resource.height() >= rows.rows {
+                return self.textures[n].resource.clone();
             }
         }
-        let grown = grown(slot.map(|n| self.textures[n].2.height()), rows.rows, max_rows);
+        let grown = grown(slot.map(|n| self.textures[n].resource.height()), rows.rows, max_rows);
         let texture = device.create_texture(&wgpu::TextureDescriptor {
             label: Some(label),
             size: TexelRows { rows: grown }.extent(),
@@ -408,10 +455,42 @@ impl BufferPool {
             view_formats: &[],
         });
         match slot {
-            Some(n) => self.textures[n].2 = texture.clone(),
-            None => self.textures.push((label, format, texture.clone())),
+            Some(n) => self.textures[n].resource = texture.clone(),
+            None => self.textures.push(Pooled::new(label, format, texture.clone(), u64::from(rows.rows))),
         }
         texture
+    }
+
+    /// Ends a frame for this pool set: drops every resource more than [`TRIM_SLACK`] times the largest
+    /// request of its last [`TRIM_FRAMES`] frames (also one not asked for in that many frames); the next
+    /// request makes it again at the size asked. Safe between batches: a batch holds the set's lock from
+    /// its uploads to its read-back, and a clone still held elsewhere keeps its resource alive.
+    pub fn trim(&mut self) {
+        self.buffers.retain_mut(|b| {
+            let size = b.resource.size();
+            b.keep_after_frame(size)
+        });
+        self.textures.retain_mut(|t| {
+            let rows = u64::from(t.resource.height());
+            t.keep_after_frame(rows)
+        });
+        let buffers = &self.buffers;
+        self.unmapped_uploads.retain(|label| buffers.iter().any(|b| b.label == *label));
+    }
+
+    /// Bytes the set holds: its buffers' sizes and its textures' texels.
+    pub fn bytes(&self) -> u64 {
+        let buffers: u64 = self.buffers.iter().map(|b| b.resource.size()).sum();
+        let textures: u64 = self
+            .textures
+            .iter()
+            .map(|t| {
+                let size = t.resource.size();
+                let texel = t.kind.block_copy_size(None).unwrap_or(0);
+                u64::from(size.width) * u64::from(size.height) * u64::from(texel)
+            })
+            .sum();
+        buffers + textures
     }
 
     /// Unmaps the upload buffer `buffer` of `label` (from [`GpuContext::mapped_upload`]) before the
@@ -856,6 +935,20 @@ impl GpuContext {
         self.pools[turn].lock().unwrap_or_else(|p| p.into_inner())
     }
 
+    /// Ends a frame: trims every pool set ([`BufferPool::trim`]), waiting for a set that a batch holds.
+    /// Called once per frame by [`crate::detect`] on the GPU path, so that a long run's GPU memory follows
+    /// its recent frames rather than its largest one.
+    pub fn end_frame(&self) {
+        for pool in &self.pools {
+            pool.lock().unwrap_or_else(|p| p.into_inner()).trim();
+        }
+    }
+
+    /// GPU memory the pool sets hold now ([`BufferPool::bytes`], summed over the sets).
+    pub fn pooled_bytes(&self) -> u64 {
+        self.pools.iter().map(|pool| pool.lock().unwrap_or_else(|p| p.into_inner()).bytes()).sum()
+    }
+
     /// `pool`'s upload buffer (`MAP_WRITE | COPY_SRC`, label `label`) of at least `bytes`, mapped for
     /// writing: the batch writes its inputs into it, unmaps it and copies them into its storage buffers in
     /// its own submission. Unlike `queue.write_buffer`, which makes a fresh staging buffer per call (new
@@ -1050,6 +1143,38 @@ mod tests {
         assert_eq!(grown(Some(100u64), 400, 1000), 400, "or the request when that is more");
         assert_eq!(grown(Some(100u32), 120, 130), 130, "capped at the maximum");
         assert_eq!(grown(Some(100u32), 140, 130), 140, "unless the request itself is over it");
+    }
+
+    #[test]
+    fn a_pooled_resource_is_kept_while_a_recent_frame_asked_for_at_least_half_of_it() {
+        // Asked for its own size every frame: never let go.
+        let mut steady = Pooled::new("steady", (), (), 1000);
+        for frame in 0..100 {
+            assert!(steady.keep_after_frame(1000), "frame {frame}");
+            steady.want(1000);
+        }
+        // One large frame (1000), then small ones (100): kept while the large request is among the last
+        // TRIM_FRAMES frames (ends 1..=8), let go at the ninth frame's end (1000 > 2·100).
+        let mut large = Pooled::new("large", (), (), 1000);
+        for end in 1..=TRIM_FRAMES {
+            assert!(large.keep_after_frame(1000), "end {end}");
+            large.want(100);
+        }
+        assert!(!large.keep_after_frame(1000), "nine frames after the large one");
+        // Half as large again as the requests (the growth of `grown`) is within the slack.
+        let mut grown_once = Pooled::new("grown", (), (), 100);
+        for end in 0..3 * TRIM_FRAMES {
+            assert!(grown_once.keep_after_frame(150), "end {end}");
+            grown_once.want(100);
+        }
+        assert!(Pooled::new("edge", (), (), 100).keep_after_frame(200), "exactly TRIM_SLACK times is kept");
+        assert!(!Pooled::new("edge", (), (), 100).keep_after_frame(201), "more is not");
+        // Asked for once, then never: let go at the end of the ninth frame.
+        let mut unused = Pooled::new("unused", (), (), 64);
+        for end in 1..=TRIM_FRAMES {
+            assert!(unused.keep_after_frame(64), "end {end}");
+        }
+        assert!(!unused.keep_after_frame(64));
     }
 
     #[test]
