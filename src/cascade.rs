@@ -1066,9 +1066,7 @@ impl StageKey<'_> {
             no_stage: result.as_ref().err().cloned(),
         };
         let text = serde_json::to_string(&checkpoint).map_err(|e| Error::invalid(&path, e.to_string()))?;
-        let partial = path.with_extension("json.tmp");
-        std::fs::write(&partial, text).map_err(|e| Error::io(&partial, e))?;
-        std::fs::rename(&partial, &path).map_err(|e| Error::io(&path, e))
+        crate::error::write_replacing(&path, text.as_bytes())
     }
 }
 

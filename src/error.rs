@@ -1,6 +1,7 @@
 //! Library errors. Every error that concerns a file names it.
 
-use std::path::PathBuf;
+use std::io::Write;
+use std::path::{Path, PathBuf};
 
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
@@ -45,3 +46,39 @@ impl Error {
 }
 
 pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// Replaces `path` with `bytes` atomically: written to `<file name>.tmp` beside it (the rename stays within
+/// one file system), synced, then renamed over it, so an interruption never leaves a half-written file (model files, checkpoints, training
+/// progress). Errors name the file that failed.
+pub fn write_replacing(path: &Path, bytes: &[u8]) -> Result<()> {
+    let mut name = path.file_name().map(|n| n.to_os_string()).unwrap_or_default();
+    name.push(".tmp");
+    let temporary = path.with_file_name(name);
+    let write = || -> std::io::Result<()> {
+        let mut file = std::fs::File::create(&temporary)?;
+        file.write_all(bytes)?;
+        file.sync_all()
+    };
+    write().map_err(|e| Error::io(&temporary, e))?;
+    std::fs::rename(&temporary, path).map_err(|e| Error::io(path, e))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn write_replacing_replaces_the_file_and_leaves_no_temporary() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("model.json");
+        write_replacing(&path, b"first").unwrap();
+        write_replacing(&path, b"second, longer").unwrap();
+        assert_eq!(std::fs::read(&path).unwrap(), b"second, longer");
+        let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+        assert_eq!(names, vec![std::ffi::OsString::from("model.json")], "no model.json.tmp left behind");
+        // A directory that does not exist: the error names the temporary file it could not create.
+        let missing = dir.path().join("absent").join("model.json");
+        let message = write_replacing(&missing, b"x").unwrap_err().to_string();
+        assert!(message.contains("absent/model.json.tmp"), "{message}");
+    }
+}

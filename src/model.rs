@@ -343,9 +343,7 @@ impl Model {
     pub fn write(&self, path: &Path) -> Result<()> {
         self.check().map_err(|e| Error::invalid(path, e))?;
         let text = serde_json::to_string(self).map_err(|e| Error::invalid(path, e.to_string()))?;
-        let temporary = path.with_extension("json.tmp");
-        std::fs::write(&temporary, text).map_err(|e| Error::io(&temporary, e))?;
-        std::fs::rename(&temporary, path).map_err(|e| Error::io(path, e))
+        crate::error::write_replacing(path, text.as_bytes())
     }
 }
 

@@ -548,9 +548,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
             };
             let save = |progress: &LatentProgress| -> cog_gpu::error::Result<()> {
                 let text = serde_json::to_string(progress).map_err(|e| cog_gpu::error::Error::Input(e.to_string()))?;
-                let temporary = PathBuf::from(format!("{}.tmp", progress_path.display()));
-                std::fs::write(&temporary, text).map_err(|e| cog_gpu::error::Error::io(&temporary, e))?;
-                std::fs::rename(&temporary, &progress_path).map_err(|e| cog_gpu::error::Error::io(&progress_path, e))
+                cog_gpu::error::write_replacing(&progress_path, text.as_bytes())
             };
             let latent = train_latent_detector(&mut oracle, &ssvm, progress, &settings, args.resume, save)?;
             (latent.last.clone(), Some(latent))

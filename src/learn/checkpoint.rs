@@ -16,9 +16,8 @@
 //! Writes go to `<path>.tmp`, are synced, then renamed over `<path>`: a crash mid-write leaves the
 //! previous checkpoint intact.
 
-use crate::error::{Error, Result};
-use std::io::Write;
-use std::path::{Path, PathBuf};
+use crate::error::{write_replacing, Error, Result};
+use std::path::Path;
 
 const MAGIC: &[u8; 8] = b"COGSSVM\0";
 const VERSION: u32 = 1;
@@ -56,15 +55,7 @@ pub struct Checkpoint {
 impl Checkpoint {
     /// Encodes the checkpoint and replaces `path` atomically (temp file, sync, rename).
     pub fn write(&self, path: &Path) -> Result<()> {
-        let bytes = self.encode();
-        let temp = temp_path(path);
-        let write_temp = || -> std::io::Result<()> {
-            let mut file = std::fs::File::create(&temp)?;
-            file.write_all(&bytes)?;
-            file.sync_all()
-        };
-        write_temp().map_err(|e| Error::io(&temp, e))?;
-        std::fs::rename(&temp, path).map_err(|e| Error::io(path, e))
+        write_replacing(path, &self.encode())
     }
 
     /// Reads and validates a checkpoint (magic, version, sizes, checksum, finite values).
@@ -154,13 +145,7 @@ impl Checkpoint {
     }
 }
 
-/// `<path>.tmp` beside the target, so the rename stays within one file system.
-fn temp_path(path: &Path) -> PathBuf {
-    let mut name = path.file_name().map(|n| n.to_os_string()).unwrap_or_default();
-    name.push(".tmp");
-    path.with_file_name(name)
-}
-
+/// The FNV-1a offset basis ([`fnv1a`]'s starting state).
 pub(crate) const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
 
 /// FNV-1a, continued from `state` (pass [`FNV_OFFSET`] to start).
