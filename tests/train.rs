@@ -278,6 +278,28 @@ fn one_slack_training_converges_and_reports_its_objective() {
 }
 
 /// A tiny synthetic bedroom dataset written by `cog-gpu synth`.
+/// Example limits of the tests: up to 100 instances and `negatives` frames spread evenly, the other
+/// instances removed, the floor window, every instance.
+fn example_limits(negatives: usize) -> cog_gpu::learn::detector::ExampleLimits {
+    cog_gpu::learn::detector::ExampleLimits {
+        positives: 100,
+        negatives,
+        negative_choice: cog_gpu::learn::detector::NegativeChoice::Spread,
+        others: OtherInstances::Removed,
+        support: Support::Floor,
+        seen: None,
+    }
+}
+
+/// The frame directories of [`tiny_dataset`], sorted.
+fn tiny_frames(dir: &Path) -> Vec<PathBuf> {
+    let data = tiny_dataset(dir);
+    let mut frames: Vec<PathBuf> = std::fs::read_dir(&data).unwrap().map(|e| e.unwrap().path()).collect();
+    frames.retain(|p| p.is_dir());
+    frames.sort();
+    frames
+}
+
 fn tiny_dataset(dir: &Path) -> PathBuf {
     let data = dir.join("data");
     let out = run(&[
@@ -581,8 +603,7 @@ fn a_surface_window_learns_its_supporters_from_the_positives() {
         }
     }
     assert!(sinks > 0 && expected != SurfaceCategories::NONE, "seed 5 must give sinks on counters");
-    let limits =
-        |support| ExampleLimits { positives: 100, negatives: 2, others: OtherInstances::Removed, support, seen: None };
+    let limits = |support| ExampleLimits { support, ..example_limits(2) };
     let collected = collect_examples(&frames, "sink", limits(Support::FloorAndSurfaces)).unwrap();
     assert_eq!(collected.supporters, expected);
     let annotations = read_all_annotations(&frames).unwrap();
@@ -627,10 +648,7 @@ fn the_seen_rule_counts_the_points_above_the_floor_slab_inside_the_box() {
 fn skip_unseen_leaves_out_instances_without_points() {
     use cog_gpu::learn::detector::{collect_examples, ExampleLimits, SeenRule};
     let dir = tempfile::tempdir().unwrap();
-    let data = tiny_dataset(dir.path());
-    let mut frames: Vec<PathBuf> = std::fs::read_dir(&data).unwrap().map(|e| e.unwrap().path()).collect();
-    frames.retain(|p| p.is_dir());
-    frames.sort();
+    let frames = tiny_frames(dir.path());
     // Beside every bed, a copy 40 m away along X: far beyond any depth sensor, it holds no point.
     let mut far_copies = 0;
     for frame in &frames {
@@ -650,13 +668,7 @@ fn skip_unseen_leaves_out_instances_without_points() {
     }
     assert!(far_copies > 0, "seed 11's bedrooms must have beds");
     let is_far = |c: &Cuboid| c.centre.truncate().length() > 30.0;
-    let limits = |seen| ExampleLimits {
-        positives: 100,
-        negatives: 1,
-        others: OtherInstances::Removed,
-        support: Support::Floor,
-        seen,
-    };
+    let limits = |seen| ExampleLimits { seen, ..example_limits(1) };
     let truths = |seen| -> Vec<Cuboid> {
         let collected = collect_examples(&frames, "bed", limits(seen)).unwrap();
         collected.examples.iter().filter_map(|e| e.truth).collect()
@@ -667,4 +679,83 @@ fn skip_unseen_leaves_out_instances_without_points() {
     assert!(seen.iter().all(|c| !is_far(c)), "an instance without points must not be a positive");
     assert!(!seen.is_empty(), "the beds in view stay positives");
     assert_eq!(seen.len() + far_copies, all.len(), "the beds in view all hold 50 points: only the copies go");
+}
+
+/// `hardest` by hand: the highest hardness first, ties to the earlier candidate, NaN and −∞ last, and the
+/// choice returned in the candidates' order.
+#[test]
+fn hardest_takes_the_highest_scores_in_frame_order() {
+    use cog_gpu::learn::detector::hardest;
+    let candidates = [3, 5, 8, 9, 12];
+    let hardness = [0.2, f32::NEG_INFINITY, 0.9, 0.2, 0.5];
+    assert_eq!(hardest(&candidates, &hardness, 1), vec![8]);
+    assert_eq!(hardest(&candidates, &hardness, 2), vec![8, 12]);
+    // 0.2 twice: the earlier candidate (3) before the later (9).
+    assert_eq!(hardest(&candidates, &hardness, 3), vec![3, 8, 12]);
+    assert_eq!(hardest(&candidates, &hardness, 4), vec![3, 8, 9, 12]);
+    assert_eq!(hardest(&candidates, &hardness, 10), candidates.to_vec());
+    assert_eq!(hardest(&candidates, &hardness, 0), Vec::<usize>::new());
+    let with_nan = [f32::NAN, 0.1, -0.3];
+    assert_eq!(hardest(&[0, 1, 2], &with_nan, 1), vec![1], "a NaN hardness is never the hardest");
+}
+
+/// `--hard-negatives`: the negative examples are the frames without the category that the given best
+/// scores rank highest (not the even spread), and a frame without the category but without a score is
+/// an error naming it.
+#[test]
+fn hard_negatives_are_the_frames_an_earlier_detector_scored_highest() {
+    use cog_gpu::learn::detector::{collect_examples, ExampleLimits, NegativeChoice};
+    use std::collections::BTreeMap;
+    let dir = tempfile::tempdir().unwrap();
+    let frames = tiny_frames(dir.path());
+    assert_eq!(frames.len(), 4);
+    let name = |f: &PathBuf| f.file_name().unwrap().to_string_lossy().into_owned();
+    // Bedrooms hold no toilet: all four frames are negatives of the toilet.
+    let scores = [0.1, 0.9, f32::NEG_INFINITY, 0.5];
+    let best_scores: BTreeMap<String, f32> = frames.iter().map(name).zip(scores).collect();
+    let limits = |negative_choice| ExampleLimits { negative_choice, ..example_limits(2) };
+    let names = |choice| -> Vec<String> {
+        let collected = collect_examples(&frames, "toilet", limits(choice)).unwrap();
+        assert!(collected.examples.iter().all(|e| e.truth.is_none()));
+        collected.examples.iter().map(|e| e.name.clone()).collect()
+    };
+    let expected: Vec<String> = [1, 3].iter().map(|&i| format!("{} (no toilet)", name(&frames[i]))).collect();
+    let hard = |share| NegativeChoice::Hardest { best_scores: best_scores.clone(), share };
+    assert_eq!(names(hard(1.0)), expected);
+    // Half of the two hardest (frame 1), the other spread over frames 0, 2 and 3 (the first of them).
+    let half: Vec<String> = [0, 1].iter().map(|&i| format!("{} (no toilet)", name(&frames[i]))).collect();
+    assert_eq!(names(hard(0.5)), half);
+    // The even spread of 2 of 4 takes frames 0 and 2: the hard choice is not the default.
+    let spread: Vec<String> = [0, 2].iter().map(|&i| format!("{} (no toilet)", name(&frames[i]))).collect();
+    assert_eq!(names(NegativeChoice::Spread), spread);
+    let mut missing = best_scores;
+    missing.remove(&name(&frames[2]));
+    let err = collect_examples(&frames, "toilet", limits(NegativeChoice::Hardest { best_scores: missing, share: 1.0 }))
+        .err()
+        .expect("a negative frame without a score must be an error")
+        .to_string();
+    assert!(err.contains(&name(&frames[2])) && err.contains("no detections file"), "{err}");
+}
+
+/// `train --hard-negatives DIR` refuses a directory without detection files before any training.
+#[test]
+fn hard_negatives_from_an_empty_directory_is_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = tiny_dataset(dir.path());
+    let empty = dir.path().join("no-detections");
+    std::fs::create_dir(&empty).unwrap();
+    let out = run(&[
+        "train",
+        "--data",
+        data.to_str().unwrap(),
+        "--category",
+        "bed",
+        "--out",
+        dir.path().join("bed.json").to_str().unwrap(),
+        "--hard-negatives",
+        empty.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("--hard-negatives") && stderr.contains("no detection files"), "{stderr}");
 }

@@ -39,6 +39,7 @@
 //! * at most `--max-iterations 300` cutting-plane iterations;
 //! * constraints whose α stayed 0 for `--prune-after 10` solves leave the working set.
 
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -51,7 +52,8 @@ use cog_gpu::features::{budget, FeatureLayout, Groups, LatticePhase, SizeQuantil
 use cog_gpu::frame::Dataset;
 use cog_gpu::learn::detector::{
     cached_rows_per_example, collect_examples, instances_of, read_all_annotations, train_detector, DetectorOracle,
-    ExampleLimits, FeatureEngine, OtherInstances, PositiveTarget, SeenRule, TrainingExample, TrainingSettings,
+    ExampleLimits, FeatureEngine, NegativeChoice, OtherInstances, PositiveTarget, SeenRule, TrainingExample,
+    TrainingSettings,
 };
 use cog_gpu::learn::detector::{surface_weights, train_latent_detector, LatentProgress, LatentSettings, SURFACE_DIM};
 use cog_gpu::learn::latent::impute;
@@ -97,6 +99,18 @@ pub struct Args {
     /// Most frames without the category to train on.
     #[arg(long, default_value_t = 60)]
     pub negatives: usize,
+    /// Take as negatives the `--negatives` frames without the category on which an earlier detector of it
+    /// scored highest, read from this directory of detection files (`<frame>.json`, as `detect` writes
+    /// them: one per training frame; each frame ranked by its best detection of the category, by
+    /// `raw_score` when present, else `score`), instead of frames spread evenly over the dataset.
+    #[arg(long, value_name = "DETECTIONS_DIR")]
+    pub hard_negatives: Option<PathBuf>,
+    #[arg(value_parser = options::probability)]
+    /// With `--hard-negatives`: the share of the `--negatives` frames taken hardest first; the rest are
+    /// spread evenly over the other frames without the category (0.5: all hardest lost 8–9 AP points on
+    /// the calibration set, README "Training").
+    #[arg(long, default_value_t = 0.5, requires = "hard_negatives")]
+    pub hard_share: f32,
     /// Train only on instances the depth sensor saw: an instance whose annotated box holds fewer than
     /// `--min-points` points more than one `--step` above the floor (the window's own keep rule) is not a
     /// positive; `--positives` are spread over the others.
@@ -302,6 +316,33 @@ pub enum PathArg {
     Exact,
 }
 
+/// The best score of a detection of `category` in every detections file of `dir` (`<frame>.json`), by
+/// frame name: `raw_score` when present (a single model's own scale; calibrated probabilities can round
+/// to the same value), else `score`; `f32::NEG_INFINITY` for a file without one (`--hard-negatives`).
+fn best_scores_by_frame(dir: &std::path::Path, category: &str) -> anyhow::Result<BTreeMap<String, f32>> {
+    let entries = std::fs::read_dir(dir).with_context(|| format!("--hard-negatives: cannot read {}", dir.display()))?;
+    let mut best = BTreeMap::new();
+    for entry in entries {
+        let path = entry.with_context(|| format!("--hard-negatives: cannot read {}", dir.display()))?.path();
+        if path.extension().is_none_or(|e| e != "json") {
+            continue;
+        }
+        let Some(frame) = path.file_stem().map(|s| s.to_string_lossy().into_owned()) else { continue };
+        let detections = cog_gpu::eval::FrameDetections::read(&path)?;
+        let score = detections
+            .detections
+            .iter()
+            .filter(|d| d.category == category)
+            .map(|d| d.raw_score.unwrap_or(d.score))
+            .fold(f32::NEG_INFINITY, f32::max);
+        best.insert(frame, score);
+    }
+    if best.is_empty() {
+        bail!("--hard-negatives: no detection files (*.json) in {}", dir.display());
+    }
+    Ok(best)
+}
+
 /// Drops positive examples without any point inside their box (nothing to learn from; counted in the log)
 /// and checks, before any window is built, that every example's sliding window and the candidate cache
 /// fit in memory (`cog_gpu::limits`), naming the example that does not.
@@ -467,9 +508,16 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         support: args.support.into(),
         surfaces: pretrained.is_some(),
     };
+    let negative_choice = match &args.hard_negatives {
+        Some(dir) => {
+            NegativeChoice::Hardest { best_scores: best_scores_by_frame(dir, &category)?, share: args.hard_share }
+        }
+        None => NegativeChoice::Spread,
+    };
     let limits = ExampleLimits {
         positives: args.positives,
         negatives: args.negatives,
+        negative_choice,
         others: args.other_instances.into(),
         support: args.support.into(),
         seen: args.skip_unseen.then_some(SeenRule { min_points: args.min_points, floor_slab: args.step }),
@@ -579,6 +627,8 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         "frames": dataset.len(),
         "positives": positives,
         "negatives": oracle.examples.len() - positives,
+        "hard_negatives": args.hard_negatives.as_ref().map(|d| d.display().to_string()),
+        "hard_share": args.hard_negatives.as_ref().map(|_| args.hard_share),
         "training_step": args.step,
         "training_support": Support::from(args.support).name(),
         "other_instances": match args.other_instances { OthersArg::Removed => "removed", OthersArg::Ignored => "ignored" },

@@ -41,6 +41,7 @@
 //! hundreds of examples that does not fit in memory, so a full pass rebuilds them (≈ 10 % of its time;
 //! the rest is scoring every hypothesis, which depends on w).
 
+use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::Mutex;
 
@@ -996,12 +997,14 @@ pub struct LatentProgress {
 }
 
 /// How many examples to take from a dataset.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct ExampleLimits {
     /// Instances of the category (spread evenly over the dataset's instances when there are more).
     pub positives: usize,
-    /// Frames without the category (spread evenly).
+    /// Frames without the category (chosen by [`ExampleLimits::negative_choice`]).
     pub negatives: usize,
+    /// How the `negatives` frames are chosen among the frames without the category.
+    pub negative_choice: NegativeChoice,
     /// What a positive example does with the other instances in its frame.
     pub others: OtherInstances,
     /// The window the examples are for. With [`Support::Surfaces`] every example gets its frame's
@@ -1020,6 +1023,38 @@ pub struct ExampleLimits {
     /// empty boxes. `None` trains on every instance (as every shipped model was trained). The choice among
     /// the seen instances is [`spread`] over them, as over all.
     pub seen: Option<SeenRule>,
+}
+
+/// How [`collect_examples`] chooses its negative frames (frames without the category) when there are more
+/// than [`ExampleLimits::negatives`].
+#[derive(Clone, Debug, Default, PartialEq)]
+pub enum NegativeChoice {
+    /// Spread evenly over the dataset ([`spread`]): every shipped model was trained so.
+    #[default]
+    Spread,
+    /// The hardest frames ([`hardest`]): those where an earlier detector of the category scored highest,
+    /// `best_scores[frame directory name]` being the best score of a detection of the category in that
+    /// frame (`f32::NEG_INFINITY` when it has none). Every frame without the category must have an entry
+    /// (an error names the first that has none). The classic hard-negative mining of sliding-window
+    /// detectors, over frames rather than boxes: the frames where a confusable object (a desk for a
+    /// table, a bathroom counter for a dresser) stands are the ones the model must learn to score low,
+    /// and an even spread over a room mix holds few of them.
+    /// `share` (in [0, 1]) of the negatives are the hardest; the rest are [`spread`] over the frames
+    /// left, so that the easy backgrounds the scores must also rank low stay represented.
+    Hardest { best_scores: BTreeMap<String, f32>, share: f32 },
+}
+
+/// The `count` of `candidates` with the highest `hardness` (`hardness[i]` belongs to `candidates[i]`;
+/// NaN counts as −∞; ties: the earlier candidate first), returned in the candidates' order. All of them when
+/// `count ≥ candidates.len()`.
+pub fn hardest(candidates: &[usize], hardness: &[f32], count: usize) -> Vec<usize> {
+    assert_eq!(candidates.len(), hardness.len(), "one hardness per candidate");
+    let key = |i: usize| if hardness[i].is_nan() { f32::NEG_INFINITY } else { hardness[i] };
+    let mut order: Vec<usize> = (0..candidates.len()).collect();
+    order.sort_by(|&a, &b| key(b).total_cmp(&key(a)).then(a.cmp(&b)));
+    let mut chosen: Vec<usize> = order.into_iter().take(count).collect();
+    chosen.sort_unstable();
+    chosen.into_iter().map(|i| candidates[i]).collect()
 }
 
 /// When an annotated instance counts as seen by the depth sensor ([`ExampleLimits::seen`]): the window's
@@ -1063,6 +1098,11 @@ pub fn stands_on_a_surface(cuboid: &Cuboid, surfaces: &[SupportSurface]) -> bool
 /// The instances of `category` in a frame's annotations.
 pub fn instances_of(objects: &[crate::frame::Object], category: &str) -> Vec<Cuboid> {
     objects.iter().filter(|o| o.category == category).map(|o| o.cuboid).collect()
+}
+
+/// A frame's name: its directory's (the name of its detections file, `<name>.json`).
+fn frame_name(frame: &std::path::Path) -> String {
+    frame.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default()
 }
 
 /// Evenly spread choice of `count` of `0..total` (all of them when `count ≥ total`).
@@ -1148,7 +1188,48 @@ pub fn collect_examples(
     };
     let positives: Vec<(usize, usize)> =
         spread(positives.len(), limits.positives).into_iter().map(|n| positives[n]).collect();
-    let negatives: Vec<usize> = spread(negatives.len(), limits.negatives).into_iter().map(|n| negatives[n]).collect();
+    let negatives: Vec<usize> = match &limits.negative_choice {
+        NegativeChoice::Spread => spread(negatives.len(), limits.negatives).into_iter().map(|n| negatives[n]).collect(),
+        NegativeChoice::Hardest { best_scores, share } => {
+            let hardness = negatives
+                .iter()
+                .map(|&f| {
+                    let name = frame_name(&frames[f]);
+                    best_scores.get(&name).copied().ok_or_else(|| {
+                        Error::invalid(
+                            &frames[f],
+                            format!(
+                                "hard negatives: the frame '{name}' holds no '{category}', so it is a negative \
+                                 candidate, but has no detections file to rank it by (detect every frame of the \
+                                 training set)"
+                            ),
+                        )
+                    })
+                })
+                .collect::<Result<Vec<f32>>>()?;
+            let count = limits.negatives.min(negatives.len());
+            let hard_count = ((count as f32 * share.clamp(0.0, 1.0)).round() as usize).min(count);
+            let hard = hardest(&negatives, &hardness, hard_count);
+            let scores: Vec<f32> = hard.iter().map(|f| best_scores[&frame_name(&frames[*f])]).collect();
+            let rest: Vec<usize> = negatives.iter().copied().filter(|f| hard.binary_search(f).is_err()).collect();
+            let mut chosen: Vec<usize> = spread(rest.len(), count - hard_count)
+                .into_iter()
+                .map(|n| rest[n])
+                .chain(hard.iter().copied())
+                .collect();
+            chosen.sort_unstable();
+            log::info!(
+                "{category}: as negatives the {} hardest of {} frames without one (their best detection scores \
+                 {:.3} to {:.3}) and {} spread over the others",
+                hard.len(),
+                negatives.len(),
+                scores.iter().copied().fold(f32::INFINITY, f32::min),
+                scores.iter().copied().fold(f32::NEG_INFINITY, f32::max),
+                count - hard_count,
+            );
+            chosen
+        }
+    };
     let mut needed: Vec<usize> = positives.iter().map(|p| p.0).chain(negatives.iter().copied()).collect();
     needed.sort_unstable();
     needed.dedup();
@@ -1190,7 +1271,7 @@ pub fn collect_examples(
     let surfaces: Vec<Vec<SupportSurface>> =
         all_surfaces.iter().map(|frame| frame.iter().map(|(_, s)| *s).collect()).collect();
     let surfaces_of = |f: usize| &surfaces[index_of(f)];
-    let name_of = |f: usize| frames[f].file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let name_of = |f: usize| frame_name(&frames[f]);
     let mut jobs: Vec<(String, usize, Option<Cuboid>, Vec<Cuboid>)> = Vec::new();
     let mut off_surface = 0;
     for &(f, k) in &positives {
