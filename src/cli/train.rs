@@ -99,10 +99,11 @@ pub struct Args {
     /// Most frames without the category to train on.
     #[arg(long, default_value_t = 60)]
     pub negatives: usize,
-    /// Take as negatives the `--negatives` frames without the category on which an earlier detector of it
-    /// scored highest, read from this directory of detection files (`<frame>.json`, as `detect` writes
-    /// them: one per training frame; each frame ranked by its best detection of the category, by
-    /// `raw_score` when present, else `score`), instead of frames spread evenly over the dataset.
+    /// Choose the `--negatives` frames without the category by an earlier detector of it instead of
+    /// spreading them evenly: `--hard-share` of them are the frames on which it scored highest, read from
+    /// this directory of detection files (`<frame>.json`, as `detect` writes them: one per training
+    /// frame; each frame ranked by its best detection of the category, by `raw_score` when present, else
+    /// `score`).
     #[arg(long, value_name = "DETECTIONS_DIR")]
     pub hard_negatives: Option<PathBuf>,
     #[arg(value_parser = options::probability)]

@@ -1038,9 +1038,10 @@ pub enum NegativeChoice {
     /// (an error names the first that has none). The classic hard-negative mining of sliding-window
     /// detectors, over frames rather than boxes: the frames where a confusable object (a desk for a
     /// table, a bathroom counter for a dresser) stands are the ones the model must learn to score low,
-    /// and an even spread over a room mix holds few of them.
-    /// `share` (in [0, 1]) of the negatives are the hardest; the rest are [`spread`] over the frames
-    /// left, so that the easy backgrounds the scores must also rank low stay represented.
+    /// and an even spread over a room mix holds few of them. Only `share` (in [0, 1]) of the negatives
+    /// are the hardest; the rest are [`spread`] over the frames left, so that the easy backgrounds the
+    /// scores must also rank low stay represented (on the table and the dresser neither share 1 nor 0.5
+    /// helped: README, "Training").
     Hardest { best_scores: BTreeMap<String, f32>, share: f32 },
 }
 
