@@ -76,6 +76,8 @@
 //! [`RBF_WIDTHS`]): furniture stands against a wall (nightstands, beds, dressers, bookshelves, toilets),
 //! a little off it (chairs at desks) or in the open (tables, sofas facing a TV), and pieces of other
 //! objects do not keep those distances. Without a room (`no_room` = 1) the rest of the part is zero.
+//! Among segments equally close, the first in the polygon's order gives `A` (no tie rule: the shipped
+//! cascades were trained on these values).
 //! The file format's `features` name says which set a cascade uses ([`FEATURES`]).
 //!
 //! # Learning (paper §6.2)
@@ -288,8 +290,7 @@ pub fn wall_context(cuboid: &Cuboid, room: &[Vec2]) -> Option<(f64, f64)> {
             continue;
         }
         for &p in &footprint {
-            let t = ((p - a).dot(along) / length_sq).clamp(0.0, 1.0);
-            let distance = (p - (a + along * t)).length();
+            let distance = crate::geometry::point_segment_distance(p, a, b);
             if closest.is_none_or(|(d, _)| distance < d) {
                 closest = Some((distance, along));
             }

@@ -516,78 +516,12 @@ pub fn structured_loss(truth: Option<&Cuboid>, estimate: Option<&Cuboid>) -> f32
 // ---------------------------------------------------------------------------------------------------------
 // Cuboid-to-wall relations (contextual features D(B, M) and A(B, M))
 
-/// A cuboid's relation to the nearest wall of a room polygon.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct WallRelation {
-    /// Index `i` of the nearest wall: the edge from corner `i` to corner `(i + 1) % n`.
-    pub wall: usize,
-    /// Distance (m) on the ground plane from the cuboid's footprint corners to that wall segment, ≥ 0.
-    pub distance: f32,
-    /// Angle (radians, in [0, π/2]) between the cuboid's width axis and the wall's direction: 0 when the
-    /// width axis runs along the wall, π/2 when it points into it.
-    pub angle: f32,
-}
-
 /// Distance from a point to the segment `p`–`q` (to `p` when the segment has zero length).
 pub fn point_segment_distance(point: Vec2, p: Vec2, q: Vec2) -> f32 {
     let edge = q - p;
     let len2 = edge.length_squared();
     let t = if len2 > 0.0 { ((point - p).dot(edge) / len2).clamp(0.0, 1.0) } else { 0.0 };
     (point - (p + edge * t)).length()
-}
-
-/// Angle in [0, π/2] between two undirected directions on the ground plane (0 for a zero vector).
-pub fn undirected_angle(u: Vec2, v: Vec2) -> f32 {
-    u.perp_dot(v).abs().atan2(u.dot(v).abs())
-}
-
-/// The nearest wall of a room polygon to a cuboid (the contextual features D(B, M), A(B, M)).
-///
-/// Walls are the polygon's edges `corners[i] → corners[(i + 1) % n]` (any simple polygon, either
-/// orientation; zero-length edges are skipped). The distance is the smallest distance from one of the
-/// cuboid's four footprint corners to a wall segment: it measures the gap between the object and the
-/// wall, so a bed pushed against a wall is at ≈ 0 whatever its size (the centre would mix size into the
-/// distance). Corners outside the room count by their unsigned distance. On a tie (within 1 mm, e.g. a
-/// box square in a room corner) the wall nearer to the cuboid's centre wins, so the choice follows the
-/// box's larger extent along the wall. The angle is [`undirected_angle`] between the width axis and that
-/// wall. `None` when the polygon has no wall (fewer than 2 distinct corners) or a value is not finite.
-pub fn nearest_wall(cuboid: &Cuboid, room_corners: &[Vec2]) -> Option<WallRelation> {
-    const TIE: f32 = 1e-3;
-    let footprint = cuboid.footprint();
-    let centre = cuboid.centre.truncate();
-    let n = room_corners.len();
-    let mut best: Option<(usize, f32, f32)> = None; // (wall, corner distance, centre distance)
-    for i in 0..n {
-        let (p, q) = (room_corners[i], room_corners[(i + 1) % n]);
-        if p == q {
-            continue;
-        }
-        let distance = footprint.iter().map(|&c| point_segment_distance(c, p, q)).fold(f32::INFINITY, f32::min);
-        let centre_distance = point_segment_distance(centre, p, q);
-        if !distance.is_finite() || !centre_distance.is_finite() {
-            return None;
-        }
-        let better = match best {
-            None => true,
-            Some((_, d, cd)) => distance < d - TIE || (distance <= d + TIE && centre_distance < cd),
-        };
-        if better {
-            best = Some((i, distance, centre_distance));
-        }
-    }
-    let (wall, distance, _) = best?;
-    let direction = room_corners[(wall + 1) % n] - room_corners[wall];
-    Some(WallRelation { wall, distance, angle: undirected_angle(cuboid.width_axis(), direction) })
-}
-
-/// D(B, M): distance from the cuboid to the nearest wall (see [`nearest_wall`]).
-pub fn wall_distance(cuboid: &Cuboid, room_corners: &[Vec2]) -> Option<f32> {
-    nearest_wall(cuboid, room_corners).map(|w| w.distance)
-}
-
-/// A(B, M): angle in [0, π/2] between the cuboid's width axis and the nearest wall (see [`nearest_wall`]).
-pub fn wall_angle(cuboid: &Cuboid, room_corners: &[Vec2]) -> Option<f32> {
-    nearest_wall(cuboid, room_corners).map(|w| w.angle)
 }
 
 /// Whether a ground-plane point lies inside a simple polygon (even-odd rule, so the polygon may be

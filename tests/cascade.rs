@@ -603,6 +603,10 @@ fn wall_distance_and_angle_match_a_hand_computation() {
     // 60° folds to 30° as well (modulo 90°, then the smaller side).
     let (_, a) = wall_context(&cuboid(2.0, 1.5, 60.0), &room).unwrap();
     assert!((a - 30.0 / 45.0).abs() < 1e-5, "{a}");
+    // The polygon's orientation does not matter.
+    let clockwise: Vec<Vec2> = room.iter().rev().copied().collect();
+    let (d, a) = wall_context(&c, &clockwise).unwrap();
+    assert!((d - nearest as f64).abs() < 1e-5 && (a - 30.0 / 45.0).abs() < 1e-5, "{d} {a}");
     // Centre outside the room: negative distance. A degenerate polygon: no wall.
     let (d, _) = wall_context(&cuboid(5.0, 1.5, 0.0), &room).unwrap();
     assert!((d + 0.5).abs() < 1e-6, "{d}");

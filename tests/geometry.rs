@@ -4,9 +4,8 @@ use std::f32::consts::{FRAC_PI_2, PI};
 
 use cog_gpu::geometry::{
     convex_hull, convex_hull_area, convex_intersection, convex_intersection_area, detection_loss,
-    footprint_overlap_area, intersection_volume, iou_3d, nearest_wall, point_segment_distance, polygon_area,
-    project_points, projected_hull_area, structured_loss, undirected_angle, vertical_overlap, voxel_corners,
-    wall_angle, wall_distance, wrap_angle, Camera, Cuboid,
+    footprint_overlap_area, intersection_volume, iou_3d, point_segment_distance, polygon_area, project_points,
+    projected_hull_area, structured_loss, vertical_overlap, voxel_corners, wrap_angle, Camera, Cuboid,
 };
 use glam::{Mat3, Vec2, Vec3};
 
@@ -406,61 +405,12 @@ fn voxel_indices_run_from_left_front_bottom() {
 // ----------------------------------------------------------------------------------------------------
 // Walls
 
-fn rectangle_room() -> Vec<Vec2> {
-    vec![Vec2::new(0.0, 0.0), Vec2::new(4.0, 0.0), Vec2::new(4.0, 5.0), Vec2::new(0.0, 5.0)]
-}
-
 #[test]
-fn distance_and_angle_to_the_nearest_wall() {
-    let room = rectangle_room();
-    // Footprint x ∈ [0.5, 1.5], y ∈ [2.7, 3.3]: 0.5 m from the wall x = 0 (edge 3, (0,5)→(0,0)).
-    let b = Cuboid::new(Vec3::new(1.0, 3.0, 0.5), Vec3::new(1.0, 0.6, 1.0), 0.0);
-    let w = nearest_wall(&b, &room).unwrap();
-    assert_eq!(w.wall, 3);
-    assert_close(w.distance, 0.5, 1e-6, "distance");
-    assert_close(w.angle, FRAC_PI_2, 1e-6, "width axis points into the wall");
-    // Turned by 0.3 rad: the nearest corner is at x = 1 − (0.5 cos 0.3 + 0.3 sin 0.3).
-    let yaw = 0.3f32;
-    let t = Cuboid { yaw, ..b };
-    let want = 1.0 - (0.5 * yaw.cos() + 0.3 * yaw.sin());
-    assert_close(wall_distance(&t, &room).unwrap(), want, 1e-6, "turned distance");
-    assert_close(wall_angle(&t, &room).unwrap(), FRAC_PI_2 - yaw, 1e-6, "turned angle");
-    // The front does not matter, nor does the polygon's orientation.
-    let flipped = Cuboid { yaw: yaw + PI, ..b };
-    assert_close(wall_angle(&flipped, &room).unwrap(), FRAC_PI_2 - yaw, 1e-5, "yaw + π");
-    let mut clockwise = room.clone();
-    clockwise.reverse();
-    assert_close(wall_distance(&t, &clockwise).unwrap(), want, 1e-6, "clockwise room");
-    assert_close(wall_angle(&t, &clockwise).unwrap(), FRAC_PI_2 - yaw, 1e-6, "clockwise room angle");
-    // Near the top wall y = 5 with the width along it.
-    let top = Cuboid::new(Vec3::new(2.0, 4.5, 0.5), Vec3::new(1.6, 0.6, 1.0), 0.0);
-    let w = nearest_wall(&top, &room).unwrap();
-    assert_eq!(w.wall, 2);
-    assert_close(w.distance, 0.2, 1e-6, "top wall distance");
-    assert_close(w.angle, 0.0, 1e-6, "width along the wall");
-    assert_eq!(nearest_wall(&top, &[Vec2::ZERO]), None);
-}
-
-#[test]
-fn corner_ties_go_to_the_wall_along_the_long_side() {
-    // A 2 × 0.5 box pushed into the corner (0, 0): both walls touch it; its long side runs along y = 0.
-    let room = rectangle_room();
-    let b = Cuboid::new(Vec3::new(1.0, 0.25, 0.5), Vec3::new(2.0, 0.5, 1.0), 0.0);
-    let w = nearest_wall(&b, &room).unwrap();
-    assert_eq!(w.wall, 0);
-    assert_close(w.distance, 0.0, 1e-6, "touching");
-    assert_close(w.angle, 0.0, 1e-6, "along the wall");
-}
-
-#[test]
-fn segment_distance_and_folded_angles() {
+fn segment_distance() {
     let (p, q) = (Vec2::new(0.0, 0.0), Vec2::new(2.0, 0.0));
     assert_close(point_segment_distance(Vec2::new(1.0, 1.5), p, q), 1.5, 1e-6, "above");
     assert_close(point_segment_distance(Vec2::new(5.0, 4.0), p, q), 5.0, 1e-6, "past the end");
     assert_close(point_segment_distance(Vec2::new(3.0, 4.0), p, p), 5.0, 1e-6, "zero-length");
-    for (angle, want) in [(0.2f32, 0.2f32), (FRAC_PI_2, FRAC_PI_2), (2.0, PI - 2.0), (PI, 0.0), (-0.4, 0.4)] {
-        assert_close(undirected_angle(Vec2::from_angle(angle), Vec2::X), want, 1e-6, "fold");
-    }
 }
 
 // ----------------------------------------------------------------------------------------------------

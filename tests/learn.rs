@@ -3,7 +3,7 @@
 //! shares no code with the cutting-plane/clarabel solver; KKT conditions of the primal; resume; bad input.
 
 use cog_gpu::learn::{Checkpoint, Constraint};
-use cog_gpu::learn::{CuttingPlane, SeparationOracle, SsvmOptions};
+use cog_gpu::learn::{CuttingPlane, OneSlack, SeparationOracle, SsvmOptions};
 use cog_gpu::{Error, Result};
 
 /// Multiclass SVM as a structural SVM: φ(x, y) places x in block y, Δ is the 0/1 loss.
@@ -383,6 +383,67 @@ fn bad_input_is_an_error_not_a_panic() {
     let bytes = std::fs::read(&path).unwrap();
     std::fs::write(&path, &bytes[..bytes.len() - 5]).unwrap();
     assert!(matches!(CuttingPlane::resume(options(1.0), &path), Err(Error::Invalid { .. })));
+}
+
+/// The multiclass oracle with an identity per example beyond its features (as the detector's frame names).
+struct Named {
+    inner: Multiclass,
+    fingerprints: Vec<u64>,
+}
+
+impl SeparationOracle for Named {
+    fn num_examples(&self) -> usize {
+        self.inner.num_examples()
+    }
+    fn dim(&self) -> usize {
+        self.inner.dim()
+    }
+    fn ground_truth_features(&self, example: usize) -> Result<Vec<f32>> {
+        self.inner.ground_truth_features(example)
+    }
+    fn example_fingerprint(&self, example: usize) -> u64 {
+        self.fingerprints[example]
+    }
+    fn most_violated(&self, example: usize, w: &[f64]) -> Result<Constraint> {
+        self.inner.most_violated(example, w)
+    }
+}
+
+/// A checkpoint resumes only on the same examples, told apart by their fingerprints when their features
+/// are equal (the detector's negatives, all "no object"): directly and through the 1-slack wrapper, whose
+/// one example's features are only the mean of the inner ones.
+#[test]
+fn resume_refuses_examples_that_differ_only_in_their_fingerprints() {
+    let dir = tempfile::tempdir().unwrap();
+    let named = |fingerprints: Vec<u64>| Named { inner: Multiclass::six_points(), fingerprints };
+    let saved = named(vec![1, 2, 3, 4, 5, 6]);
+    let same = named(vec![1, 2, 3, 4, 5, 6]);
+    let other = named(vec![1, 2, 3, 4, 5, 7]);
+    let swapped = named(vec![1, 2, 3, 4, 6, 5]);
+    let refused = |result: Result<cog_gpu::learn::Solution>| match result {
+        Err(Error::Input(message)) => assert!(message.contains("data hash"), "{message}"),
+        other => panic!("expected a refusal, got {other:?}"),
+    };
+    // n-slack: the data hash folds each example's fingerprint after its features.
+    let path = dir.path().join("n.ckpt");
+    let partial = SsvmOptions { max_iterations: 1, checkpoint: Some(path.clone()), ..options(1.0) };
+    cog_gpu::learn::train(&saved, partial).unwrap();
+    refused(CuttingPlane::resume(options(1.0), &path).unwrap().train(&other));
+    refused(CuttingPlane::resume(options(1.0), &path).unwrap().train(&swapped));
+    assert!(CuttingPlane::resume(options(1.0), &path).unwrap().train(&same).is_ok());
+    // 1-slack: equal mean ground truth, so only the folded fingerprints tell the runs apart.
+    let path = dir.path().join("one.ckpt");
+    let partial = SsvmOptions { max_iterations: 1, checkpoint: Some(path.clone()), ..options(1.0) };
+    cog_gpu::learn::train(&OneSlack::new(&saved).unwrap(), partial).unwrap();
+    for changed in [&other, &swapped] {
+        let wrapped = OneSlack::new(changed).unwrap();
+        assert_eq!(
+            wrapped.ground_truth_features(0).unwrap(),
+            OneSlack::new(&saved).unwrap().ground_truth_features(0).unwrap()
+        );
+        refused(CuttingPlane::resume(options(1.0), &path).unwrap().train(&wrapped));
+    }
+    assert!(CuttingPlane::resume(options(1.0), &path).unwrap().train(&OneSlack::new(&same).unwrap()).is_ok());
 }
 
 /// Scale probe, not part of CI: `cargo test --test learn -- --ignored --nocapture scale_probe`.

@@ -46,7 +46,8 @@ pub struct Checkpoint {
     pub c: f64,
     /// Completed QP solves.
     pub iteration: usize,
-    /// FNV-1a hash of the ground-truth features of all examples: refuses to resume on other data.
+    /// FNV-1a hash of the ground-truth features of all examples, each followed by its
+    /// [`super::SeparationOracle::example_fingerprint`]: refuses to resume on other data.
     pub data_hash: u64,
     pub w: Vec<f64>,
     pub constraints: Vec<WorkingConstraint>,

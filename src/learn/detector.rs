@@ -767,6 +767,11 @@ impl SeparationOracle for DetectorOracle {
         Ok(self.truth_joint_features(example, self.latents[example].load(Ordering::SeqCst)))
     }
 
+    /// The example's frame name: which frames the negatives are (their features are all "no object").
+    fn example_fingerprint(&self, example: usize) -> u64 {
+        super::checkpoint::fnv1a(super::checkpoint::FNV_OFFSET, self.examples[example].name.as_bytes())
+    }
+
     fn most_violated_batch(&self, examples: &[usize], w: &[f64]) -> Result<Vec<Constraint>> {
         let call = self.batch_calls.fetch_add(1, Ordering::SeqCst);
         let forced = self.force_full.swap(false, Ordering::SeqCst);
@@ -826,6 +831,10 @@ impl LatentOracle for DetectorOracle {
 
     fn ground_truth_features(&self, example: usize, latent: usize) -> Result<Vec<f32>> {
         Ok(self.truth_joint_features(example, latent))
+    }
+
+    fn example_fingerprint(&self, example: usize) -> u64 {
+        SeparationOracle::example_fingerprint(self, example)
     }
 
     fn most_violated(&self, example: usize, w: &[f64]) -> Result<Constraint> {
@@ -1161,6 +1170,56 @@ pub struct CollectedExamples {
     pub supporters: SurfaceCategories,
 }
 
+/// The negative frames of [`collect_examples`]: `limits.negatives` of `candidates` (indices into `frames`,
+/// ascending; the frames without the category) chosen as [`ExampleLimits::negative_choice`] says, ascending.
+fn choose_negatives(
+    frames: &[std::path::PathBuf],
+    category: &str,
+    candidates: &[usize],
+    limits: &ExampleLimits,
+) -> Result<Vec<usize>> {
+    let (best_scores, share) = match &limits.negative_choice {
+        NegativeChoice::Spread => {
+            return Ok(spread(candidates.len(), limits.negatives).into_iter().map(|n| candidates[n]).collect())
+        }
+        NegativeChoice::Hardest { best_scores, share } => (best_scores, *share),
+    };
+    let hardness = candidates
+        .iter()
+        .map(|&f| {
+            let name = frame_name(&frames[f]);
+            best_scores.get(&name).copied().ok_or_else(|| {
+                Error::invalid(
+                    &frames[f],
+                    format!(
+                        "hard negatives: the frame '{name}' holds no '{category}', so it is a negative \
+                         candidate, but has no detections file to rank it by (detect every frame of the \
+                         training set)"
+                    ),
+                )
+            })
+        })
+        .collect::<Result<Vec<f32>>>()?;
+    let count = limits.negatives.min(candidates.len());
+    let hard_count = ((count as f32 * share.clamp(0.0, 1.0)).round() as usize).min(count);
+    let hard = hardest(candidates, &hardness, hard_count);
+    let scores: Vec<f32> = hard.iter().map(|f| best_scores[&frame_name(&frames[*f])]).collect();
+    let rest: Vec<usize> = candidates.iter().copied().filter(|f| hard.binary_search(f).is_err()).collect();
+    let mut chosen: Vec<usize> =
+        spread(rest.len(), count - hard_count).into_iter().map(|n| rest[n]).chain(hard.iter().copied()).collect();
+    chosen.sort_unstable();
+    log::info!(
+        "{category}: as negatives the {} hardest of {} frames without one (their best detection scores {:.3} to \
+         {:.3}) and {} spread over the others",
+        hard.len(),
+        candidates.len(),
+        scores.iter().copied().fold(f32::INFINITY, f32::min),
+        scores.iter().copied().fold(f32::NEG_INFINITY, f32::max),
+        count - hard_count,
+    );
+    Ok(chosen)
+}
+
 /// The training examples of `category` from frame directories: reads the annotations of every frame,
 /// picks the instances and negative frames ([`ExampleLimits`]), preprocesses the frames they come from
 /// (in parallel) and builds the examples; with a window on surfaces, also the supporters (see
@@ -1189,48 +1248,7 @@ pub fn collect_examples(
     };
     let positives: Vec<(usize, usize)> =
         spread(positives.len(), limits.positives).into_iter().map(|n| positives[n]).collect();
-    let negatives: Vec<usize> = match &limits.negative_choice {
-        NegativeChoice::Spread => spread(negatives.len(), limits.negatives).into_iter().map(|n| negatives[n]).collect(),
-        NegativeChoice::Hardest { best_scores, share } => {
-            let hardness = negatives
-                .iter()
-                .map(|&f| {
-                    let name = frame_name(&frames[f]);
-                    best_scores.get(&name).copied().ok_or_else(|| {
-                        Error::invalid(
-                            &frames[f],
-                            format!(
-                                "hard negatives: the frame '{name}' holds no '{category}', so it is a negative \
-                                 candidate, but has no detections file to rank it by (detect every frame of the \
-                                 training set)"
-                            ),
-                        )
-                    })
-                })
-                .collect::<Result<Vec<f32>>>()?;
-            let count = limits.negatives.min(negatives.len());
-            let hard_count = ((count as f32 * share.clamp(0.0, 1.0)).round() as usize).min(count);
-            let hard = hardest(&negatives, &hardness, hard_count);
-            let scores: Vec<f32> = hard.iter().map(|f| best_scores[&frame_name(&frames[*f])]).collect();
-            let rest: Vec<usize> = negatives.iter().copied().filter(|f| hard.binary_search(f).is_err()).collect();
-            let mut chosen: Vec<usize> = spread(rest.len(), count - hard_count)
-                .into_iter()
-                .map(|n| rest[n])
-                .chain(hard.iter().copied())
-                .collect();
-            chosen.sort_unstable();
-            log::info!(
-                "{category}: as negatives the {} hardest of {} frames without one (their best detection scores \
-                 {:.3} to {:.3}) and {} spread over the others",
-                hard.len(),
-                negatives.len(),
-                scores.iter().copied().fold(f32::INFINITY, f32::min),
-                scores.iter().copied().fold(f32::NEG_INFINITY, f32::max),
-                count - hard_count,
-            );
-            chosen
-        }
-    };
+    let negatives = choose_negatives(frames, category, &negatives, &limits)?;
     let mut needed: Vec<usize> = positives.iter().map(|p| p.0).chain(negatives.iter().copied()).collect();
     needed.sort_unstable();
     needed.dedup();

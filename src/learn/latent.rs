@@ -40,6 +40,10 @@ pub trait LatentOracle: Sync {
     fn num_latents(&self, example: usize) -> usize;
     /// `φ(x_i, y_i, h)`.
     fn ground_truth_features(&self, example: usize, latent: usize) -> Result<Vec<f32>>;
+    /// As [`SeparationOracle::example_fingerprint`].
+    fn example_fingerprint(&self, _example: usize) -> u64 {
+        0
+    }
     /// `argmax_{ȳ,h̄} Δ(y_i, ȳ) + wᵀφ(x_i, ȳ, h̄)`.
     fn most_violated(&self, example: usize, w: &[f64]) -> Result<Constraint>;
 }
@@ -59,6 +63,9 @@ impl<O: LatentOracle + ?Sized> SeparationOracle for Imputed<'_, O> {
     }
     fn ground_truth_features(&self, example: usize) -> Result<Vec<f32>> {
         self.oracle.ground_truth_features(example, self.latents[example])
+    }
+    fn example_fingerprint(&self, example: usize) -> u64 {
+        self.oracle.example_fingerprint(example)
     }
     fn most_violated(&self, example: usize, w: &[f64]) -> Result<Constraint> {
         self.oracle.most_violated(example, w)

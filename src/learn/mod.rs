@@ -68,6 +68,14 @@ pub trait SeparationOracle: Sync {
     fn dim(&self) -> usize;
     /// `φ(x_i, y_i)`, the features of the ground-truth output of example `i`.
     fn ground_truth_features(&self, example: usize) -> Result<Vec<f32>>;
+    /// What identifies example `i` beyond its ground-truth features (the detector: the frame it was cut
+    /// from), folded into a checkpoint's data hash so that a run resumes only on the same examples. Every
+    /// negative of the detector has the same "no object" features: without this, another choice of
+    /// negative frames of the same count would resume someone else's run silently. Default 0: the
+    /// features alone identify the example.
+    fn example_fingerprint(&self, _example: usize) -> u64 {
+        0
+    }
     /// Loss-augmented inference for example `i` at weights `w` (length `dim()`).
     fn most_violated(&self, example: usize, w: &[f64]) -> Result<Constraint>;
     /// Loss-augmented inference for several examples at the same `w`, in the order given.

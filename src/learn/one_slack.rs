@@ -23,6 +23,7 @@ use std::sync::Mutex;
 
 use rayon::prelude::*;
 
+use super::checkpoint::{fnv1a, FNV_OFFSET};
 use super::{Constraint, SeparationOracle};
 use crate::error::{Error, Result};
 
@@ -42,6 +43,8 @@ pub struct OneSlack<'a, O: SeparationOracle + ?Sized> {
     inner: &'a O,
     ground_truth: Vec<Vec<f32>>,
     mean_ground_truth: Vec<f32>,
+    /// The inner examples' fingerprints folded in order: the one example's identity.
+    fingerprint: u64,
     last: Mutex<PassSummary>,
 }
 
@@ -59,7 +62,13 @@ impl<'a, O: SeparationOracle + ?Sized> OneSlack<'a, O> {
             super::check_features("ground-truth features", i, features, dim)?;
         }
         let mean_ground_truth = mean_rows(ground_truth.iter().map(Vec::as_slice), dim, n);
-        Ok(OneSlack { inner, ground_truth, mean_ground_truth, last: Mutex::new(PassSummary::default()) })
+        // The mean alone cannot tell the detector's negatives apart (all "no object"): fold in which
+        // examples they are, and every example's features, not only their mean.
+        let fingerprint = ground_truth.iter().enumerate().fold(FNV_OFFSET, |hash, (i, features)| {
+            let hash = fnv1a(hash, bytemuck::cast_slice(features));
+            fnv1a(hash, &inner.example_fingerprint(i).to_le_bytes())
+        });
+        Ok(OneSlack { inner, ground_truth, mean_ground_truth, fingerprint, last: Mutex::new(PassSummary::default()) })
     }
 
     /// What the latest call to the inner oracle found, per example.
@@ -90,6 +99,10 @@ impl<O: SeparationOracle + ?Sized> SeparationOracle for OneSlack<'_, O> {
 
     fn ground_truth_features(&self, _example: usize) -> Result<Vec<f32>> {
         Ok(self.mean_ground_truth.clone())
+    }
+
+    fn example_fingerprint(&self, _example: usize) -> u64 {
+        self.fingerprint
     }
 
     fn most_violated(&self, _example: usize, w: &[f64]) -> Result<Constraint> {

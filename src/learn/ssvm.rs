@@ -275,8 +275,10 @@ impl CuttingPlane {
                 Ok(features)
             })
             .collect::<Result<Vec<_>>>()?;
-        let data_hash =
-            ground_truth.iter().fold(FNV_OFFSET, |hash, features| fnv1a(hash, bytemuck::cast_slice(features)));
+        let data_hash = ground_truth.iter().enumerate().fold(FNV_OFFSET, |hash, (example, features)| {
+            let hash = fnv1a(hash, bytemuck::cast_slice(features));
+            fnv1a(hash, &oracle.example_fingerprint(example).to_le_bytes())
+        });
         let fresh = self.state.iteration == 0 && self.state.constraints.is_empty() && self.state.w.is_empty();
         if fresh {
             self.state.num_examples = num_examples;
