@@ -737,6 +737,12 @@ fn write_frame(dir: &Path, frame: &Frame) -> Result<()> {
 // ---------------------------------------------------------------------------------------------------------
 // Datasets
 
+/// A frame directory's name, its identity among a dataset's frames and in a detections directory
+/// (`<name>.json`); the whole path when it has no last component.
+pub fn frame_name(dir: &Path) -> String {
+    dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| dir.display().to_string())
+}
+
 /// Whether a directory looks like a frame: it has `intrinsics.txt` and an `image/` directory.
 pub fn is_frame_dir(dir: &Path) -> bool {
     dir.join("intrinsics.txt").is_file() && dir.join("image").is_dir()

@@ -34,14 +34,14 @@ use cog_gpu::eval::{
     Detection, FrameDetections, SurfaceAccuracy,
 };
 use cog_gpu::features::Preprocessed;
-use cog_gpu::frame::{read_annotations, Dataset, DepthSource, Frame, Object};
+use cog_gpu::frame::{frame_name, read_annotations, Dataset, DepthSource, Frame, Object};
 use cog_gpu::model::{read_models_dir, Model};
 use cog_gpu::synth::{read_support_heights, SUPPORT_FILE};
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use super::{options, GlobalOptions};
+use super::{detection_files, options, GlobalOptions};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -206,29 +206,6 @@ fn progress(len: usize, what: &str) -> anyhow::Result<ProgressBar> {
             .context("progress bar template")?,
     );
     Ok(bar)
-}
-
-/// The frame directory's name, its identity in the detections directory.
-fn frame_name(dir: &Path) -> String {
-    dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| dir.display().to_string())
-}
-
-/// `.json` files of the detections directory by file stem.
-fn detection_files(dir: &Path) -> anyhow::Result<HashMap<String, PathBuf>> {
-    if !dir.is_dir() {
-        bail!("{}: detections directory not found", dir.display());
-    }
-    let entries = std::fs::read_dir(dir).with_context(|| format!("{}: cannot list", dir.display()))?;
-    let mut files = HashMap::new();
-    for entry in entries {
-        let path = entry.with_context(|| format!("{}: cannot list", dir.display()))?.path();
-        if path.is_file() && path.extension().is_some_and(|e| e == "json") {
-            if let Some(stem) = path.file_stem() {
-                files.insert(stem.to_string_lossy().into_owned(), path);
-            }
-        }
-    }
-    Ok(files)
 }
 
 pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {

@@ -51,3 +51,22 @@ pub struct GlobalOptions {
     /// `--cpu`: never ask for a GPU adapter.
     pub force_cpu: bool,
 }
+
+/// `.json` files of a detections directory by file stem (a frame's name, [`cog_gpu::frame::frame_name`]).
+pub fn detection_files(dir: &std::path::Path) -> anyhow::Result<std::collections::HashMap<String, std::path::PathBuf>> {
+    use anyhow::Context;
+    if !dir.is_dir() {
+        anyhow::bail!("{}: detections directory not found", dir.display());
+    }
+    let entries = std::fs::read_dir(dir).with_context(|| format!("{}: cannot list", dir.display()))?;
+    let mut files = std::collections::HashMap::new();
+    for entry in entries {
+        let path = entry.with_context(|| format!("{}: cannot list", dir.display()))?.path();
+        if path.is_file() && path.extension().is_some_and(|e| e == "json") {
+            if let Some(stem) = path.file_stem() {
+                files.insert(stem.to_string_lossy().into_owned(), path);
+            }
+        }
+    }
+    Ok(files)
+}

@@ -106,11 +106,10 @@ pub struct Args {
     /// `score`).
     #[arg(long, value_name = "DETECTIONS_DIR")]
     pub hard_negatives: Option<PathBuf>,
-    #[arg(value_parser = options::probability)]
     /// With `--hard-negatives`: the share of the `--negatives` frames taken hardest first; the rest are
     /// spread evenly over the other frames without the category (0.5: all hardest lost 8–9 AP points on
     /// the calibration set, README "Training").
-    #[arg(long, default_value_t = 0.5, requires = "hard_negatives")]
+    #[arg(long, default_value_t = 0.5, requires = "hard_negatives", value_parser = options::probability)]
     pub hard_share: f32,
     /// Train only on instances the depth sensor saw: an instance whose annotated box holds fewer than
     /// `--min-points` points more than one `--step` above the floor (the window's own keep rule) is not a
@@ -321,14 +320,12 @@ pub enum PathArg {
 /// frame name: `raw_score` when present (a single model's own scale; calibrated probabilities can round
 /// to the same value), else `score`; `f32::NEG_INFINITY` for a file without one (`--hard-negatives`).
 fn best_scores_by_frame(dir: &std::path::Path, category: &str) -> anyhow::Result<BTreeMap<String, f32>> {
-    let entries = std::fs::read_dir(dir).with_context(|| format!("--hard-negatives: cannot read {}", dir.display()))?;
+    let files = super::detection_files(dir).context("--hard-negatives")?;
+    if files.is_empty() {
+        bail!("--hard-negatives: no detection files (*.json) in {}", dir.display());
+    }
     let mut best = BTreeMap::new();
-    for entry in entries {
-        let path = entry.with_context(|| format!("--hard-negatives: cannot read {}", dir.display()))?.path();
-        if path.extension().is_none_or(|e| e != "json") {
-            continue;
-        }
-        let Some(frame) = path.file_stem().map(|s| s.to_string_lossy().into_owned()) else { continue };
+    for (frame, path) in files {
         let detections = cog_gpu::eval::FrameDetections::read(&path)?;
         let score = detections
             .detections
@@ -337,9 +334,6 @@ fn best_scores_by_frame(dir: &std::path::Path, category: &str) -> anyhow::Result
             .map(|d| d.raw_score.unwrap_or(d.score))
             .fold(f32::NEG_INFINITY, f32::max);
         best.insert(frame, score);
-    }
-    if best.is_empty() {
-        bail!("--hard-negatives: no detection files (*.json) in {}", dir.display());
     }
     Ok(best)
 }

@@ -1110,11 +1110,6 @@ pub fn instances_of(objects: &[crate::frame::Object], category: &str) -> Vec<Cub
     objects.iter().filter(|o| o.category == category).map(|o| o.cuboid).collect()
 }
 
-/// A frame's name: its directory's (the name of its detections file, `<name>.json`).
-fn frame_name(frame: &std::path::Path) -> String {
-    frame.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default()
-}
-
 /// Evenly spread choice of `count` of `0..total` (all of them when `count ≥ total`).
 pub fn spread(total: usize, count: usize) -> Vec<usize> {
     if count >= total {
@@ -1187,7 +1182,7 @@ fn choose_negatives(
     let hardness = candidates
         .iter()
         .map(|&f| {
-            let name = frame_name(&frames[f]);
+            let name = crate::frame::frame_name(&frames[f]);
             best_scores.get(&name).copied().ok_or_else(|| {
                 Error::invalid(
                     &frames[f],
@@ -1203,7 +1198,8 @@ fn choose_negatives(
     let count = limits.negatives.min(candidates.len());
     let hard_count = ((count as f32 * share.clamp(0.0, 1.0)).round() as usize).min(count);
     let hard = hardest(candidates, &hardness, hard_count);
-    let scores: Vec<f32> = hard.iter().map(|f| best_scores[&frame_name(&frames[*f])]).collect();
+    let scores: Vec<f32> =
+        candidates.iter().zip(&hardness).filter(|(f, _)| hard.binary_search(f).is_ok()).map(|(_, &h)| h).collect();
     let rest: Vec<usize> = candidates.iter().copied().filter(|f| hard.binary_search(f).is_err()).collect();
     let mut chosen: Vec<usize> =
         spread(rest.len(), count - hard_count).into_iter().map(|n| rest[n]).chain(hard.iter().copied()).collect();
@@ -1290,7 +1286,7 @@ pub fn collect_examples(
     let surfaces: Vec<Vec<SupportSurface>> =
         all_surfaces.iter().map(|frame| frame.iter().map(|(_, s)| *s).collect()).collect();
     let surfaces_of = |f: usize| &surfaces[index_of(f)];
-    let name_of = |f: usize| frame_name(&frames[f]);
+    let name_of = |f: usize| crate::frame::frame_name(&frames[f]);
     let mut jobs: Vec<(String, usize, Option<Cuboid>, Vec<Cuboid>)> = Vec::new();
     let mut off_surface = 0;
     for &(f, k) in &positives {
