@@ -707,17 +707,27 @@ pub fn calibrate(detections: &mut [Detection], models: &[Model]) {
 /// furniture by [`overlay_selection`].
 pub const CROSS_CATEGORY_IOU: f32 = 0.4;
 
+/// `detect --overlay-min-score`'s default: the overlay draws a calibrated detection only when it is more
+/// likely right than wrong. Chosen by that meaning of a calibrated probability, not fitted to any frames;
+/// the README ("Detection", the overlay) gives the precision and the boxes per frame it leads to.
+pub const DEFAULT_OVERLAY_MIN_PROBABILITY: f32 = 0.5;
+
 /// The detections an overlay draws: in score order over all categories (calibrated scores compare across
 /// categories), each skipped when it overlaps an already chosen detection **of another category** with
 /// 3D IoU ≥ [`CROSS_CATEGORY_IOU`] (one object is not drawn as two categories; same-category overlaps were
-/// settled by NMS), until `count` are chosen.
-pub fn overlay_selection(detections: &[Detection], count: usize) -> Vec<Detection> {
+/// settled by NMS), until `count` are chosen. A calibrated detection (one with a `raw_score`, whose `score`
+/// is a probability) whose score is below `min_probability` is not drawn; an uncalibrated one's score is
+/// raw, on no common scale, so the floor does not apply to it (0 draws the best `count` whatever they are).
+pub fn overlay_selection(detections: &[Detection], count: usize, min_probability: f32) -> Vec<Detection> {
     let mut order: Vec<&Detection> = detections.iter().collect();
     order.sort_by(|a, b| b.score.total_cmp(&a.score));
     let mut chosen: Vec<Detection> = Vec::new();
     for d in order {
         if chosen.len() >= count {
             break;
+        }
+        if d.raw_score.is_some() && d.score < min_probability {
+            continue;
         }
         let cuboid = d.cuboid();
         let clash = chosen

@@ -16,9 +16,11 @@
 //!    are comparable between frames: if the rank AP is higher, the scores of different frames are on
 //!    different scales (calibration loses AP).
 //! 4. **Overlay precision** ([`overlay_precision`]): in each frame, the best k detections (k = the frame's
-//!    number of ground-truth boxes of the evaluated categories) over all evaluated categories, chosen exactly
-//!    as the overlay picture chooses them ([`crate::detect::overlay_selection`]: by score, skipping a box
-//!    that overlaps a better one of another category); the fraction of them that are correct.
+//!    number of ground-truth boxes of the evaluated categories) over all evaluated categories, chosen by the
+//!    overlay picture's rule ([`crate::detect::overlay_selection`]: by score, skipping a box that overlaps a
+//!    better one of another category) but without its probability floor; the fraction of them that are
+//!    correct. And the same for the boxes `detect`'s overlay draws ([`OverlayRule::Drawn`]: at most its
+//!    `--overlay-top`, none below its `--overlay-min-score`), with the frames where it draws none.
 //! 5. **False-positive kinds** ([`false_positive_kinds`]): the highest-scoring false positives (as many as
 //!    the category has ground-truth boxes) split into duplicates, poor localisation, confusion with
 //!    another category's object, and background in frames with or without the category — which of them
@@ -254,35 +256,55 @@ pub fn rank_average_precision(
 pub struct OverlayPrecision {
     /// Shown detections that are true positives.
     pub true_positives: usize,
-    /// Detections shown: per frame `min(k, detections of the evaluated categories)`.
+    /// Detections shown (per frame at most the rule's count: see [`OverlayRule`]).
     pub shown: usize,
     /// `true_positives / shown`; `None` when nothing is shown.
     pub precision: Option<f32>,
+    /// Frames evaluated, and of them those where nothing is shown.
+    pub frames: usize,
+    pub frames_without_boxes: usize,
 }
 
-/// Overlay precision: in each image, k = its number of ground-truth boxes of `categories`; of the image's
-/// detections of `categories`, the k that [`overlay_selection`] picks are "shown" (by score, highest first,
-/// ties in list order, all categories together, skipping a detection with 3D IoU ≥
-/// [`crate::detect::CROSS_CATEGORY_IOU`] with a better one of another category). They are matched greedily in that order: a shown detection takes,
-/// among the not yet matched ground-truth boxes of its own category in the image, the one with the highest
-/// 3D IoU, and is a true positive (and marks that box matched) when that IoU is ≥ `iou_threshold`. (Unlike
-/// the benchmark's AP rule, a detection whose best box is taken may still match a second, free box.)
+/// How many detections a frame's overlay shows, for [`overlay_precision`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum OverlayRule {
+    /// k = the frame's number of ground-truth boxes of the evaluated categories, whatever the detections'
+    /// probabilities (the measure: a frame shows as many boxes as it has objects).
+    GroundTruthCount,
+    /// What `detect` draws: at most `top`, none of them a calibrated detection below `min_probability`
+    /// (`detect --overlay-top`, `--overlay-min-score`).
+    Drawn { top: usize, min_probability: f32 },
+}
+
+/// Overlay precision: in each image, of its detections of `categories`, those that [`overlay_selection`]
+/// picks under `rule` are "shown" (by score, highest first, ties in list order, all categories together,
+/// skipping a detection with 3D IoU ≥ [`crate::detect::CROSS_CATEGORY_IOU`] with a better one of another
+/// category; [`OverlayRule::GroundTruthCount`]: k of them, k = the image's ground-truth boxes of
+/// `categories`). They are matched greedily in that order: a shown detection takes, among the not yet
+/// matched ground-truth boxes of its own category in the image, the one with the highest 3D IoU, and is a
+/// true positive (and marks that box matched) when that IoU is ≥ `iou_threshold`. (Unlike the benchmark's
+/// AP rule, a detection whose best box is taken may still match a second, free box.)
 pub fn overlay_precision(
     truth: &[Vec<Object>],
     detections: &[Vec<Detection>],
     categories: &[String],
     iou_threshold: f32,
+    rule: OverlayRule,
 ) -> OverlayPrecision {
     let evaluated = |category: &str| categories.iter().any(|c| c == category);
-    let mut out = OverlayPrecision::default();
+    let mut out = OverlayPrecision { frames: truth.len(), ..OverlayPrecision::default() };
     for (image, objects) in truth.iter().enumerate() {
         let truths: Vec<&Object> = objects.iter().filter(|o| evaluated(&o.category)).collect();
-        let k = truths.len();
         let dets = detections.get(image).map(Vec::as_slice).unwrap_or(&[]);
-        // Exactly what the overlay draws: the best k over the categories, one category per object.
         let candidates: Vec<Detection> = dets.iter().filter(|d| evaluated(&d.category)).cloned().collect();
-        let order = overlay_selection(&candidates, k);
-        let mut matched = vec![false; k];
+        let order = match rule {
+            OverlayRule::GroundTruthCount => overlay_selection(&candidates, truths.len(), 0.0),
+            OverlayRule::Drawn { top, min_probability } => overlay_selection(&candidates, top, min_probability),
+        };
+        if order.is_empty() {
+            out.frames_without_boxes += 1;
+        }
+        let mut matched = vec![false; truths.len()];
         for d in &order {
             out.shown += 1;
             let cuboid = d.cuboid();

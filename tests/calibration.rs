@@ -226,9 +226,32 @@ fn overlay_draws_one_category_per_object() {
         detection("nightstand", [1.4, 1.6, 0.3], [0.5, 0.4, 0.6], 0.6), // beside the bed (IoU < 0.4): kept
         detection("chair", [4.0, 2.0, 0.4], [0.5, 0.5, 0.8], 0.5),
     ];
-    let chosen = overlay_selection(&detections, 3);
+    let chosen = overlay_selection(&detections, 3, 0.0);
     let names: Vec<(&str, f32)> = chosen.iter().map(|d| (d.category.as_str(), d.score)).collect();
     assert_eq!(names, vec![("bed", 0.9), ("bed", 0.7), ("nightstand", 0.6)]);
+}
+
+/// The overlay's probability floor drops calibrated detections below it (wherever they rank) and never an
+/// uncalibrated one, whose score is raw; 0 keeps the plain best-`count` rule.
+#[test]
+fn overlay_floor_applies_to_calibrated_probabilities_only() {
+    let calibrated = |category: &str, x: f32, probability: f32| {
+        let mut d = detection(category, [x, 2.0, 0.5], [1.0, 1.0, 1.0], probability);
+        d.raw_score = Some(probability - 0.5); // any raw score: what marks `score` as a probability
+        d
+    };
+    let uncalibrated = detection("chair", [3.0, 2.0, 0.4], [0.5, 0.5, 0.8], 0.3); // raw 0.3, below the floor
+    let detections = vec![
+        calibrated("bed", 0.0, 0.9),
+        calibrated("table", 6.0, 0.49), // just below 0.5: not drawn
+        uncalibrated,
+        calibrated("sofa", 9.0, 0.5), // at the floor: drawn
+        calibrated("desk", 12.0, 0.1),
+    ];
+    let names = |chosen: Vec<Detection>| -> Vec<String> { chosen.iter().map(|d| d.category.clone()).collect() };
+    assert_eq!(names(overlay_selection(&detections, 8, 0.5)), ["bed", "sofa", "chair"]);
+    assert_eq!(names(overlay_selection(&detections, 2, 0.5)), ["bed", "sofa"]);
+    assert_eq!(names(overlay_selection(&detections, 8, 0.0)), ["bed", "sofa", "table", "chair", "desk"]);
 }
 
 /// The raw score at a probability: the closed form (logit(p) − b) / a, and exactly the boundary of the

@@ -248,6 +248,62 @@ fn the_cli_writes_detections_and_overlays() {
     assert_eq!(printed, vec![read]);
 }
 
+/// `detect --overlay-min-score` reaches the picture: the PNG is exactly the library's overlay of the
+/// detections `overlay_selection` keeps at that floor (by default 0.5, left out wherever they rank), and with
+/// a floor of 1 no box is drawn at all (the picture is the RGB image).
+#[test]
+fn the_overlay_draws_only_calibrated_detections_above_its_floor() {
+    use cog_gpu::calibration::Calibration;
+    use cog_gpu::detect::{overlay_selection, DEFAULT_OVERLAY_MIN_PROBABILITY};
+    let dir = tempfile::tempdir().unwrap();
+    let models = dir.path().join("models");
+    std::fs::create_dir_all(&models).unwrap();
+    let frame = Frame::read(SAMPLE, DepthSource::Raw).unwrap();
+    let mut model = density_model(FeaturePath::Fast, 0.2);
+    // A calibration whose probability is 0.5 at the fourth best raw score: about half the best 8 above the
+    // floor.
+    let everything = DetectOptions { min_score: Some(-100.0), ..DetectOptions::default() };
+    let raw = detect_frame(&frame, std::slice::from_ref(&model), Backend::Cpu, &everything).unwrap().detections;
+    assert!(raw.len() > 8, "{} detections", raw.len());
+    let (a, midpoint) = (2.0, f64::from(raw[3].score));
+    model.calibration = Some(Calibration {
+        a,
+        b: -a * midpoint,
+        detections: 0,
+        true_positives: 0,
+        iou: 0.25,
+        data: String::new(),
+        frames: 0,
+    });
+    model.write(&models.join("bed.json")).unwrap();
+    let name = "synth-bedroom-s52";
+    let picture = |floor: Option<&str>| {
+        let out = dir.path().join(format!("out-{}", floor.unwrap_or("default")));
+        let mut args = vec!["--cpu", "detect", SAMPLE, "--models", models.to_str().unwrap()];
+        args.extend(["--out", out.to_str().unwrap(), "--min-score", "-100"]);
+        if let Some(floor) = floor {
+            args.extend(["--overlay-min-score", floor]);
+        }
+        let output = run(&args);
+        assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+        let detections = FrameDetections::read(&out.join(format!("{name}.json"))).unwrap();
+        (image::open(out.join(format!("{name}.png"))).unwrap().to_rgb8(), detections)
+    };
+    let (png, detections) = picture(None);
+    let drawn = overlay_selection(&detections.detections, 8, DEFAULT_OVERLAY_MIN_PROBABILITY);
+    let unfloored = overlay_selection(&detections.detections, 8, 0.0);
+    assert!(!drawn.is_empty() && drawn.len() < unfloored.len(), "{} against {}", drawn.len(), unfloored.len());
+    let expected = overlay(&frame, &FrameDetections { frame: name.into(), detections: drawn });
+    assert!(png == expected, "the default floor's picture");
+    let (png, detections) = picture(Some("0"));
+    let expected = overlay(&frame, &FrameDetections { frame: name.into(), detections: unfloored });
+    assert!(png == expected && detections.detections.len() > 8, "floor 0: the best 8");
+    let (png, _) = picture(Some("1"));
+    assert!(png == frame.rgb, "floor 1: no box");
+    let output = run(&["detect", SAMPLE, "--overlay-min-score", "1.5"]);
+    assert!(!output.status.success() && String::from_utf8_lossy(&output.stderr).contains("not a probability"));
+}
+
 #[test]
 fn the_cli_names_bad_inputs() {
     let dir = tempfile::tempdir().unwrap();

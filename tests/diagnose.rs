@@ -8,7 +8,7 @@ mod common;
 
 use cog_gpu::diagnose::{
     best_window_ious, diagnose_categories, false_positive_kinds, frame_window_best_ious, in_frame_ranking, oracle_aps,
-    overlay_precision, rank_average_precision, WindowRecall,
+    overlay_precision, rank_average_precision, OverlayRule, WindowRecall,
 };
 use cog_gpu::eval::{Detection, FrameDetections};
 use cog_gpu::features::hypotheses::{sliding_window, window_yaws, WindowOptions};
@@ -148,18 +148,63 @@ fn overlay_precision_by_hand() {
         vec![det("bed", unit_box(0.0, 3.0), 0.9)],
     ];
     // Shown 2 + 2 + 0 + 0 = 4, true positives 1 + 2 = 3.
-    let o = overlay_precision(&truth, &detections, &categories, 0.25);
+    let o = overlay_precision(&truth, &detections, &categories, 0.25, OverlayRule::GroundTruthCount);
     assert_eq!((o.true_positives, o.shown), (3, 4));
     assert!(close(o.precision, 0.75));
     // At IoU 0.5 the second bed of f1 misses (0.43): 2 of 4.
-    let o = overlay_precision(&truth, &detections, &categories, 0.5);
+    let o = overlay_precision(&truth, &detections, &categories, 0.5, OverlayRule::GroundTruthCount);
     assert_eq!((o.true_positives, o.shown), (2, 4));
     // A detection of another category on the box does not count: a chair on f1's bed.
     let chair_on_bed = vec![vec![], vec![det("chair", unit_box(0.0, 3.0), 0.9)]];
-    let o = overlay_precision(&truth, &chair_on_bed, &categories, 0.25);
+    let o = overlay_precision(&truth, &chair_on_bed, &categories, 0.25, OverlayRule::GroundTruthCount);
     assert_eq!((o.true_positives, o.shown, o.precision), (0, 1, Some(0.0)));
-    let none = overlay_precision(&truth, &[], &categories, 0.25);
+    let none = overlay_precision(&truth, &[], &categories, 0.25, OverlayRule::GroundTruthCount);
     assert_eq!((none.shown, none.precision), (0, None));
+    assert_eq!((none.frames, none.frames_without_boxes), (4, 4));
+    // Under the ground-truth count, f2 (no detections) and f3 (k = 0) show nothing.
+    let o = overlay_precision(&truth, &detections, &categories, 0.25, OverlayRule::GroundTruthCount);
+    assert_eq!((o.frames, o.frames_without_boxes), (4, 2));
+}
+
+/// What `detect` draws: at most `top` a frame, calibrated detections below the floor left out (wherever
+/// they rank), by hand.
+#[test]
+fn drawn_overlay_precision_by_hand() {
+    let categories = vec!["bed".to_string(), "chair".to_string()];
+    let truth = vec![
+        vec![object("bed", unit_box(0.0, 3.0)), object("chair", unit_box(0.0, 6.0))],
+        vec![object("chair", unit_box(0.0, 6.0))],
+        vec![],
+    ];
+    let calibrated = |category: &str, cuboid: Cuboid, probability: f32| {
+        let mut d = det(category, cuboid, probability);
+        d.raw_score = Some(0.0);
+        d
+    };
+    let detections = vec![
+        // f0: bed 0.9 (TP), a false chair 0.6, the exact chair 0.4 (below 0.5), a false bed 0.55.
+        vec![
+            calibrated("bed", unit_box(0.0, 3.0), 0.9),
+            calibrated("chair", unit_box(20.0, 6.0), 0.6),
+            calibrated("chair", unit_box(0.0, 6.0), 0.4),
+            calibrated("bed", unit_box(30.0, 3.0), 0.55),
+        ],
+        // f1: the chair at 0.3 only: nothing drawn.
+        vec![calibrated("chair", unit_box(0.0, 6.0), 0.3)],
+        // f2: no ground truth, a false bed at 0.7: drawn, false.
+        vec![calibrated("bed", unit_box(0.0, 3.0), 0.7)],
+    ];
+    let drawn = |top: usize, min_probability: f32| {
+        let rule = OverlayRule::Drawn { top, min_probability };
+        let o = overlay_precision(&truth, &detections, &categories, 0.25, rule);
+        (o.true_positives, o.shown, o.frames_without_boxes)
+    };
+    // Floor 0.5, top 8: f0 shows bed, chair 0.6, bed 0.55 (1 TP of 3); f1 none; f2 one false.
+    assert_eq!(drawn(8, 0.5), (1, 4, 1));
+    // Top 2: f0 shows bed and the false chair.
+    assert_eq!(drawn(2, 0.5), (1, 3, 1));
+    // No floor: f0's exact chair is drawn too (2 of 4), f1's chair (TP): 3 of 6.
+    assert_eq!(drawn(8, 0.0), (3, 6, 0));
 }
 
 #[test]
@@ -360,6 +405,15 @@ fn cli_diagnose_json_and_table() {
     let overlay = &report["overlay_precision"];
     assert_eq!((overlay["true_positives"].as_u64(), overlay["shown"].as_u64()), (Some(2), Some(2)));
     assert!((num(&overlay["precision"]) - 1.0).abs() < 1e-6);
+    // As drawn (detect's defaults: 8 a frame, floor 0.5 — which these uncalibrated scores are not cut
+    // by): a's two boxes (one false) and b's.
+    let drawn = &report["overlay_drawn"];
+    assert_eq!((drawn["top"].as_u64(), num(&drawn["min_probability"])), (Some(8), 0.5));
+    let counts = |d: &Value| ["true_positives", "shown", "frames", "frames_without_boxes"].map(|k| d[k].as_u64());
+    assert_eq!(counts(drawn), [Some(2), Some(3), Some(2), Some(0)]);
+    let out = run(&["--json", "--overlay-top", "1"]);
+    let report: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(counts(&report["overlay_drawn"]), [Some(2), Some(2), Some(2), Some(0)]);
 
     let out = run(&[]);
     assert!(out.status.success());
@@ -370,6 +424,7 @@ fn cli_diagnose_json_and_table() {
         ["bed", "2", "-", "-", "-", "2", "2", "100.0", "83.3", "100.0"]
     );
     assert!(table.contains("2/2 = 100.0"), "{table}");
+    assert!(table.contains("2/3 = 66.7; 1.50 boxes per frame, 0 of 2 frames without a box"), "{table}");
     // The oracle table: a's far box is background; without it both true positives come first.
     let oracle = table.split("AP without the false positives").nth(1).expect("the oracle table");
     for name in ["bed", "mean"] {

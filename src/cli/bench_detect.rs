@@ -46,7 +46,9 @@ use super::detect::{
 };
 use super::GlobalOptions;
 use cog_gpu::backend::Backend;
-use cog_gpu::detect::{compare_paths, detect_preprocessed_timed, DetectOptions, DetectStages, Stopwatch};
+use cog_gpu::detect::{
+    compare_paths, detect_preprocessed_timed, DetectOptions, DetectStages, Stopwatch, DEFAULT_OVERLAY_MIN_PROBABILITY,
+};
 use cog_gpu::eval::Detection;
 use cog_gpu::features::Preprocessed;
 use cog_gpu::frame::{DepthSource, Frame};
@@ -233,7 +235,11 @@ impl Bench<'_> {
         let found = detections.detections.clone();
         let report = FrameReport { detections, layout: layout.as_ref().map(|(_, record)| record.clone()) };
         let text = serde_json::to_string_pretty(&report)?;
-        let picture = overlay_picture(&frame, &best_of(&report, 8), layout.as_ref().map(|(p, _)| &p.room));
+        let picture = overlay_picture(
+            &frame,
+            &best_of(&report, 8, DEFAULT_OVERLAY_MIN_PROBABILITY),
+            layout.as_ref().map(|(p, _)| &p.room),
+        );
         std::hint::black_box((text, picture));
         let output = lap();
         times.output_s = output.wall_s;

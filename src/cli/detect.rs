@@ -19,7 +19,9 @@ use anyhow::{bail, Context};
 use cog_gpu::backend::Backend;
 use cog_gpu::cascade::Cascade;
 use cog_gpu::category::{normalise_name, SURFACE_CATEGORIES};
-use cog_gpu::detect::{detect_frame, overlay, overlay_selection, DetectOptions, DEFAULT_SUPPORT_MIN_SCORE};
+use cog_gpu::detect::{
+    detect_frame, overlay, overlay_selection, DetectOptions, DEFAULT_OVERLAY_MIN_PROBABILITY, DEFAULT_SUPPORT_MIN_SCORE,
+};
 use cog_gpu::draw::category_colour;
 use cog_gpu::eval::FrameDetections;
 use cog_gpu::frame::RoomLayout;
@@ -81,6 +83,12 @@ pub struct Args {
     /// all of them); a picture with every box above the threshold is unreadable.
     #[arg(long, default_value_t = 8)]
     pub overlay_top: usize,
+    /// The overlay (and `--ply`'s boxes) leaves out calibrated detections whose probability (`score`) is
+    /// below this: by default it draws only boxes more likely right than wrong, so a frame where nothing is
+    /// found shows no box; 0 draws the best `--overlay-top` whatever their probability. Detections of
+    /// uncalibrated models (raw scores) are not cut. The JSON keeps every detection.
+    #[arg(long, default_value_t = DEFAULT_OVERLAY_MIN_PROBABILITY, value_parser = options::probability)]
+    pub overlay_min_score: f32,
     /// Print the detections of all frames as one JSON array on stdout (each entry as the frame's detections
     /// file, with the room under "layout" when there is a layout model).
     #[arg(long)]
@@ -344,7 +352,7 @@ fn detect_one(
     let json_path = args.out.join(format!("{}.json", frame.name));
     std::fs::write(&json_path, serde_json::to_string_pretty(&report)?)
         .with_context(|| format!("writing {}", json_path.display()))?;
-    let best = best_of(&report, args.overlay_top);
+    let best = best_of(&report, args.overlay_top, args.overlay_min_score);
     let room = layout.as_ref().map(|(predicted, _)| &predicted.room);
     if !args.no_overlay {
         let png_path = args.out.join(format!("{}.png", frame.name));
@@ -389,11 +397,12 @@ pub(super) fn rescore_in_room(
     Ok(())
 }
 
-/// The best `top` detections over all categories, one category per object (what the overlay draws).
-pub(super) fn best_of(report: &FrameReport, top: usize) -> FrameDetections {
+/// The best `top` detections over all categories, one category per object, none of them a calibrated one
+/// below `min_probability` (what the overlay draws: [`overlay_selection`]).
+pub(super) fn best_of(report: &FrameReport, top: usize, min_probability: f32) -> FrameDetections {
     FrameDetections {
         frame: report.detections.frame.clone(),
-        detections: overlay_selection(&report.detections.detections, top),
+        detections: overlay_selection(&report.detections.detections, top, min_probability),
     }
 }
 

@@ -18,15 +18,17 @@
 //! * `--diagnose [--models DIR] [--step S]` replaces the AP report with the diagnosis of
 //!   [`cog_gpu::diagnose`] (window recall only with `--models`: frames with ground truth of a category that
 //!   has a model are read, preprocessed and windowed as `detect` does; evaluated categories without a model
-//!   get no window numbers and a warning). `--models` and `--step` need `--diagnose`.
+//!   get no window numbers and a warning). `--models` and `--step` need `--diagnose`; so do
+//!   `--overlay-top` and `--overlay-min-score`, the rule of the "overlay as drawn" line (`detect`'s).
 
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
 use cog_gpu::category::{CATEGORIES, LARGE_CATEGORIES};
+use cog_gpu::detect::DEFAULT_OVERLAY_MIN_PROBABILITY;
 use cog_gpu::diagnose::{
-    diagnose_categories, frame_window_best_ious, overlay_precision, CategoryDiagnosis, OverlayPrecision,
+    diagnose_categories, frame_window_best_ious, overlay_precision, CategoryDiagnosis, OverlayPrecision, OverlayRule,
 };
 use cog_gpu::draw::category_colour;
 use cog_gpu::eval::{
@@ -87,6 +89,14 @@ pub struct Args {
     /// With --diagnose --models: overrides every model's window step (metres), as `detect --step`.
     #[arg(long, requires = "models", value_parser = options::step)]
     pub step: Option<f32>,
+    /// With --diagnose: the "overlay as drawn" line measures the boxes `detect` draws with this
+    /// `--overlay-top` (the same default as `detect`'s).
+    #[arg(long, requires = "diagnose", default_value_t = 8)]
+    pub overlay_top: usize,
+    /// With --diagnose: the "overlay as drawn" line measures the boxes `detect` draws with this
+    /// `--overlay-min-score` (the same default as `detect`'s).
+    #[arg(long, requires = "diagnose", default_value_t = DEFAULT_OVERLAY_MIN_PROBABILITY, value_parser = options::probability)]
+    pub overlay_min_score: f32,
     /// Evaluate room layouts instead of detections: per-frame and mean free-space IoU of the `layout`
     /// files (or `detect` files with a "layout") in --detections against each frame's room annotation
     /// (see `eval_layout`).
@@ -146,7 +156,18 @@ type FrameInputs = (Vec<Object>, Option<Vec<Detection>>);
 #[derive(Serialize)]
 struct DiagnosisReport {
     diagnosis: BTreeMap<String, CategoryDiagnosis>,
+    /// k boxes a frame, k = its ground-truth boxes ([`OverlayRule::GroundTruthCount`]).
     overlay_precision: OverlayPrecision,
+    /// The boxes `detect`'s overlay draws ([`OverlayRule::Drawn`]), with the rule's two numbers.
+    overlay_drawn: DrawnOverlay,
+}
+
+#[derive(Serialize)]
+struct DrawnOverlay {
+    top: usize,
+    min_probability: f32,
+    #[serde(flatten)]
+    precision: OverlayPrecision,
 }
 
 /// The `--json` document.
@@ -317,15 +338,22 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
             None => None,
         };
         let diagnosis = diagnose_categories(&truth, &detections, &categories, args.iou, window.as_ref());
-        let overlay = overlay_precision(&truth, &detections, &categories, args.iou);
+        let overlay = overlay_precision(&truth, &detections, &categories, args.iou, OverlayRule::GroundTruthCount);
+        let drawn_rule = OverlayRule::Drawn { top: args.overlay_top, min_probability: args.overlay_min_score };
+        let drawn = overlay_precision(&truth, &detections, &categories, args.iou, drawn_rule);
         if args.json {
             let report = DiagnosisReport {
                 diagnosis: diagnosis.iter().map(|d| (d.category.clone(), d.clone())).collect(),
                 overlay_precision: overlay,
+                overlay_drawn: DrawnOverlay {
+                    top: args.overlay_top,
+                    min_probability: args.overlay_min_score,
+                    precision: drawn,
+                },
             };
             println!("{}", serde_json::to_string_pretty(&report)?);
         } else {
-            print_diagnosis(&args, &diagnosis, &overlay, evaluated, missing);
+            print_diagnosis(&args, &diagnosis, &overlay, &drawn, evaluated, missing);
         }
         return super::batch_result(&failures, names.len());
     }
@@ -662,6 +690,7 @@ fn print_diagnosis(
     args: &Args,
     diagnosis: &[CategoryDiagnosis],
     overlay: &OverlayPrecision,
+    drawn: &OverlayPrecision,
     frames: usize,
     missing: usize,
 ) {
@@ -749,5 +778,18 @@ fn print_diagnosis(
         overlay.true_positives,
         overlay.shown,
         percent(overlay.precision)
+    );
+    let per_frame = |n: usize| if drawn.frames > 0 { n as f32 / drawn.frames as f32 } else { 0.0 };
+    println!(
+        "overlay as drawn (at most {} boxes, calibrated ones with probability ≥ {}): {}/{} = {}; {:.2} boxes per \
+         frame, {} of {} frames without a box",
+        args.overlay_top,
+        args.overlay_min_score,
+        drawn.true_positives,
+        drawn.shown,
+        percent(drawn.precision),
+        per_frame(drawn.shown),
+        drawn.frames_without_boxes,
+        drawn.frames
     );
 }
