@@ -277,7 +277,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     if args.json {
         println!("{}", serde_json::to_string_pretty(&results)?);
     } else {
-        print_summary(&results, &args.out, started.elapsed().as_secs_f64());
+        print_summary(&results, &args, started.elapsed().as_secs_f64());
     }
     super::batch_result(&failures, frames.len())
 }
@@ -416,9 +416,11 @@ pub(super) fn overlay_picture(frame: &Frame, best: &FrameDetections, room: Optio
     img
 }
 
-/// One line per frame: detections per category and the best score.
-fn print_summary(results: &[FrameReport], out: &Path, seconds: f64) {
-    for r in results.iter().map(|r| &r.detections) {
+/// One line per frame: detections per category and the best score, and how many boxes the overlay drew
+/// (so that a picture without a box is explained: nothing reached `--overlay-min-score`).
+fn print_summary(results: &[FrameReport], args: &Args, seconds: f64) {
+    for report in results {
+        let r = &report.detections;
         let mut counts: Vec<(String, usize, f32)> = Vec::new();
         for d in &r.detections {
             match counts.iter_mut().find(|c| c.0 == d.category) {
@@ -427,7 +429,13 @@ fn print_summary(results: &[FrameReport], out: &Path, seconds: f64) {
             }
         }
         let text: Vec<String> = counts.iter().map(|(c, n, best)| format!("{c} {n} (best {best:.2})")).collect();
-        println!("{}: {} detections: {}", r.frame, r.detections.len(), text.join(", "));
+        let drawn = if args.no_overlay {
+            String::new()
+        } else {
+            let boxes = best_of(report, args.overlay_top, args.overlay_min_score).detections.len();
+            format!("; overlay: {boxes} box(es) (calibrated score ≥ {})", args.overlay_min_score)
+        };
+        println!("{}: {} detections: {}{drawn}", r.frame, r.detections.len(), text.join(", "));
     }
-    println!("wrote {} frame(s) to {} in {seconds:.1} s", results.len(), out.display());
+    println!("wrote {} frame(s) to {} in {seconds:.1} s", results.len(), args.out.display());
 }
