@@ -707,6 +707,9 @@ pub fn calibrate(detections: &mut [Detection], models: &[Model]) {
 /// furniture by [`overlay_selection`].
 pub const CROSS_CATEGORY_IOU: f32 = 0.4;
 
+/// `detect --overlay-top`'s default: the most boxes an overlay draws (a picture with more is unreadable).
+pub const DEFAULT_OVERLAY_TOP: usize = 8;
+
 /// `detect --overlay-min-score`'s default: the overlay draws a calibrated detection only when it is more
 /// likely right than wrong. Chosen by that meaning of a calibrated probability, not fitted to any frames;
 /// the README ("Detection", the overlay) gives the precision and the boxes per frame it leads to.

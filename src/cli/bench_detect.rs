@@ -48,6 +48,7 @@ use super::GlobalOptions;
 use cog_gpu::backend::Backend;
 use cog_gpu::detect::{
     compare_paths, detect_preprocessed_timed, DetectOptions, DetectStages, Stopwatch, DEFAULT_OVERLAY_MIN_PROBABILITY,
+    DEFAULT_OVERLAY_TOP,
 };
 use cog_gpu::eval::Detection;
 use cog_gpu::features::Preprocessed;
@@ -237,7 +238,7 @@ impl Bench<'_> {
         let text = serde_json::to_string_pretty(&report)?;
         let picture = overlay_picture(
             &frame,
-            &best_of(&report, 8, DEFAULT_OVERLAY_MIN_PROBABILITY),
+            &best_of(&report, DEFAULT_OVERLAY_TOP, DEFAULT_OVERLAY_MIN_PROBABILITY),
             layout.as_ref().map(|(p, _)| &p.room),
         );
         std::hint::black_box((text, picture));

@@ -20,7 +20,8 @@ use cog_gpu::backend::Backend;
 use cog_gpu::cascade::Cascade;
 use cog_gpu::category::{normalise_name, SURFACE_CATEGORIES};
 use cog_gpu::detect::{
-    detect_frame, overlay, overlay_selection, DetectOptions, DEFAULT_OVERLAY_MIN_PROBABILITY, DEFAULT_SUPPORT_MIN_SCORE,
+    detect_frame, overlay, overlay_selection, DetectOptions, DEFAULT_OVERLAY_MIN_PROBABILITY, DEFAULT_OVERLAY_TOP,
+    DEFAULT_SUPPORT_MIN_SCORE,
 };
 use cog_gpu::draw::category_colour;
 use cog_gpu::eval::FrameDetections;
@@ -81,7 +82,7 @@ pub struct Args {
     pub no_overlay: bool,
     /// Boxes drawn on an overlay: the frame's best this many detections over all categories (the JSON keeps
     /// all of them); a picture with every box above the threshold is unreadable.
-    #[arg(long, default_value_t = 8)]
+    #[arg(long, default_value_t = DEFAULT_OVERLAY_TOP)]
     pub overlay_top: usize,
     /// The overlay (and `--ply`'s boxes) leaves out calibrated detections whose probability (`score`) is
     /// below this: by default it draws only boxes more likely right than wrong, so a frame where nothing is

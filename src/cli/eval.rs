@@ -26,7 +26,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
 use cog_gpu::category::{CATEGORIES, LARGE_CATEGORIES};
-use cog_gpu::detect::DEFAULT_OVERLAY_MIN_PROBABILITY;
+use cog_gpu::detect::{DEFAULT_OVERLAY_MIN_PROBABILITY, DEFAULT_OVERLAY_TOP};
 use cog_gpu::diagnose::{
     diagnose_categories, frame_window_best_ious, overlay_precision, CategoryDiagnosis, OverlayPrecision, OverlayRule,
 };
@@ -91,7 +91,7 @@ pub struct Args {
     pub step: Option<f32>,
     /// With --diagnose: the "overlay as drawn" line measures the boxes `detect` draws with this
     /// `--overlay-top` (the same default as `detect`'s).
-    #[arg(long, requires = "diagnose", default_value_t = 8)]
+    #[arg(long, requires = "diagnose", default_value_t = DEFAULT_OVERLAY_TOP)]
     pub overlay_top: usize,
     /// With --diagnose: the "overlay as drawn" line measures the boxes `detect` draws with this
     /// `--overlay-min-score` (the same default as `detect`'s).
