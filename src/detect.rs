@@ -703,6 +703,66 @@ pub fn calibrate(detections: &mut [Detection], models: &[Model]) {
     detections.sort_by(|a, b| b.score.total_cmp(&a.score));
 }
 
+/// Why the first-stage detections of `categories` cannot be replaced on their own (by
+/// [`replace_categories`]) among those of `models`: a surface model ([`Support::uses_surfaces`]) searches
+/// the surfaces of its supporters' detections, so when one of its supporters is replaced and it is not,
+/// its kept detections stand on surfaces that are no longer there. `None` when they can; the message
+/// names the dependent categories to replace as well.
+pub fn replacement_problem(categories: &[String], models: &[Model]) -> Option<String> {
+    let mut problems = Vec::new();
+    for model in models.iter().filter(|m| m.window.support.uses_surfaces()) {
+        if categories.contains(&model.category) {
+            continue;
+        }
+        let replaced: Vec<&String> = categories.iter().filter(|c| model.window.supporters.contains(c)).collect();
+        if !replaced.is_empty() {
+            let names: Vec<&str> = replaced.iter().map(|c| c.as_str()).collect();
+            problems.push(format!("{} (searched on the surfaces of {})", model.category, names.join(", ")));
+        }
+    }
+    (!problems.is_empty()).then(|| {
+        format!(
+            "the detections of {} depend on the replaced categories' detections: detect those categories \
+             again too and replace them with the others",
+            problems.join("; ")
+        )
+    })
+}
+
+/// One frame's first-stage detections (from `detect` with `models`, no cascade) with those of
+/// `categories` replaced by those of `update` (the same frame detected again, with the same options, with
+/// new models of `categories`; its detections of other categories are ignored), in the order `detect` with
+/// all the new models writes them: detect lists the floor (and free-window) models' detections sorted by
+/// raw score, ties in category order, then the surface models' likewise, and finally sorts all of them
+/// by calibrated score, a stable sort ([`calibrate`]); so the merged list is sorted by (calibrated score
+/// descending, floor before surface models, raw score descending, category), stably, each category's
+/// detections keeping their order. A category without a model in `models` counts as a floor model
+/// (the caller checks that every category has one). Chosen so that re-detecting one category of a large
+/// set and merging it gives, detection for detection, what detecting the whole set again would give
+/// (`tests/merge_detections.rs` checks it against a full detection), at the cost of one model's detection.
+/// It requires [`replacement_problem`] to be `None`.
+pub fn replace_categories(
+    base: &[Detection],
+    update: &[Detection],
+    categories: &[String],
+    models: &[Model],
+) -> Vec<Detection> {
+    let replaced = |d: &&Detection| categories.contains(&d.category);
+    let mut merged: Vec<Detection> =
+        base.iter().filter(|d| !replaced(d)).chain(update.iter().filter(replaced)).cloned().collect();
+    let on_surfaces = |d: &Detection| {
+        models.iter().find(|m| m.category == d.category).is_some_and(|m| m.window.support.uses_surfaces())
+    };
+    merged.sort_by(|a, b| {
+        b.score
+            .total_cmp(&a.score)
+            .then(on_surfaces(a).cmp(&on_surfaces(b)))
+            .then(b.raw_score.unwrap_or(b.score).total_cmp(&a.raw_score.unwrap_or(a.score)))
+            .then(a.category.cmp(&b.category))
+    });
+    merged
+}
+
 /// 3D IoU above which a lower-scoring detection of another category is taken for the same piece of
 /// furniture by [`overlay_selection`].
 pub const CROSS_CATEGORY_IOU: f32 = 0.4;

@@ -40,6 +40,8 @@ enum Command {
     Rescore(cli::rescore::Args),
     /// Combine cascades trained with different feature sets: per category the best cross-validated stage.
     MergeCascades(cli::merge_cascades::Args),
+    /// Replace some categories' first-stage detections by those of new models, without detecting the rest.
+    MergeDetections(cli::merge_detections::Args),
     /// Train one category's detector (structural SVM) on annotated frames and write a model file.
     Train(cli::train::Args),
     /// Room layout of frames: a Manhattan cuboid per frame (JSON, overlay picture, optional PLY).
@@ -83,6 +85,7 @@ fn main() {
         Command::Cascade(args) => cli::cascade::run(args, &options),
         Command::Rescore(args) => cli::rescore::run(args, &options),
         Command::MergeCascades(args) => cli::merge_cascades::run(args, &options),
+        Command::MergeDetections(args) => cli::merge_detections::run(args, &options),
         Command::Layout(args) => cli::layout::run(args, &options),
         Command::TrainLayout(args) => cli::train_layout::run(args, &options),
     };

@@ -306,6 +306,18 @@ fn numeric_options_are_range_checked_naming_flag_value_and_range() {
         ),
         (vec!["calibrate", "--data", f, "--detections", f, "--categories", ",bed"], vec!["--categories", "empty name"]),
         (vec!["eval", "--data", f, "--detections", f, "--diagnose", "--models", f, "--step", "0"], vec!["--step"]),
+        (
+            vec!["merge-detections", "--base", f, "--update", f, "--categories", "bed,,chair", "--out", f],
+            vec!["--categories", "empty name"],
+        ),
+        (
+            vec!["merge-detections", "--base", f, "--update", f, "--categories", "wardrobe", "--out", f],
+            vec!["no model for category 'wardrobe'"],
+        ),
+        (
+            vec!["merge-detections", "--base", f, "--update", f, "--categories", "bed", "--out", f],
+            vec!["--out must differ from --base"],
+        ),
         (vec!["synth", "--out", text(&synth_out), "--frames", "1", "--rooms", ""], vec!["--rooms"]),
     ];
     for (args, needles) in &cases {

@@ -11,6 +11,7 @@ pub mod in_flight;
 pub mod info;
 pub mod layout;
 pub mod merge_cascades;
+pub mod merge_detections;
 pub mod options;
 pub mod rescore;
 pub mod score;

@@ -127,3 +127,12 @@ pub fn names(flag: &str, values: &[String]) -> anyhow::Result<Vec<String>> {
     }
     Ok(names)
 }
+
+/// Whether two paths name the same existing directory (false when either does not exist yet): an output
+/// directory that is also an input would be overwritten while it is read.
+pub fn same_dir(a: &std::path::Path, b: &std::path::Path) -> bool {
+    match (a.canonicalize(), b.canonicalize()) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => false,
+    }
+}

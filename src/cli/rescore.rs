@@ -30,11 +30,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     if !args.detections.is_dir() {
         bail!("{}: detections directory not found", args.detections.display());
     }
-    let same = |a: &std::path::Path, b: &std::path::Path| match (a.canonicalize(), b.canonicalize()) {
-        (Ok(a), Ok(b)) => a == b,
-        _ => false,
-    };
-    if same(&args.detections, &args.out) {
+    if super::options::same_dir(&args.detections, &args.out) {
         bail!("{}: --out must differ from --detections (the first-stage files are kept)", args.out.display());
     }
     let mut inputs: Vec<PathBuf> = std::fs::read_dir(&args.detections)

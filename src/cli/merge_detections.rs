@@ -1,0 +1,174 @@
+//! `cog-gpu merge-detections --base DIR --update DIR --categories a,b --out DIR [--models DIR]`: replaces,
+//! in every first-stage detections file of `--base` (from `detect --no-cascade`), the detections of
+//! `--categories` by those of the same frame in `--update` (`detect --no-cascade --categories a,b` with new
+//! models of those categories and the same other options), and writes the merged files to `--out`
+//! ([`cog_gpu::detect::replace_categories`]): what detecting the whole set again with the new models would
+//! write, at the cost of detecting only the changed categories. So a change of one first-stage model
+//! re-detects one category of the cascade's training set (`cog-gpu cascade`) instead of all 19.
+//!
+//! Refused: cascaded files (merge the first stage, then `rescore`); a replaced category on whose detections
+//! a surface model (monitor on desks, sink on counters) that is not replaced searches; a frame of one
+//! directory missing from the other; an `--update` without any detection of the categories.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context};
+use cog_gpu::category::normalise_name;
+use cog_gpu::detect::{replace_categories, replacement_problem};
+use cog_gpu::eval::FrameDetections;
+use cog_gpu::model::read_models_dir;
+
+use super::GlobalOptions;
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// First-stage detections of every category (`<frame>.json` files from `detect --no-cascade`).
+    #[arg(long)]
+    pub base: PathBuf,
+    /// The same frames detected again with the new models of --categories (`detect --no-cascade
+    /// --categories ...`, every other option as for --base); its detections of other categories are ignored.
+    #[arg(long)]
+    pub update: PathBuf,
+    /// The categories whose detections --update replaces (comma-separated).
+    #[arg(long, value_delimiter = ',', required = true)]
+    pub categories: Vec<String>,
+    /// The models of the merged detections (--base's, with the new ones of --categories): they say which
+    /// models search support surfaces, for the order `detect` writes detections in and for the check that
+    /// no kept category depends on a replaced one.
+    #[arg(long, default_value = "assets/models")]
+    pub models: PathBuf,
+    /// Where to write the merged files (neither --base nor --update).
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
+    let categories: Vec<String> =
+        super::options::names("--categories", &args.categories)?.iter().map(|c| normalise_name(c).0).collect();
+    let models = read_models_dir(&args.models, None)?;
+    for category in &categories {
+        if !models.iter().any(|m| &m.category == category) {
+            bail!("{}: no model for category '{category}' ({category}.json)", args.models.display());
+        }
+    }
+    if let Some(problem) = replacement_problem(&categories, &models) {
+        bail!("--categories {}: {problem}", categories.join(","));
+    }
+    for (dir, flag) in [(&args.base, "--base"), (&args.update, "--update")] {
+        if !dir.is_dir() {
+            bail!("{}: {flag} detections directory not found", dir.display());
+        }
+        if super::options::same_dir(dir, &args.out) {
+            bail!(
+                "{}: --out must differ from {flag} (its files are read while the merged ones are written)",
+                dir.display()
+            );
+        }
+    }
+    let base_files = detection_files(&args.base)?;
+    let update_files = detection_files(&args.update)?;
+    if base_files.is_empty() {
+        bail!("{}: no detections files (<frame>.json)", args.base.display());
+    }
+    if let Some(extra) = update_files.iter().find(|name| !base_files.contains(name)) {
+        bail!("{}: has no counterpart {} in --base {}", args.update.join(extra).display(), extra, args.base.display());
+    }
+    let mut added = vec![0usize; categories.len()];
+    let mut removed = vec![0usize; categories.len()];
+    let mut merged_files = Vec::with_capacity(base_files.len());
+    for name in &base_files {
+        let (base_path, update_path) = (args.base.join(name), args.update.join(name));
+        if !update_path.is_file() {
+            bail!(
+                "{}: missing: --update must hold every frame of --base ({})",
+                update_path.display(),
+                args.base.display()
+            );
+        }
+        let base_text = cog_gpu::frame::read_text(&base_path)?;
+        let base = first_stage(&base_path, &base_text)?;
+        let update = first_stage(&update_path, &cog_gpu::frame::read_text(&update_path)?)?;
+        if update.frame != base.frame {
+            bail!("{}: frame '{}', but the --base file is frame '{}'", update_path.display(), update.frame, base.frame);
+        }
+        if let Some(d) =
+            base.detections.iter().chain(&update.detections).find(|d| !models.iter().any(|m| m.category == d.category))
+        {
+            bail!(
+                "{}: a '{}' detection, and {} has no {}.json: --models must hold the models of every category \
+                 in the detections",
+                base_path.display(),
+                d.category,
+                args.models.display(),
+                d.category
+            );
+        }
+        for (n, category) in categories.iter().enumerate() {
+            removed[n] += base.detections.iter().filter(|d| &d.category == category).count();
+            added[n] += update.detections.iter().filter(|d| &d.category == category).count();
+        }
+        let detections = replace_categories(&base.detections, &update.detections, &categories, &models);
+        // Every other field of the base file (the room under "layout") kept as it was; through text, so
+        // that each f32 keeps its shortest form, as `detect` writes it.
+        let mut file: serde_json::Value =
+            serde_json::from_str(&base_text).with_context(|| format!("{}", base_path.display()))?;
+        file["detections"] = serde_json::from_str(&serde_json::to_string(&detections)?)?;
+        merged_files.push((name.clone(), file));
+    }
+    if added.iter().all(|&n| n == 0) {
+        bail!(
+            "{}: holds no detection of {} in any frame: was it made with `detect --categories {}`?",
+            args.update.display(),
+            categories.join(", "),
+            categories.join(",")
+        );
+    }
+    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    for (name, file) in &merged_files {
+        let out = args.out.join(name);
+        std::fs::write(&out, serde_json::to_string_pretty(file)?)
+            .with_context(|| format!("writing {}", out.display()))?;
+    }
+    println!("{:<12} {:>10} {:>10}", "category", "removed", "added");
+    for (n, category) in categories.iter().enumerate() {
+        println!("{category:<12} {:>10} {:>10}", removed[n], added[n]);
+        if added[n] == 0 {
+            log::warn!("{}: no {category} detection in any frame", args.update.display());
+        }
+    }
+    println!(
+        "merged {} frame(s) of {} with {} of {} into {}",
+        merged_files.len(),
+        args.base.display(),
+        categories.join(","),
+        args.update.display(),
+        args.out.display()
+    );
+    Ok(())
+}
+
+/// The `<frame>.json` file names of a detections directory, sorted.
+fn detection_files(dir: &Path) -> anyhow::Result<Vec<String>> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .with_context(|| format!("reading {}", dir.display()))?
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "json") && p.is_file())
+        .filter_map(|p| p.file_name().and_then(|n| n.to_str()).map(String::from))
+        .collect();
+    names.sort();
+    Ok(names)
+}
+
+/// A detections file's contents, refused when the cascade rescored it.
+fn first_stage(path: &Path, text: &str) -> anyhow::Result<FrameDetections> {
+    let frame = FrameDetections::parse(path, text)?;
+    if frame.detections.iter().any(|d| d.first_stage_score.is_some() || d.context_score.is_some()) {
+        bail!(
+            "{}: rescored by the context cascade: merge first-stage files (`detect --no-cascade`), then \
+             `rescore` the merged ones",
+            path.display()
+        );
+    }
+    Ok(frame)
+}
