@@ -305,6 +305,43 @@ fn the_overlay_draws_only_calibrated_detections_above_its_floor() {
 }
 
 #[test]
+fn resume_keeps_finished_frames_and_detects_the_others_again() {
+    let dir = tempfile::tempdir().unwrap();
+    let models = models_dir(dir.path());
+    let out = dir.path().join("out");
+    let detect = |extra: &[&str]| {
+        let mut args = vec!["--cpu", "detect", "assets/sample", "--models", models.to_str().unwrap()];
+        args.extend(["--out", out.to_str().unwrap(), "--no-overlay"]);
+        args.extend(extra);
+        let output = run(&args);
+        assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+        (String::from_utf8_lossy(&output.stdout).into_owned(), String::from_utf8_lossy(&output.stderr).into_owned())
+    };
+    detect(&[]);
+    let (synth, real) = (out.join("synth-bedroom-s52.json"), out.join("kv1-b3dodata-img_0063.json"));
+    let read = |p: &Path| std::fs::read_to_string(p).unwrap();
+    let (synth_first, real_first) = (read(&synth), read(&real));
+    // A finished frame, marked (its detections emptied, which no detection here gives), and one whose file
+    // an interrupted run cut short.
+    let mut marked: serde_json::Value = serde_json::from_str(&synth_first).unwrap();
+    assert!(!marked["detections"].as_array().unwrap().is_empty());
+    marked["detections"] = serde_json::json!([]);
+    std::fs::write(&synth, marked.to_string()).unwrap();
+    std::fs::write(&real, &real_first[..real_first.len() / 2]).unwrap();
+    let (stdout, stderr) = detect(&["--resume"]);
+    assert_eq!(read(&synth), marked.to_string(), "the finished frame is kept as it was");
+    assert_eq!(read(&real), real_first, "the cut file is detected again, as the first time");
+    assert!(stderr.contains("--resume: kept 1 frame(s)"), "{stderr}");
+    assert!(stdout.contains("synth-bedroom-s52: 0 detections"), "the summary reads the kept file: {stdout}");
+    // Without --resume every frame is detected again; no partial file is left behind.
+    detect(&[]);
+    assert_eq!(read(&synth), synth_first);
+    let partial =
+        std::fs::read_dir(&out).unwrap().flatten().any(|e| e.file_name().to_string_lossy().ends_with(".partial"));
+    assert!(!partial);
+}
+
+#[test]
 fn the_cli_names_bad_inputs() {
     let dir = tempfile::tempdir().unwrap();
     let models = models_dir(dir.path());

@@ -106,6 +106,12 @@ pub struct Args {
     /// others and fail at the end).
     #[arg(long)]
     pub fail_fast: bool,
+    /// Keep the frames already detected in --out (a `<frame>.json` that reads as that frame's detections
+    /// file) and detect only the others: an interrupted run over many frames goes on where it stopped. Use
+    /// the same models and options as the run it resumes (the kept files are not checked against them);
+    /// the kept frames' overlays and PLY files are not drawn again.
+    #[arg(long)]
+    pub resume: bool,
     /// Frames detected at once, so that one frame's CPU stages overlap another's GPU work (same
     /// detections; each frame in flight adds ~0.5 GB of memory at step 0.1). Default: 3 when the GPU
     /// scores the fast path, else 1 (on the CPU path every core is already busy).
@@ -248,11 +254,17 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     if in_flight > 1 && frames.len() > 1 {
         log::info!("{in_flight} frames in flight");
     }
+    let kept = std::sync::atomic::AtomicUsize::new(0);
     let outcomes = super::in_flight::in_flight(
         &frames,
         in_flight,
         |_, dir| {
             progress.set_message(dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default());
+            if let Some(report) = args.resume.then(|| finished_report(&args.out, dir)).flatten() {
+                kept.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                progress.inc(1);
+                return Ok(report);
+            }
             let outcome =
                 detect_one(dir, &models, cascade.as_ref(), layout_model.as_ref(), backend, &detect_options, &args);
             if let (Err(err), false) = (&outcome, args.fail_fast) {
@@ -275,6 +287,10 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         }
     }
     progress.finish_and_clear();
+    let kept = kept.into_inner();
+    if kept > 0 {
+        log::info!("--resume: kept {kept} frame(s) already detected in {}", args.out.display());
+    }
     if args.json {
         println!("{}", serde_json::to_string_pretty(&results)?);
     } else {
@@ -325,12 +341,28 @@ pub(super) fn cascade_for(
 /// What `detect` reports of one frame: the detections file `{"frame", "detections"}`, plus `"layout"` (the
 /// layout file's record) when the room was laid out. Written to `<frame>.json` and, with `--json`, as one
 /// entry of the array on stdout.
-#[derive(serde::Serialize)]
+#[derive(serde::Serialize, serde::Deserialize)]
 pub(super) struct FrameReport {
     #[serde(flatten)]
     pub detections: FrameDetections,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub layout: Option<LayoutRecord>,
+}
+
+/// `--resume`: the report of the frame in `dir` that an earlier run wrote to `out`, when `<frame>.json` is
+/// there and reads as that frame's detections file (with a readable room when it has one); else `None`,
+/// and the frame is detected again.
+fn finished_report(out: &Path, dir: &Path) -> Option<FrameReport> {
+    let name = dir.file_name()?.to_string_lossy().into_owned();
+    let path = out.join(format!("{name}.json"));
+    let text = std::fs::read_to_string(&path).ok()?;
+    let detections = FrameDetections::parse(&path, &text).ok().filter(|d| d.frame == name)?;
+    let file: serde_json::Value = serde_json::from_str(&text).ok()?;
+    let layout = match file.get("layout") {
+        None => None,
+        Some(record) => Some(serde_json::from_value::<LayoutRecord>(record.clone()).ok()?),
+    };
+    Some(FrameReport { detections, layout })
 }
 
 /// Reads one frame, detects (rescores with `cascade`, lays out the room with `layout_model`), and writes
@@ -351,8 +383,12 @@ fn detect_one(
     rescore_in_room(cascade, &mut detections, layout.as_ref())?;
     let report = FrameReport { detections, layout: layout.as_ref().map(|(_, record)| record.clone()) };
     let json_path = args.out.join(format!("{}.json", frame.name));
-    std::fs::write(&json_path, serde_json::to_string_pretty(&report)?)
-        .with_context(|| format!("writing {}", json_path.display()))?;
+    // Written beside and renamed into place: an interrupted run leaves no truncated `<frame>.json` that
+    // `--resume` would have to tell from a finished one.
+    let partial = args.out.join(format!("{}.json.partial", frame.name));
+    std::fs::write(&partial, serde_json::to_string_pretty(&report)?)
+        .with_context(|| format!("writing {}", partial.display()))?;
+    std::fs::rename(&partial, &json_path).with_context(|| format!("renaming {} into place", partial.display()))?;
     let best = best_of(&report, args.overlay_top, args.overlay_min_score);
     let room = layout.as_ref().map(|(predicted, _)| &predicted.room);
     if !args.no_overlay {
