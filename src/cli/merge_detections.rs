@@ -149,15 +149,8 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
 
 /// The `<frame>.json` file names of a detections directory, sorted.
 fn detection_files(dir: &Path) -> anyhow::Result<Vec<String>> {
-    let mut names: Vec<String> = std::fs::read_dir(dir)
-        .with_context(|| format!("reading {}", dir.display()))?
-        .flatten()
-        .map(|e| e.path())
-        .filter(|p| p.extension().is_some_and(|x| x == "json") && p.is_file())
-        .filter_map(|p| p.file_name().and_then(|n| n.to_str()).map(String::from))
-        .collect();
-    names.sort();
-    Ok(names)
+    let paths = super::options::json_files(dir)?;
+    Ok(paths.iter().filter_map(|p| p.file_name().and_then(|n| n.to_str()).map(String::from)).collect())
 }
 
 /// A detections file's contents, refused when the cascade rescored it.

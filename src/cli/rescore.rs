@@ -33,13 +33,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     if super::options::same_dir(&args.detections, &args.out) {
         bail!("{}: --out must differ from --detections (the first-stage files are kept)", args.out.display());
     }
-    let mut inputs: Vec<PathBuf> = std::fs::read_dir(&args.detections)
-        .with_context(|| format!("reading {}", args.detections.display()))?
-        .flatten()
-        .map(|e| e.path())
-        .filter(|p| p.extension().is_some_and(|x| x == "json") && p.is_file())
-        .collect();
-    inputs.sort();
+    let inputs = super::options::json_files(&args.detections)?;
     if inputs.is_empty() {
         bail!("{}: no detections files (<frame>.json)", args.detections.display());
     }
