@@ -304,16 +304,21 @@ fn the_overlay_draws_only_calibrated_detections_above_its_floor() {
     assert!(!output.status.success() && String::from_utf8_lossy(&output.stderr).contains("not a probability"));
 }
 
+/// `detect` of the sample frames on the CPU with `models` into `out`, without overlays, plus `extra`.
+fn detect_samples(models: &Path, out: &Path, extra: &[&str]) -> std::process::Output {
+    let mut args = vec!["--cpu", "detect", "assets/sample", "--models", models.to_str().unwrap()];
+    args.extend(["--out", out.to_str().unwrap(), "--no-overlay"]);
+    args.extend(extra);
+    run(&args)
+}
+
 #[test]
 fn resume_keeps_finished_frames_and_detects_the_others_again() {
     let dir = tempfile::tempdir().unwrap();
     let models = models_dir(dir.path());
     let out = dir.path().join("out");
     let detect = |extra: &[&str]| {
-        let mut args = vec!["--cpu", "detect", "assets/sample", "--models", models.to_str().unwrap()];
-        args.extend(["--out", out.to_str().unwrap(), "--no-overlay"]);
-        args.extend(extra);
-        let output = run(&args);
+        let output = detect_samples(&models, &out, extra);
         assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
         (String::from_utf8_lossy(&output.stdout).into_owned(), String::from_utf8_lossy(&output.stderr).into_owned())
     };
@@ -339,6 +344,47 @@ fn resume_keeps_finished_frames_and_detects_the_others_again() {
     let partial =
         std::fs::read_dir(&out).unwrap().flatten().any(|e| e.file_name().to_string_lossy().ends_with(".partial"));
     assert!(!partial);
+}
+
+#[test]
+fn resume_refuses_files_of_other_models_or_options() {
+    let dir = tempfile::tempdir().unwrap();
+    let models = models_dir(dir.path());
+    let out = dir.path().join("out");
+    let detect = |extra: &[&str]| {
+        let output = detect_samples(&models, &out, extra);
+        (output.status.success(), String::from_utf8_lossy(&output.stderr).into_owned())
+    };
+    assert!(detect(&[]).0);
+    let synth = out.join("synth-bedroom-s52.json");
+    let read = |p: &Path| std::fs::read_to_string(p).unwrap();
+    let first = read(&synth);
+    let file: serde_json::Value = serde_json::from_str(&first).unwrap();
+    let fingerprint = file["run"].as_str().unwrap().to_string();
+    assert!(fingerprint.len() == 16 && fingerprint.chars().all(|c| c.is_ascii_hexdigit()), "{fingerprint}");
+    // Another detection option, another model: refused before anything is detected, the files untouched.
+    let (ok, stderr) = detect(&["--resume", "--max-per-category", "3"]);
+    let refused = stderr.contains("2 of the detections files") && stderr.contains("other models or options");
+    assert!(!ok && refused && stderr.contains(&format!("run {fingerprint}")), "{stderr}");
+    assert_eq!(read(&synth), first);
+    let bed = models.join("bed.json");
+    let model = read(&bed);
+    let mut changed: serde_json::Value = serde_json::from_str(&model).unwrap();
+    changed["threshold"] = serde_json::json!(changed["threshold"].as_f64().unwrap() + 0.5);
+    std::fs::write(&bed, changed.to_string()).unwrap();
+    let (ok, stderr) = detect(&["--resume"]);
+    assert!(!ok && stderr.contains("other models or options"), "{stderr}");
+    std::fs::write(&bed, &model).unwrap();
+    // An option that changes only the pictures is not part of the run; the same run resumes.
+    let (ok, stderr) = detect(&["--resume", "--overlay-top", "3"]);
+    assert!(ok && stderr.contains("--resume: kept 2 frame(s)"), "{stderr}");
+    // A file without a fingerprint (an older cog-gpu's) is kept, with a warning.
+    let mut legacy = file.clone();
+    legacy.as_object_mut().unwrap().remove("run");
+    std::fs::write(&synth, legacy.to_string()).unwrap();
+    let (ok, stderr) = detect(&["--resume"]);
+    assert!(ok && stderr.contains("1 detections file(s)") && stderr.contains("no run fingerprint"), "{stderr}");
+    assert_eq!(read(&synth), legacy.to_string());
 }
 
 #[test]

@@ -63,7 +63,8 @@ fn detect(data: &Path, models: &Path, out: &Path, categories: Option<&str>) {
     ok(&args);
 }
 
-/// Each file of `dir` as JSON, by name.
+/// Each file of `dir` as JSON, by name, without `detect`'s `"run"` fingerprint (a merged file comes from no
+/// single detect run, and `merge-detections` writes none: checked here).
 fn files(dir: &Path) -> Vec<(String, serde_json::Value)> {
     let mut names: Vec<String> =
         std::fs::read_dir(dir).unwrap().flatten().map(|e| e.file_name().to_string_lossy().into_owned()).collect();
@@ -71,7 +72,11 @@ fn files(dir: &Path) -> Vec<(String, serde_json::Value)> {
     names
         .into_iter()
         .map(|n| {
-            let value = serde_json::from_str(&std::fs::read_to_string(dir.join(&n)).unwrap()).unwrap();
+            let mut value: serde_json::Value =
+                serde_json::from_str(&std::fs::read_to_string(dir.join(&n)).unwrap()).unwrap();
+            let run = value.as_object_mut().unwrap().remove("run");
+            let merged = dir.file_name().is_some_and(|d| d.to_string_lossy().starts_with("step"));
+            assert_eq!(run.is_some(), !merged, "{n} in {}", dir.display());
             (n, value)
         })
         .collect()

@@ -234,7 +234,7 @@ impl Bench<'_> {
         let rescored = lap();
         times.cascade_s = rescored.wall_s;
         let found = detections.detections.clone();
-        let report = FrameReport { detections, layout: layout.as_ref().map(|(_, record)| record.clone()) };
+        let report = FrameReport { detections, layout: layout.as_ref().map(|(_, record)| record.clone()), run: None };
         let text = serde_json::to_string_pretty(&report)?;
         let picture = overlay_picture(
             &frame,

@@ -107,9 +107,9 @@ pub struct Args {
     #[arg(long)]
     pub fail_fast: bool,
     /// Keep the frames already detected in --out (a `<frame>.json` that reads as that frame's detections
-    /// file) and detect only the others: an interrupted run over many frames goes on where it stopped. Use
-    /// the same models and options as the run it resumes (the kept files are not checked against them);
-    /// the kept frames' overlays and PLY files are not drawn again.
+    /// file) and detect only the others: an interrupted run over many frames goes on where it stopped. The
+    /// kept files must come from the same models and options (their `"run"` fingerprint; a mismatch stops
+    /// the run before anything is detected); the kept frames' overlays and PLY files are not drawn again.
     #[arg(long)]
     pub resume: bool,
     /// Frames detected at once, so that one frame's CPU stages overlap another's GPU work (same
@@ -231,6 +231,10 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     // The room layout comes with the detections when the models directory holds a layout model.
     let layout_model = super::layout::model_in_dir(&models_dir)?;
     let frames = frame_dirs(&args.frames)?;
+    let run = run_fingerprint(&models, cascade.as_ref(), layout_model.as_ref(), &detect_options)?;
+    if args.resume {
+        check_resumable(&args.out, &frames, &run)?;
+    }
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating the output directory {}", args.out.display()))?;
     // Both feature paths score on the GPU when there is one (fast: gpu::fast, exact: gpu::features).
@@ -254,6 +258,15 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     if in_flight > 1 && frames.len() > 1 {
         log::info!("{in_flight} frames in flight");
     }
+    let job = DetectRun {
+        models: &models,
+        cascade: cascade.as_ref(),
+        layout_model: layout_model.as_ref(),
+        backend,
+        detect_options: &detect_options,
+        args: &args,
+        fingerprint: &run,
+    };
     let kept = std::sync::atomic::AtomicUsize::new(0);
     let outcomes = super::in_flight::in_flight(
         &frames,
@@ -265,8 +278,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
                 progress.inc(1);
                 return Ok(report);
             }
-            let outcome =
-                detect_one(dir, &models, cascade.as_ref(), layout_model.as_ref(), backend, &detect_options, &args);
+            let outcome = detect_one(dir, &job);
             if let (Err(err), false) = (&outcome, args.fail_fast) {
                 progress.suspend(|| log::error!("{}: skipped: {}", dir.display(), super::error_text(err)));
             }
@@ -347,6 +359,77 @@ pub(super) struct FrameReport {
     pub detections: FrameDetections,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub layout: Option<LayoutRecord>,
+    /// [`run_fingerprint`] of the run that wrote the file (absent in files of cog-gpu before it was
+    /// recorded, and in `bench --detect`'s reports, which are not written).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub run: Option<String>,
+}
+
+/// The `"run"` of a detections file: a 64-bit FNV-1a fingerprint (16 hex digits) of everything that
+/// decides a frame's detections besides the frame — every model as loaded (after `--step`; their JSON,
+/// in category order), the context cascade when one is applied, the layout model, and the detection
+/// options (NMS IoU, detections per category, the cut, the support surfaces' cut) — so that `--resume`
+/// keeps only files that this run would have written. Options that change only the pictures (`--overlay-*`,
+/// `--no-overlay`, `--ply`) and the backend are left out; the GPU and CPU paths give the same detections.
+/// A cog-gpu build that serialises a model differently gives another fingerprint (such files are refused
+/// by `--resume`, which is the safe side).
+pub(super) fn run_fingerprint(
+    models: &[cog_gpu::model::Model],
+    cascade: Option<&Cascade>,
+    layout_model: Option<&cog_gpu::room_layout::model::LayoutModel>,
+    options: &DetectOptions,
+) -> anyhow::Result<String> {
+    let mut sorted: Vec<&cog_gpu::model::Model> = models.iter().collect();
+    sorted.sort_by(|a, b| a.category.cmp(&b.category));
+    let mut parts = Vec::new();
+    for model in sorted {
+        parts.push(serde_json::to_string(model)?);
+    }
+    parts.push(cascade.map(serde_json::to_string).transpose()?.unwrap_or_default());
+    parts.push(layout_model.map(serde_json::to_string).transpose()?.unwrap_or_default());
+    parts.push(format!("{options:?}"));
+    let hash = parts.iter().fold(cog_gpu::learn::checkpoint::FNV_OFFSET, |hash, part| {
+        // Each part's length first, so that no two different lists of parts hash the same bytes.
+        let hash = cog_gpu::learn::checkpoint::fnv1a(hash, &(part.len() as u64).to_le_bytes());
+        cog_gpu::learn::checkpoint::fnv1a(hash, part.as_bytes())
+    });
+    Ok(format!("{hash:016x}"))
+}
+
+/// `--resume`: refuses to go on when a frame's `<frame>.json` in `out` was written by a run with another
+/// fingerprint (other models or options); warns about files without one (written by an older cog-gpu),
+/// which are kept unchecked. Files that do not read as detections files are left to be detected again.
+fn check_resumable(out: &Path, frames: &[PathBuf], run: &str) -> anyhow::Result<()> {
+    let (mut other, mut unchecked) = (Vec::new(), 0usize);
+    for dir in frames {
+        let Some(name) = dir.file_name().map(|n| n.to_string_lossy().into_owned()) else { continue };
+        let path = out.join(format!("{name}.json"));
+        let Ok(text) = std::fs::read_to_string(&path) else { continue };
+        let Ok(file) = serde_json::from_str::<serde_json::Value>(&text) else { continue };
+        match file.get("run").and_then(|r| r.as_str()) {
+            Some(written) if written != run => other.push((path, written.to_string())),
+            Some(_) => {}
+            None => unchecked += 1,
+        }
+    }
+    if let Some((path, written)) = other.first() {
+        bail!(
+            "--resume: {} of the detections files in {} were written with other models or options than this \
+             run's (e.g. {}: run {written}, this run {run}); resume with the models and options of the run that \
+             wrote them, or drop --resume to detect every frame again",
+            other.len(),
+            out.display(),
+            path.display()
+        );
+    }
+    if unchecked > 0 {
+        log::warn!(
+            "--resume: {unchecked} detections file(s) in {} carry no run fingerprint (written by an older \
+             cog-gpu): kept without checking their models and options",
+            out.display()
+        );
+    }
+    Ok(())
 }
 
 /// `--resume`: the report of the frame in `dir` that an earlier run wrote to `out`, when `<frame>.json` is
@@ -362,26 +445,37 @@ fn finished_report(out: &Path, dir: &Path) -> Option<FrameReport> {
         None => None,
         Some(record) => Some(serde_json::from_value::<LayoutRecord>(record.clone()).ok()?),
     };
-    Some(FrameReport { detections, layout })
+    let run = file.get("run").and_then(|r| r.as_str()).map(str::to_string);
+    Some(FrameReport { detections, layout, run })
+}
+
+/// What every frame of a `detect` run is detected with.
+#[derive(Clone, Copy)]
+struct DetectRun<'a> {
+    models: &'a [cog_gpu::model::Model],
+    cascade: Option<&'a Cascade>,
+    layout_model: Option<&'a cog_gpu::room_layout::model::LayoutModel>,
+    backend: Backend<'a>,
+    detect_options: &'a DetectOptions,
+    args: &'a Args,
+    /// [`run_fingerprint`] of all of the above.
+    fingerprint: &'a str,
 }
 
 /// Reads one frame, detects (rescores with `cascade`, lays out the room with `layout_model`), and writes
 /// its detections file, overlay and PLY.
-fn detect_one(
-    dir: &Path,
-    models: &[cog_gpu::model::Model],
-    cascade: Option<&Cascade>,
-    layout_model: Option<&cog_gpu::room_layout::model::LayoutModel>,
-    backend: Backend,
-    detect_options: &DetectOptions,
-    args: &Args,
-) -> anyhow::Result<FrameReport> {
+fn detect_one(dir: &Path, run: &DetectRun) -> anyhow::Result<FrameReport> {
+    let DetectRun { models, cascade, layout_model, backend, detect_options, args, fingerprint } = *run;
     let frame = Frame::read(dir, DepthSource::Raw)?;
     let mut detections = detect_frame(&frame, models, backend, detect_options)
         .with_context(|| format!("detecting in {}", dir.display()))?;
     let layout = lay_out(&frame, layout_model, backend)?;
     rescore_in_room(cascade, &mut detections, layout.as_ref())?;
-    let report = FrameReport { detections, layout: layout.as_ref().map(|(_, record)| record.clone()) };
+    let report = FrameReport {
+        detections,
+        layout: layout.as_ref().map(|(_, record)| record.clone()),
+        run: Some(fingerprint.to_string()),
+    };
     let json_path = args.out.join(format!("{}.json", frame.name));
     // Written beside and renamed into place: an interrupted run leaves no truncated `<frame>.json` that
     // `--resume` would have to tell from a finished one.

@@ -108,11 +108,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
             added[n] += update.detections.iter().filter(|d| &d.category == category).count();
         }
         let detections = replace_categories(&base.detections, &update.detections, &categories, &models);
-        // Every other field of the base file (the room under "layout") kept as it was; through text, so
-        // that each f32 keeps its shortest form, as `detect` writes it.
-        let mut file: serde_json::Value =
-            serde_json::from_str(&base_text).with_context(|| format!("{}", base_path.display()))?;
-        file["detections"] = serde_json::from_str(&serde_json::to_string(&detections)?)?;
+        let file = super::options::with_detections(&base_text, &base_path, &detections)?;
         merged_files.push((name.clone(), file));
     }
     if added.iter().all(|&n| n == 0) {

@@ -149,3 +149,22 @@ pub fn json_files(dir: &std::path::Path) -> anyhow::Result<Vec<std::path::PathBu
     paths.sort();
     Ok(paths)
 }
+
+/// A detections file read from `text` (of `path`) with its detections replaced by `detections` and every
+/// other field kept (the room under "layout"), except `detect`'s `"run"` fingerprint: the result comes from
+/// no single detect run (`rescore`, `merge-detections`). Through text, not `to_value`: a value keeps each
+/// f32 as the f64 it widens to (0.999159574508667), text keeps the f32's shortest form (0.9991596), as
+/// `detect` writes it.
+pub fn with_detections(
+    text: &str,
+    path: &std::path::Path,
+    detections: &[cog_gpu::eval::Detection],
+) -> anyhow::Result<serde_json::Value> {
+    use anyhow::Context;
+    let mut file: serde_json::Value = serde_json::from_str(text).with_context(|| format!("{}", path.display()))?;
+    file["detections"] = serde_json::from_str(&serde_json::to_string(detections)?)?;
+    if let Some(fields) = file.as_object_mut() {
+        fields.remove("run");
+    }
+    Ok(file)
+}

@@ -44,10 +44,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         let mut frame = FrameDetections::parse(path, &text)?;
         let room = cog_gpu::cascade::room_in(path, &text)?;
         cascade.rescore(&mut frame.detections, room.as_ref()).with_context(|| format!("{}", path.display()))?;
-        let mut file: serde_json::Value = serde_json::from_str(&text).with_context(|| format!("{}", path.display()))?;
-        // Through text, not `to_value`: a value keeps each f32 as the f64 it widens to (0.999159574508667),
-        // text keeps the f32's shortest form (0.9991596), as `detect` writes it.
-        file["detections"] = serde_json::from_str(&serde_json::to_string(&frame.detections)?)?;
+        let file = super::options::with_detections(&text, path, &frame.detections)?;
         let name = path.file_name().context("a detections file without a name")?;
         let out = args.out.join(name);
         std::fs::write(&out, serde_json::to_string_pretty(&file)?)

@@ -147,10 +147,10 @@ impl Checkpoint {
 }
 
 /// The FNV-1a offset basis ([`fnv1a`]'s starting state).
-pub(crate) const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
+pub const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
 
 /// FNV-1a, continued from `state` (pass [`FNV_OFFSET`] to start).
-pub(crate) fn fnv1a(mut state: u64, bytes: &[u8]) -> u64 {
+pub fn fnv1a(mut state: u64, bytes: &[u8]) -> u64 {
     for byte in bytes {
         state ^= u64::from(*byte);
         state = state.wrapping_mul(0x0000_0100_0000_01b3);
