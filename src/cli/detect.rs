@@ -232,9 +232,13 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     let layout_model = super::layout::model_in_dir(&models_dir)?;
     let frames = frame_dirs(&args.frames)?;
     let run = run_fingerprint(&models, cascade.as_ref(), layout_model.as_ref(), &detect_options)?;
-    if args.resume {
-        check_resumable(&args.out, &frames, &run)?;
-    }
+    // Taken (once) by the frame's job below; all `None` without --resume.
+    let finished: Vec<std::sync::Mutex<Option<FrameReport>>> =
+        if args.resume { finished_reports(&args.out, &frames, &run)? } else { frames.iter().map(|_| None).collect() }
+            .into_iter()
+            .map(std::sync::Mutex::new)
+            .collect();
+    let kept = finished.iter().filter(|f| f.lock().is_ok_and(|f| f.is_some())).count();
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating the output directory {}", args.out.display()))?;
     // Both feature paths score on the GPU when there is one (fast: gpu::fast, exact: gpu::features).
@@ -267,14 +271,12 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         args: &args,
         fingerprint: &run,
     };
-    let kept = std::sync::atomic::AtomicUsize::new(0);
     let outcomes = super::in_flight::in_flight(
         &frames,
         in_flight,
-        |_, dir| {
+        |n, dir| {
             progress.set_message(dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default());
-            if let Some(report) = args.resume.then(|| finished_report(&args.out, dir)).flatten() {
-                kept.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            if let Some(report) = finished[n].lock().ok().and_then(|mut f| f.take()) {
                 progress.inc(1);
                 return Ok(report);
             }
@@ -299,7 +301,6 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         }
     }
     progress.finish_and_clear();
-    let kept = kept.into_inner();
     if kept > 0 {
         log::info!("--resume: kept {kept} frame(s) already detected in {}", args.out.display());
     }
@@ -373,7 +374,7 @@ pub(super) struct FrameReport {
 /// `--no-overlay`, `--ply`) and the backend are left out; the GPU and CPU paths give the same detections.
 /// A cog-gpu build that serialises a model differently gives another fingerprint (such files are refused
 /// by `--resume`, which is the safe side).
-pub(super) fn run_fingerprint(
+fn run_fingerprint(
     models: &[cog_gpu::model::Model],
     cascade: Option<&Cascade>,
     layout_model: Option<&cog_gpu::room_layout::model::LayoutModel>,
@@ -396,22 +397,17 @@ pub(super) fn run_fingerprint(
     Ok(format!("{hash:016x}"))
 }
 
-/// `--resume`: refuses to go on when a frame's `<frame>.json` in `out` was written by a run with another
-/// fingerprint (other models or options); warns about files without one (written by an older cog-gpu),
-/// which are kept unchecked. Files that do not read as detections files are left to be detected again.
-fn check_resumable(out: &Path, frames: &[PathBuf], run: &str) -> anyhow::Result<()> {
-    let (mut other, mut unchecked) = (Vec::new(), 0usize);
-    for dir in frames {
-        let Some(name) = dir.file_name().map(|n| n.to_string_lossy().into_owned()) else { continue };
-        let path = out.join(format!("{name}.json"));
-        let Ok(text) = std::fs::read_to_string(&path) else { continue };
-        let Ok(file) = serde_json::from_str::<serde_json::Value>(&text) else { continue };
-        match file.get("run").and_then(|r| r.as_str()) {
-            Some(written) if written != run => other.push((path, written.to_string())),
-            Some(_) => {}
-            None => unchecked += 1,
-        }
-    }
+/// `--resume`: the report of every frame of `frames` whose `<frame>.json` an earlier run wrote to `out`
+/// ([`finished_report`], `None` for the frames to detect), each file read once. Refuses to go on when one
+/// was written by a run with another fingerprint (other models or options); warns about files without one
+/// (written by an older cog-gpu), which are kept unchecked.
+fn finished_reports(out: &Path, frames: &[PathBuf], run: &str) -> anyhow::Result<Vec<Option<FrameReport>>> {
+    let reports: Vec<Option<(PathBuf, FrameReport)>> = frames.iter().map(|dir| finished_report(out, dir)).collect();
+    let other: Vec<(&PathBuf, &str)> = reports
+        .iter()
+        .flatten()
+        .filter_map(|(path, report)| report.run.as_deref().filter(|written| *written != run).map(|w| (path, w)))
+        .collect();
     if let Some((path, written)) = other.first() {
         bail!(
             "--resume: {} of the detections files in {} were written with other models or options than this \
@@ -422,6 +418,7 @@ fn check_resumable(out: &Path, frames: &[PathBuf], run: &str) -> anyhow::Result<
             path.display()
         );
     }
+    let unchecked = reports.iter().flatten().filter(|(_, report)| report.run.is_none()).count();
     if unchecked > 0 {
         log::warn!(
             "--resume: {unchecked} detections file(s) in {} carry no run fingerprint (written by an older \
@@ -429,13 +426,13 @@ fn check_resumable(out: &Path, frames: &[PathBuf], run: &str) -> anyhow::Result<
             out.display()
         );
     }
-    Ok(())
+    Ok(reports.into_iter().map(|r| r.map(|(_, report)| report)).collect())
 }
 
-/// `--resume`: the report of the frame in `dir` that an earlier run wrote to `out`, when `<frame>.json` is
-/// there and reads as that frame's detections file (with a readable room when it has one); else `None`,
-/// and the frame is detected again.
-fn finished_report(out: &Path, dir: &Path) -> Option<FrameReport> {
+/// `--resume`: the path and report of the frame in `dir` that an earlier run wrote to `out`, when
+/// `<frame>.json` is there and reads as that frame's detections file (with a readable room when it has
+/// one); else `None`, and the frame is detected again.
+fn finished_report(out: &Path, dir: &Path) -> Option<(PathBuf, FrameReport)> {
     let name = dir.file_name()?.to_string_lossy().into_owned();
     let path = out.join(format!("{name}.json"));
     let text = std::fs::read_to_string(&path).ok()?;
@@ -446,7 +443,7 @@ fn finished_report(out: &Path, dir: &Path) -> Option<FrameReport> {
         Some(record) => Some(serde_json::from_value::<LayoutRecord>(record.clone()).ok()?),
     };
     let run = file.get("run").and_then(|r| r.as_str()).map(str::to_string);
-    Some(FrameReport { detections, layout, run })
+    Some((path, FrameReport { detections, layout, run }))
 }
 
 /// What every frame of a `detect` run is detected with.
