@@ -86,7 +86,7 @@ done
 # Extra `train` arguments per category (models mode only): more training examples where they were
 # measured to help on the validation set (README, "The shipped models").
 declare -A CATEGORY_ARGS=()
-# A category's training set when not WORK/train.
+# A category's training set when not WORK/train (models mode; the nine small ones all train on WORK/train).
 declare -A CATEGORY_DATA=()
 # train_and_eval NAME CATEGORIES TEST CALIBRATE TRAIN_ARGS...: trains each category into WORK/NAME/models/;
 # when CALIBRATE is "yes", detects on WORK/calibration and fits the models' calibrations; then detects on
@@ -294,8 +294,7 @@ case "$mode" in
             if [ -n "${WINDOW[$category]:-}" ]; then
                 read -r -a window <<< "${WINDOW[$category]}"
             fi
-            "$BIN" train --data "${CATEGORY_DATA[$category]:-$WORK/train}" --category "$category" \
-                --out "$dir/models/$category.json" \
+            "$BIN" train --data "$WORK/train" --category "$category" --out "$dir/models/$category.json" \
                 "${resume[@]}" "${window[@]}" 2> "$dir/$category.log"
             echo "small $category $((SECONDS - started)) s" >> "$dir/times.txt"
         done

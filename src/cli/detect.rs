@@ -232,13 +232,12 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     let layout_model = super::layout::model_in_dir(&models_dir)?;
     let frames = frame_dirs(&args.frames)?;
     let run = run_fingerprint(&models, cascade.as_ref(), layout_model.as_ref(), &detect_options)?;
-    // Taken (once) by the frame's job below; all `None` without --resume.
+    let finished =
+        if args.resume { finished_reports(&args.out, &frames, &run)? } else { frames.iter().map(|_| None).collect() };
+    let kept = finished.iter().flatten().count();
+    // Each taken (once) by its frame's job below, which may run on another thread.
     let finished: Vec<std::sync::Mutex<Option<FrameReport>>> =
-        if args.resume { finished_reports(&args.out, &frames, &run)? } else { frames.iter().map(|_| None).collect() }
-            .into_iter()
-            .map(std::sync::Mutex::new)
-            .collect();
-    let kept = finished.iter().filter(|f| f.lock().is_ok_and(|f| f.is_some())).count();
+        finished.into_iter().map(std::sync::Mutex::new).collect();
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating the output directory {}", args.out.display()))?;
     // Both feature paths score on the GPU when there is one (fast: gpu::fast, exact: gpu::features).
