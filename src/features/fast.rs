@@ -206,8 +206,8 @@ pub struct LayerTable {
 /// went to cells no hypothesis of the group reads.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) struct CellRegion {
-    pub(crate) lo: [usize; 2],
-    pub(crate) hi: [usize; 2],
+    lo: [usize; 2],
+    hi: [usize; 2],
 }
 
 impl CellRegion {
@@ -245,9 +245,9 @@ pub struct FastEngine<'a> {
     lattices: Arc<Vec<YawLattice>>,
     /// COG units per unit of gradient magnitude.
     cog_scale: f32,
-    /// Nanoseconds spent in [`FastEngine::table`], summed over threads (`cog-gpu bench --detect` reports it
-    /// as the tables' share of scoring: the tables are built inside the parallel scoring loop, one per
-    /// group, so they have no wall-clock stage of their own).
+    /// Nanoseconds spent building layer tables (`build_table`), summed over threads (`cog-gpu bench
+    /// --detect` reports it as the tables' share of scoring: the tables are built inside the parallel
+    /// scoring loop, one per group, so they have no wall-clock stage of their own).
     table_nanos: AtomicU64,
 }
 
@@ -311,9 +311,9 @@ impl<'a> FastEngine<'a> {
             work.push((key, rows_of_group));
         }
         work.into_par_iter().for_each(|(key, members)| {
-            let table = self.table_for(key, members.iter().map(|&(n, _)| &hypotheses[n]));
-            members.into_par_iter().for_each(|(n, row)| {
-                self.hypothesis(&table, &hypotheses[n], |voxel, values| {
+            let (table, boundaries) = self.group_table(key, members.iter().map(|&(n, _)| &hypotheses[n]));
+            members.into_par_iter().zip(boundaries).for_each(|((n, row), bounds)| {
+                self.hypothesis(&table, &hypotheses[n], &bounds, |voxel, values| {
                     row[voxel * PER_VOXEL..(voxel + 1) * PER_VOXEL].copy_from_slice(values);
                 });
                 if self.layout.groups.view {
@@ -327,8 +327,8 @@ impl<'a> FastEngine<'a> {
 
     /// Fused scores `scores[h·W + w] = weights[w] · φ(h)` (each weight vector of length `layout.dim()`).
     pub fn scores(&self, hypotheses: &[Hypothesis], weights: &[Vec<f32>]) -> Vec<f32> {
-        self.rows(hypotheses, weights.len(), |table, hyp, row| {
-            self.hypothesis(table, hyp, |voxel, values| {
+        self.rows(hypotheses, weights.len(), |table, hyp, bounds, row| {
+            self.hypothesis(table, hyp, bounds, |voxel, values| {
                 let offset = voxel * PER_VOXEL;
                 for (score, w) in row.iter_mut().zip(weights) {
                     *score += dot_lanes(&w[offset..offset + PER_VOXEL], values);
@@ -354,8 +354,8 @@ impl<'a> FastEngine<'a> {
         let g = self.layout.grid();
         let (columns, layers) = ((g[0] * g[1]) as usize, g[2] as usize);
         assert_eq!(layer_weights.len(), columns * PER_VOXEL, "one weight block per voxel of a layer");
-        self.rows(hypotheses, layers, |table, hyp, row| {
-            self.hypothesis(table, hyp, |voxel, values| {
+        self.rows(hypotheses, layers, |table, hyp, bounds, row| {
+            self.hypothesis(table, hyp, bounds, |voxel, values| {
                 let (layer, column) = (voxel / columns, voxel % columns);
                 let offset = column * PER_VOXEL;
                 row[layer] += dot_lanes(&layer_weights[offset..offset + PER_VOXEL], values);
@@ -363,13 +363,13 @@ impl<'a> FastEngine<'a> {
         })
     }
 
-    /// `width` numbers per hypothesis, row-major: `fill(table, hypothesis, zeroed row)` for each, in
-    /// parallel over the hypotheses' table groups (each table built once).
+    /// `width` numbers per hypothesis, row-major: `fill(table, hypothesis, its boundaries, zeroed row)` for
+    /// each, in parallel over the hypotheses' table groups (each table built once).
     fn rows(
         &self,
         hypotheses: &[Hypothesis],
         width: usize,
-        fill: impl Fn(&LayerTable, &Hypothesis, &mut [f32]) + Sync,
+        fill: impl Fn(&LayerTable, &Hypothesis, &VoxelBoundaries, &mut [f32]) + Sync,
     ) -> Vec<f32> {
         let mut out = vec![0.0f32; hypotheses.len() * width];
         if width == 0 {
@@ -380,9 +380,12 @@ impl<'a> FastEngine<'a> {
         let per_group: Vec<(Vec<usize>, Vec<f32>)> = group_by_table(hypotheses)
             .into_par_iter()
             .map(|(key, members)| {
-                let table = self.table_for(key, members.iter().map(|&n| &hypotheses[n]));
+                let (table, boundaries) = self.group_table(key, members.iter().map(|&n| &hypotheses[n]));
                 let mut rows = vec![0.0f32; members.len() * width];
-                rows.par_chunks_mut(width).zip(&members).for_each(|(row, &n)| fill(&table, &hypotheses[n], row));
+                rows.par_chunks_mut(width)
+                    .zip(&members)
+                    .zip(&boundaries)
+                    .for_each(|((row, &n), bounds)| fill(&table, &hypotheses[n], bounds, row));
                 (members, rows)
             })
             .collect();
@@ -407,22 +410,30 @@ impl<'a> FastEngine<'a> {
     /// Step 2: the layer table of one (yaw, bottom, height), over the whole lattice (the layout of the
     /// GPU's tables, for its CPU twin and the tests against it).
     pub(crate) fn table(&self, key: TableKey) -> LayerTable {
-        let started = Instant::now();
-        let lattice = &self.lattices[key.yaw_index as usize];
-        let table = LayerTable::build(lattice, self.table_span(key), CellRegion::whole(lattice));
-        self.table_nanos.fetch_add(started.elapsed().as_nanos() as u64, Ordering::Relaxed);
-        table
+        self.build_table(key, CellRegion::whole(&self.lattices[key.yaw_index as usize]))
     }
 
-    /// Step 2 for the CPU's scoring: the table of `key` over the cells that the voxels of `members` (all
-    /// of that key) cover, a [`CellRegion`]; their scores are those from [`FastEngine::table`], bit for bit.
-    fn table_for<'h>(&self, key: TableKey, members: impl Iterator<Item = &'h Hypothesis>) -> LayerTable {
-        let started = Instant::now();
+    /// Steps 2 and 3 for the CPU's scoring of one group: the cell boundaries of each of `members` (all of
+    /// `key`), in order, and the table of `key` over the cells their voxels cover, a [`CellRegion`] (their
+    /// scores are those from [`FastEngine::table`], bit for bit). The boundaries are made once here, for the
+    /// region and for the scoring.
+    fn group_table<'h>(
+        &self,
+        key: TableKey,
+        members: impl Iterator<Item = &'h Hypothesis>,
+    ) -> (LayerTable, Vec<VoxelBoundaries>) {
         let lattice = &self.lattices[key.yaw_index as usize];
         let g = self.layout.grid();
-        let bounds = members.map(|hyp| voxel_boundaries(&g, &ExpandedBox::new(&self.layout, hyp), lattice));
-        let region = CellRegion::of_boundaries(bounds).unwrap_or(CellRegion::whole(lattice));
-        let table = LayerTable::build(lattice, self.table_span(key), region);
+        let boundaries: Vec<VoxelBoundaries> =
+            members.map(|hyp| voxel_boundaries(&g, &ExpandedBox::new(&self.layout, hyp), lattice)).collect();
+        let region = CellRegion::of_boundaries(boundaries.iter().copied()).unwrap_or(CellRegion::whole(lattice));
+        (self.build_table(key, region), boundaries)
+    }
+
+    /// The table of `key` over `region`, its build time added to [`FastEngine::table_thread_seconds`].
+    fn build_table(&self, key: TableKey, region: CellRegion) -> LayerTable {
+        let started = Instant::now();
+        let table = LayerTable::build(&self.lattices[key.yaw_index as usize], self.table_span(key), region);
         self.table_nanos.fetch_add(started.elapsed().as_nanos() as u64, Ordering::Relaxed);
         table
     }
@@ -453,17 +464,16 @@ impl<'a> FastEngine<'a> {
         self.table(key_of(hyp)).sums
     }
 
-    /// Step 3 for one hypothesis: calls `visit([i, j, k], integer sums)` for every non-empty voxel.
+    /// Step 3 for one hypothesis, whose cell boundaries are `boundaries`: calls `visit([i, j, k], integer
+    /// sums)` for every non-empty voxel.
     fn for_each_voxel_sums(
         &self,
         table: &LayerTable,
-        expanded: &ExpandedBox,
-        lattice: &YawLattice,
+        boundaries: &VoxelBoundaries,
         mut visit: impl FnMut([usize; 3], &[u32; CHANNELS]),
     ) {
         let g = self.layout.grid();
         let (nx, ny) = (g[0] as usize, g[1] as usize);
-        let boundaries = voxel_boundaries(&g, expanded, lattice);
         // The boundaries as entries of the table, which may cover only a region of the lattice.
         let local = |cells: &[u32], origin: usize| -> [usize; MAX_BOUNDARIES] {
             let mut out = [0; MAX_BOUNDARIES];
@@ -507,9 +517,9 @@ impl<'a> FastEngine<'a> {
     /// of every voxel of `hyp`, indexed by ℓ ([`FeatureLayout::voxel_index`]). For tests and debugging.
     pub fn voxel_sums(&self, hyp: &Hypothesis) -> Vec<[u32; CHANNELS]> {
         let table = self.table(key_of(hyp));
-        let expanded = ExpandedBox::new(&self.layout, hyp);
+        let boundaries = self.voxel_boundaries(&ExpandedBox::new(&self.layout, hyp), hyp.yaw_index);
         let mut out = vec![[0u32; CHANNELS]; self.layout.voxel_count()];
-        self.for_each_voxel_sums(&table, &expanded, &self.lattices[hyp.yaw_index as usize], |[i, j, k], sums| {
+        self.for_each_voxel_sums(&table, &boundaries, |[i, j, k], sums| {
             out[self.layout.voxel_index(i as u32, j as u32, k as u32)] = *sums;
         });
         out
@@ -527,9 +537,15 @@ impl<'a> FastEngine<'a> {
         self.cog_scale
     }
 
-    /// Steps 3–4 for one hypothesis: calls `visit(voxel index ℓ, its 35 features)` for every non-empty
-    /// voxel (empty voxels are all zeros, as in the exact path).
-    fn hypothesis(&self, table: &LayerTable, hyp: &Hypothesis, mut visit: impl FnMut(usize, &[f32; PER_VOXEL])) {
+    /// Steps 3–4 for one hypothesis, whose cell boundaries are `boundaries`: calls `visit(voxel index ℓ, its
+    /// 35 features)` for every non-empty voxel (empty voxels are all zeros, as in the exact path).
+    fn hypothesis(
+        &self,
+        table: &LayerTable,
+        hyp: &Hypothesis,
+        boundaries: &VoxelBoundaries,
+        mut visit: impl FnMut(usize, &[f32; PER_VOXEL]),
+    ) {
         let grid: &YawGrid = &self.scene.yaws[hyp.yaw_index as usize];
         let expanded = ExpandedBox::new(&self.layout, hyp);
         let m = grid.camera_from_rotated;
@@ -538,8 +554,7 @@ impl<'a> FastEngine<'a> {
         let face_areas = [vt * vz, vs * vz, vs * vt];
         let groups = self.layout.groups;
         let inv_cog_scale = 1.0 / self.cog_scale;
-        let lattice = &self.lattices[hyp.yaw_index as usize];
-        self.for_each_voxel_sums(table, &expanded, lattice, |[i, j, k], sums| {
+        self.for_each_voxel_sums(table, boundaries, |[i, j, k], sums| {
             let centre = Vec3::new(
                 expanded.lo[0] + (i as f32 + 0.5) * vs,
                 expanded.lo[1] + (j as f32 + 0.5) * vt,
@@ -948,7 +963,8 @@ mod tests {
                 for (hyp, &score) in hypotheses.iter().zip(&scores) {
                     let table = whole_tables.entry(key_of(hyp)).or_insert_with(|| engine.table(key_of(hyp)));
                     let mut dots = vec![0.0f32; layout.voxel_count()];
-                    engine.hypothesis(table, hyp, |voxel, values| {
+                    let bounds = engine.voxel_boundaries(&ExpandedBox::new(&layout, hyp), hyp.yaw_index);
+                    engine.hypothesis(table, hyp, &bounds, |voxel, values| {
                         dots[voxel] = dot_lanes(&weights[voxel * PER_VOXEL..(voxel + 1) * PER_VOXEL], values);
                     });
                     let mut expected = dots.iter().fold(0.0f32, |sum, &d| sum + d);
