@@ -2,8 +2,9 @@
 // the yaws' lattice points, so that a frame's tables never cross the bus.
 // CPU twins: `scatter_main` and `scan_main` in src/gpu/fast_tables.rs (same names, same order).
 //
-// A table has `layers` layers of `rows` rows of `row` entries, CHANNELS u32 words each; entry (x + 1, y + 1)
-// of layer k starts as the sums of lattice cell (x, y)'s points in layer k (count, normal bin, two COG
+// A table has `layers` layers of `rows` rows of `row` entries, CHANNELS u32 words each, over a region of
+// the lattice (its first cell `region.xy`, `row - 1` cells along s, `rows - 1` along t); entry (x + 1, y + 1)
+// of layer k starts as the sums of the region's cell (x, y)'s points in layer k (count, normal bin, two COG
 // shares), then becomes the inclusive 2D prefix sum. Every table of a batch is built by the same three
 // dispatches, in this order (workgroup z = the table's index in `tables`, whose entry says where its words
 // and its yaw's points lie in the shared buffers):
@@ -37,6 +38,7 @@ struct TableParams {
     shape: vec4<u32>, // entries per row (cells_s + 1), rows per layer (cells_t + 1), layers, cells_s
     job: vec4<u32>,   // point count, scan mode, first word of the table in `table`, first point in `points`
     span: vec4<f32>,  // z_lo, 1 / layer height, unused, unused
+    region: vec4<u32>, // first lattice cell along s and t of the table's region, unused, unused
 }
 
 // One entry per table of the dispatch (workgroup z).
@@ -61,9 +63,15 @@ fn scatter(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     if (!(layer >= 0.0 && layer < f32(params.shape.z))) {
         return;
     }
-    let x = p.cell % params.shape.w;
-    let y = p.cell / params.shape.w;
-    // Cell (x, y) is entry (x + 1, y + 1) before the prefix sums.
+    let cell_s = p.cell % params.shape.w;
+    let cell_t = p.cell / params.shape.w;
+    // Only the region's cells, `lo <= c < lo + shape - 1` (u32: a cell below `lo` wraps to a large value).
+    let x = cell_s - params.region.x;
+    let y = cell_t - params.region.y;
+    if (cell_s < params.region.x || cell_t < params.region.y || x >= params.shape.x - 1u || y >= params.shape.y - 1u) {
+        return;
+    }
+    // Cell (x, y) of the region is entry (x + 1, y + 1) before the prefix sums.
     let base = params.job.z + ((u32(layer) * params.shape.y + y + 1u) * params.shape.x + x + 1u) * CHANNELS;
     atomicAdd(&table[base], 1u);
     atomicAdd(&table[base + 1u + (p.bins & 0xffu)], 1u);

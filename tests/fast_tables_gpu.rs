@@ -12,7 +12,7 @@ use common::{shader_module, wgsl_const, wgsl_const_f32, wgsl_struct_size};
 use std::path::Path;
 
 use cog_gpu::features::cpu::VIEW_MIN_DISTANCE;
-use cog_gpu::features::fast::{FastEngine, FastOptions, CHANNELS};
+use cog_gpu::features::fast::{CellRegion, FastEngine, FastOptions, CHANNELS};
 use cog_gpu::features::feature_layout::{FeatureLayout, Groups, COG, COG_EPSILON, VIEW, VIEW_RBFS, VIEW_SIGMA};
 use cog_gpu::features::{Hypothesis, PreparedWindow, SizeQuantiles};
 use cog_gpu::frame::{DepthSource, Frame};
@@ -89,6 +89,8 @@ fn tables_built_together_equal_each_built_alone() {
     // Several tables of several yaws in one buffer, at offsets that are not zero, with the yaws' points
     // packed one after the other (as a batch of the scoring path builds them): each table's words must be
     // those of the CPU's LayerTable, built by the twins and on the GPU, and the gaps between them stay zero.
+    // Every other table covers only a region of its lattice (as the scoring path's, the cells its boxes
+    // reach): its entries must also be the whole lattice table's sums over the region's cells.
     let frame = synth::generate_frame(5, 0, &SynthOptions::small(160, 120)).unwrap().frame;
     let window = window(&frame, "chair");
     let engine = FastEngine::new(&window.scene, &FeatureLayout::default(), FastOptions::default());
@@ -110,15 +112,35 @@ fn tables_built_together_equal_each_built_alone() {
     let mut words = 7; // a gap before the first table
     let mut tables = Vec::new();
     let mut alone = Vec::new();
-    for hyp in &hyps {
+    let mut regions = 0;
+    for (n, hyp) in hyps.iter().enumerate() {
         let yaw = hyp.yaw_index as usize;
         let (lattice, span) = (engine.lattice(yaw), engine.table_span_of(hyp));
-        let params = table_params_at(lattice, span, 0, words as u32, first_point[yaw]);
+        let [cs, ct] = lattice.cells();
+        let region = if n % 2 == 1 {
+            // The middle of the lattice, not touching its edges: a fifth to four fifths along each axis.
+            CellRegion::new(lattice, [cs / 5, ct / 5], [cs * 4 / 5, ct * 4 / 5]).unwrap()
+        } else {
+            CellRegion::whole(lattice)
+        };
+        let params = table_params_at(lattice, span, 0, words as u32, first_point[yaw], region);
         tables.push(params);
         // The CPU's own LayerTable (`LayerTable::build`), not the twins.
-        alone.push((words, engine.table_words_of(hyp)));
+        let cpu = engine.region_table_words_of(hyp, region);
+        if region != CellRegion::whole(lattice) {
+            assert_region_table_is_a_part_of_the_whole(
+                &cpu,
+                &engine.table_words_of(hyp),
+                region,
+                lattice.cells(),
+                span.layers,
+            );
+            regions += 1;
+        }
+        alone.push((words, cpu));
         words += table_words(&params) + 5; // and a gap after each
     }
+    assert!(regions >= 2, "only {regions} region tables");
     let twin = build_tables_reference(&tables, &points, words);
     let check = |built: &[u32], what: &str| {
         let mut covered = vec![false; words];
@@ -134,6 +156,37 @@ fn tables_built_together_equal_each_built_alone() {
     check(&twin, "twins");
     if let Some(ctx) = common::gpu_context() {
         check(&build_tables_gpu(&ctx, &tables, &points, words).unwrap(), "GPU");
+    }
+}
+
+/// `region_table` (a table over `region` of a lattice of `cells`) holds, at entry (x, y) of layer k, the
+/// sums over the region's first x cells along s and first y along t: the difference of four entries of
+/// `whole`, the table of the whole lattice.
+fn assert_region_table_is_a_part_of_the_whole(
+    region_table: &[u32],
+    whole: &[u32],
+    region: CellRegion,
+    cells: [usize; 2],
+    layers: usize,
+) {
+    let [row, rows] = region.table_stride();
+    let [lo_s, lo_t] = region.lo();
+    let (whole_row, whole_rows) = (cells[0] + 1, cells[1] + 1);
+    assert_eq!(region_table.len(), layers * rows * row * CHANNELS);
+    let at = |k: usize, x: usize, y: usize, c: usize| whole[((k * whole_rows + y) * whole_row + x) * CHANNELS + c];
+    for k in 0..layers {
+        for y in 0..rows {
+            for x in 0..row {
+                for c in 0..CHANNELS {
+                    let expected = at(k, lo_s + x, lo_t + y, c)
+                        .wrapping_sub(at(k, lo_s, lo_t + y, c))
+                        .wrapping_sub(at(k, lo_s + x, lo_t, c))
+                        .wrapping_add(at(k, lo_s, lo_t, c));
+                    let got = region_table[((k * rows + y) * row + x) * CHANNELS + c];
+                    assert_eq!(got, expected, "layer {k}, entry ({x}, {y}), channel {c}");
+                }
+            }
+        }
     }
 }
 

@@ -204,16 +204,43 @@ pub struct LayerTable {
 /// bit for bit as from the whole one: the tables were a fifth to a quarter of a frame's scoring time on
 /// the CPU, and on the standard frame (README, "Tables over their boxes' region") more than half of that
 /// went to cells no hypothesis of the group reads.
+///
+/// The GPU path builds its tables over the same regions (`gpu::fast`, from the first and last boundaries of
+/// its hypotheses, `voxel_boundary_extremes`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) struct CellRegion {
+pub struct CellRegion {
     lo: [usize; 2],
     hi: [usize; 2],
 }
 
 impl CellRegion {
     /// Every cell of `lattice`.
-    fn whole(lattice: &YawLattice) -> CellRegion {
+    pub fn whole(lattice: &YawLattice) -> CellRegion {
         CellRegion { lo: [0, 0], hi: lattice.cells }
+    }
+
+    /// The cells `lo[a] ≤ c < hi[a]`; `None` unless `lo[a] ≤ hi[a]` and `hi` lies within `lattice`.
+    pub fn new(lattice: &YawLattice, lo: [usize; 2], hi: [usize; 2]) -> Option<CellRegion> {
+        let fits = (0..2).all(|a| lo[a] <= hi[a] && hi[a] <= lattice.cells[a]);
+        fits.then_some(CellRegion { lo, hi })
+    }
+
+    /// The region's first cell along s and t.
+    pub fn lo(&self) -> [usize; 2] {
+        self.lo
+    }
+
+    /// Entries per row and rows per layer of a [`LayerTable`] over the region (cells + 1 along s and t).
+    pub fn table_stride(&self) -> [usize; 2] {
+        [self.hi[0] - self.lo[0] + 1, self.hi[1] - self.lo[1] + 1]
+    }
+
+    /// The smallest region holding `self` and `other`.
+    pub(crate) fn union(self, other: CellRegion) -> CellRegion {
+        CellRegion {
+            lo: [self.lo[0].min(other.lo[0]), self.lo[1].min(other.lo[1])],
+            hi: [self.hi[0].max(other.hi[0]), self.hi[1].max(other.hi[1])],
+        }
     }
 
     /// The smallest region holding the voxels of every hypothesis whose boundaries `bounds` yields (their
@@ -226,10 +253,7 @@ impl CellRegion {
             let hi = [xs[xs.len() - 1] as usize, ys[ys.len() - 1] as usize];
             region = Some(match region {
                 None => CellRegion { lo, hi },
-                Some(r) => CellRegion {
-                    lo: [r.lo[0].min(lo[0]), r.lo[1].min(lo[1])],
-                    hi: [r.hi[0].max(hi[0]), r.hi[1].max(hi[1])],
-                },
+                Some(r) => r.union(CellRegion { lo, hi }),
             });
         }
         region
@@ -407,8 +431,8 @@ impl<'a> FastEngine<'a> {
         self.table_nanos.load(Ordering::Relaxed) as f64 * 1e-9
     }
 
-    /// Step 2: the layer table of one (yaw, bottom, height), over the whole lattice (the layout of the
-    /// GPU's tables, for its CPU twin and the tests against it).
+    /// Step 2: the layer table of one (yaw, bottom, height), over the whole lattice (for the tests of the
+    /// GPU's tables and for debugging; scoring builds each group's over its region).
     pub(crate) fn table(&self, key: TableKey) -> LayerTable {
         self.build_table(key, CellRegion::whole(&self.lattices[key.yaw_index as usize]))
     }
@@ -431,7 +455,7 @@ impl<'a> FastEngine<'a> {
     }
 
     /// The table of `key` over `region`, its build time added to [`FastEngine::table_thread_seconds`].
-    fn build_table(&self, key: TableKey, region: CellRegion) -> LayerTable {
+    pub(crate) fn build_table(&self, key: TableKey, region: CellRegion) -> LayerTable {
         let started = Instant::now();
         let table = LayerTable::build(&self.lattices[key.yaw_index as usize], self.table_span(key), region);
         self.table_nanos.fetch_add(started.elapsed().as_nanos() as u64, Ordering::Relaxed);
@@ -462,6 +486,12 @@ impl<'a> FastEngine<'a> {
     /// The words of the table `hyp` is scored from (step 2 on the CPU), for tests against the GPU's.
     pub fn table_words_of(&self, hyp: &Hypothesis) -> Vec<u32> {
         self.table(key_of(hyp)).sums
+    }
+
+    /// The words of the table of `hyp`'s (yaw, bottom, height) over `region` of its lattice (step 2 on the
+    /// CPU), for tests against the GPU's.
+    pub fn region_table_words_of(&self, hyp: &Hypothesis, region: CellRegion) -> Vec<u32> {
+        self.build_table(key_of(hyp), region).sums
     }
 
     /// Step 3 for one hypothesis, whose cell boundaries are `boundaries`: calls `visit([i, j, k], integer
@@ -668,6 +698,17 @@ impl VoxelBoundaries {
     pub(crate) fn all(&self) -> &[u32] {
         &self.cells[..self.counts[0] + self.counts[1]]
     }
+
+    /// The boundaries as entries of a table over `region` (which holds the hypothesis's voxels): less the
+    /// region's first cell along each axis.
+    pub(crate) fn relative_to(&self, region: CellRegion) -> VoxelBoundaries {
+        let mut out = *self;
+        let nx1 = self.counts[0];
+        for (k, cell) in out.cells[..self.counts[0] + self.counts[1]].iter_mut().enumerate() {
+            *cell -= region.lo[usize::from(k >= nx1)] as u32;
+        }
+        out
+    }
 }
 
 /// Step 3's membership rule: voxel i along s covers the lattice cells `xs[i]..xs[i+1]` (those whose centre
@@ -710,8 +751,19 @@ fn voxel_boundaries(g: &[u32; 3], expanded: &ExpandedBox, lattice: &YawLattice) 
     boundaries
 }
 
+/// The first and last cell boundaries along s and t of the hypothesis `expanded` (those of
+/// [`voxel_boundaries`], which ascend): the cells `lo ≤ c < hi` its voxels cover, by the rule one boundary
+/// at a time ([`boundary_scalar`], equal to the lanes' — tested), four boundaries instead of all.
+pub(crate) fn voxel_boundary_extremes(g: &[u32; 3], expanded: &ExpandedBox, lattice: &YawLattice) -> [[usize; 2]; 2] {
+    let first_and_last = |axis: usize| {
+        let last = g[axis] as usize;
+        [boundary_scalar(expanded, lattice, axis, 0) as usize, boundary_scalar(expanded, lattice, axis, last) as usize]
+    };
+    let (s, t) = (first_and_last(0), first_and_last(1));
+    [[s[0], t[0]], [s[1], t[1]]]
+}
+
 /// Boundary `i` along `axis` by the rule's formula, one at a time (the reference of [`voxel_boundaries`]).
-#[cfg(test)]
 fn boundary_scalar(expanded: &ExpandedBox, lattice: &YawLattice, axis: usize, i: usize) -> u32 {
     let face = expanded.lo[axis] + i as f32 * expanded.cell[axis];
     // Ties (a cell centre on a face, common: centres and sizes are round numbers) go to the voxel above
@@ -763,18 +815,13 @@ pub(crate) fn group_by_table(hypotheses: &[Hypothesis]) -> Vec<(TableKey, Vec<us
 
 impl YawLattice {
     /// Cells along s and t.
-    pub(crate) fn cells(&self) -> [usize; 2] {
+    pub fn cells(&self) -> [usize; 2] {
         self.cells
     }
 
     /// The binned points, grouped by height (in binning order within each 5 cm height bucket).
     pub fn points(&self) -> &[LatticePoint] {
         &self.points
-    }
-
-    /// Entries per row and rows per layer of this yaw's [`LayerTable`]s (cells + 1 along s and t).
-    pub(crate) fn table_stride(&self) -> [usize; 2] {
-        [self.cells[0] + 1, self.cells[1] + 1]
     }
 
     fn build(
@@ -882,10 +929,9 @@ impl LayerTable {
         LayerTable { sums, counts, stride, origin: lo }
     }
 
-    /// All entries, layer by layer, `(k·stride[1] + y)·stride[0] + x` entries of [`CHANNELS`] words each;
-    /// for a table of the whole lattice ([`FastEngine::table`]), the GPU's layout.
+    /// All entries, layer by layer, `(k·stride[1] + y)·stride[0] + x` entries of [`CHANNELS`] words each
+    /// (the GPU's layout).
     pub(crate) fn sums(&self) -> &[u32] {
-        debug_assert_eq!(self.origin, [0, 0], "a table of the whole lattice");
         &self.sums
     }
 

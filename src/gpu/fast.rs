@@ -81,7 +81,9 @@ use super::fast_tables::{
 use super::{buffer_range, Binding, GpuContext, KernelSpec, TexelRows};
 use crate::error::{Error, Result};
 use crate::features::cpu::{dot, ExpandedBox, VIEW_MIN_DISTANCE};
-use crate::features::fast::{group_by_table, FastEngine, LayerTable, TableKey, TableSpan, CHANNELS};
+use crate::features::fast::{
+    group_by_table, voxel_boundary_extremes, CellRegion, FastEngine, LayerTable, TableKey, TableSpan, CHANNELS,
+};
 use crate::features::feature_layout::{
     view_features, FeatureLayout, COG, COG_BINS, COG_EPSILON, NORMALS, PER_VOXEL, VIEW,
 };
@@ -227,9 +229,13 @@ pub struct FastDispatch<'a> {
     pub yaw_index: usize,
     /// The table's layers along z.
     pub(crate) span: TableSpan,
+    /// The lattice cells the table covers: those the group's hypotheses' voxels reach (`bounds` are
+    /// relative to its first cell).
+    pub(crate) region: CellRegion,
     pub records: &'a [FastRecord],
-    /// Per hypothesis its `nx + 1 + ny + 1` voxel boundaries, two 16-bit boundaries per word (the lower half
-    /// first), `params.job[3]` words ([`pack_boundaries`]).
+    /// Per hypothesis its `nx + 1 + ny + 1` voxel boundaries less the first cell of `region` (along s for
+    /// the first `nx + 1`, along t for the rest), two 16-bit boundaries per word (the lower half first),
+    /// `params.job[3]` words ([`pack_boundaries`]).
     pub bounds: &'a [u32],
     /// The pass's weight vectors, each voxel padded to [`CHANNELS`] with a zero: `params.job[1] × voxels ×
     /// CHANNELS`, then with the view group each vector's [`VIEW`] view weights (`params.job[1] × VIEW`).
@@ -252,6 +258,8 @@ type JobMembers = Vec<(usize, Vec<usize>)>;
 struct PackedGroup {
     yaw_index: usize,
     span: TableSpan,
+    /// The cells the group's voxels reach (as the CPU path's tables, [`CellRegion`]).
+    region: CellRegion,
     /// The table, when built on the CPU.
     table: Option<LayerTable>,
     chunks: Vec<PackedChunk>,
@@ -280,6 +288,18 @@ impl PackedGroup {
         let layout = engine.layout();
         let g = layout.grid();
         let words = boundary_words(&g);
+        let lattice = engine.lattice(key.yaw_index as usize);
+        // The region first (from each hypothesis's first and last boundaries), so the boundaries packed
+        // below can be made relative to it.
+        let region = members
+            .par_iter()
+            .flat_map_iter(|(job, job_members)| job_members.iter().map(move |&n| &jobs[*job].hypotheses[n]))
+            .map(|hyp| {
+                let [lo, hi] = voxel_boundary_extremes(&g, &ExpandedBox::new(layout, hyp), lattice);
+                CellRegion::new(lattice, lo, hi).expect("boundaries lie within the lattice")
+            })
+            .reduce_with(CellRegion::union)
+            .unwrap_or(CellRegion::whole(lattice));
         let mut chunks = Vec::new();
         for (job, job_members) in members {
             for part in job_members.chunks(max_chunk.max(1)) {
@@ -291,7 +311,7 @@ impl PackedGroup {
                     |((record, bounds), &n)| {
                         let hyp = &jobs[*job].hypotheses[n];
                         let expanded = ExpandedBox::new(layout, hyp);
-                        let boundaries = engine.voxel_boundaries(&expanded, key.yaw_index);
+                        let boundaries = engine.voxel_boundaries(&expanded, key.yaw_index).relative_to(region);
                         pack_boundaries(boundaries.all(), bounds);
                         let ExpandedBox { lo, cell, .. } = expanded;
                         *record = FastRecord {
@@ -304,12 +324,15 @@ impl PackedGroup {
             }
         }
         let span = engine.table_span(key);
-        PackedGroup { yaw_index: key.yaw_index as usize, span, table: build_table.then(|| engine.table(key)), chunks }
+        let table = build_table.then(|| engine.build_table(key, region));
+        PackedGroup { yaw_index: key.yaw_index as usize, span, region, table, chunks }
     }
 
-    /// Bytes the group of `key` with `members` adds to a batch's arenas (`scores_per_hypothesis[job]`
-    /// outputs per hypothesis): its table, and per member its record, boundaries and scores. Known before
-    /// the group is packed, so batches are planned first ([`plan_batches`]).
+    /// At most the bytes the group of `key` with `members` adds to a batch's arenas
+    /// (`scores_per_hypothesis[job]` outputs per hypothesis): its table (taken over the whole lattice, an
+    /// upper bound of its region's: the region is known only once the group is packed), and per member its
+    /// record, boundaries and scores. Known before the group is packed, so batches are planned first
+    /// ([`plan_batches`]).
     fn bytes(engine: &FastEngine, key: TableKey, members: &JobMembers, scores_per_hypothesis: &[usize]) -> u64 {
         let g = engine.layout().grid();
         let words = boundary_words(&g);
@@ -444,7 +467,7 @@ fn run(
     let [fx, fy, _, _] = scene.pre.camera.intrinsics;
     let inv_cog_scale = 1.0 / engine.cog_scale();
     let params_of = |group: &PackedGroup, chunk: &PackedChunk, count: usize| {
-        let stride = engine.lattice(group.yaw_index).table_stride();
+        let stride = group.region.table_stride();
         let grid = &scene.yaws[group.yaw_index];
         let m = grid.camera_from_rotated;
         let front = Cuboid::new(Vec3::ZERO, Vec3::ONE, grid.yaw).front();
@@ -478,6 +501,7 @@ fn run(
                         table: group.table.as_ref().map(LayerTable::sums),
                         yaw_index: group.yaw_index,
                         span: group.span,
+                        region: group.region,
                         records: &chunk.records,
                         bounds: &chunk.bounds,
                         weights: pass_weights,
@@ -678,7 +702,7 @@ pub fn fast_scores_gpu_jobs(
 
 /// Words of the table dispatch `d` reads.
 fn fast_tables_words(engine: &FastEngine, d: &FastDispatch) -> usize {
-    table_words(&table_params(engine.lattice(d.yaw_index), d.span, 0))
+    table_words(&table_params_at(engine.lattice(d.yaw_index), d.span, 0, 0, 0, d.region))
 }
 
 /// Where everything of one batch lies in its buffers, computed once and used alike by the GPU path and its
@@ -736,12 +760,12 @@ impl<'p> BatchLayout<'p> {
         for d in dispatches {
             if d.group == groups.len() {
                 let lattice = engine.lattice(d.yaw_index);
-                let table_bytes = 4 * table_words(&table_params(lattice, d.span, 0)) as u64;
+                let table_bytes = 4 * table_words(&table_params_at(lattice, d.span, 0, 0, 0, d.region)) as u64;
                 let table = tables.place(table_bytes);
                 let first_word = index(table, 4, "tables")?;
                 let first_point = yaw_points[d.yaw_index].expect("placed above").0 as u32;
                 let steps = [0, SCAN_ROWS, SCAN_COLUMNS]
-                    .map(|mode| table_params_at(lattice, d.span, mode, first_word, first_point));
+                    .map(|mode| table_params_at(lattice, d.span, mode, first_word, first_point, d.region));
                 groups.push(GroupPlacement { table, params: steps });
             }
             if d.chunk == chunks.len() {

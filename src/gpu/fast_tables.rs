@@ -22,7 +22,7 @@ use bytemuck::{Pod, Zeroable};
 
 use super::{Binding, GpuContext, KernelSpec};
 use crate::error::{Error, Result};
-use crate::features::fast::{LatticePoint, TableSpan, YawLattice, CHANNELS};
+use crate::features::fast::{CellRegion, LatticePoint, TableSpan, YawLattice, CHANNELS};
 use crate::features::feature_layout::COG;
 
 const BINDINGS: &[Binding] = &[Binding::StorageRead, Binding::StorageRead, Binding::StorageReadWrite];
@@ -63,8 +63,11 @@ pub struct TableParams {
     pub job: [u32; 4],
     /// z_lo, 1 / layer height, unused, unused.
     pub span: [f32; 4],
+    /// The first lattice cell along s and t of the table's region ([`CellRegion`]; the table holds the
+    /// cells `lo ≤ c < lo + shape − 1`, and the scatter drops the points outside), unused, unused.
+    pub region: [u32; 4],
 }
-const _: () = assert!(std::mem::size_of::<TableParams>() == 48);
+const _: () = assert!(std::mem::size_of::<TableParams>() == 64);
 // The shader hard-codes the entry layout: CHANNELS words, the COG bins from word COG.
 const _: () = assert!(CHANNELS == 36 && COG == 26);
 
@@ -73,26 +76,29 @@ pub fn table_points(lattice: &YawLattice) -> &[TablePoint] {
     lattice.points()
 }
 
-/// The params of a table of `span` over `lattice`, for the dispatch `mode` (0 for the scatter), alone in
-/// its buffers (its words and its points from 0).
+/// The params of a table of `span` over the whole of `lattice`, for the dispatch `mode` (0 for the
+/// scatter), alone in its buffers (its words and its points from 0).
 pub fn table_params(lattice: &YawLattice, span: TableSpan, mode: u32) -> TableParams {
-    table_params_at(lattice, span, mode, 0, 0)
+    table_params_at(lattice, span, mode, 0, 0, CellRegion::whole(lattice))
 }
 
-/// [`table_params`] of a table whose words start at word `first_word` of the tables buffer and whose
-/// yaw's points start at point `first_point` of the points buffer.
+/// The params of a table of `span` over `region` of `lattice` whose words start at word `first_word` of
+/// the tables buffer and whose yaw's points start at point `first_point` of the points buffer.
 pub fn table_params_at(
     lattice: &YawLattice,
     span: TableSpan,
     mode: u32,
     first_word: u32,
     first_point: u32,
+    region: CellRegion,
 ) -> TableParams {
-    let [row, rows] = lattice.table_stride();
+    let [row, rows] = region.table_stride();
+    let [lo_s, lo_t] = region.lo();
     TableParams {
         shape: [row as u32, rows as u32, span.layers as u32, lattice.cells()[0] as u32],
         job: [lattice.points().len() as u32, mode, first_word, first_point],
         span: [span.z_lo, span.inv_step, 0.0, 0.0],
+        region: [lo_s as u32, lo_t as u32, 0, 0],
     }
 }
 
@@ -121,9 +127,15 @@ pub fn scatter_main(tables: &[TableParams], points: &[TablePoint], table: &mut [
         return;
     }
     let [row, rows, _, cells_s] = params.shape.map(|v| v as usize);
-    let x = p.cell as usize % cells_s;
-    let y = p.cell as usize / cells_s;
-    // Cell (x, y) is entry (x + 1, y + 1) before the prefix sums.
+    let [lo_s, lo_t] = [params.region[0] as usize, params.region[1] as usize];
+    let cell_s = p.cell as usize % cells_s;
+    let cell_t = p.cell as usize / cells_s;
+    // Only the region's cells, `lo ≤ c < lo + shape − 1`.
+    if cell_s < lo_s || cell_t < lo_t || cell_s - lo_s >= row - 1 || cell_t - lo_t >= rows - 1 {
+        return;
+    }
+    let (x, y) = (cell_s - lo_s, cell_t - lo_t);
+    // Cell (x, y) of the region is entry (x + 1, y + 1) before the prefix sums.
     let base = params.job[2] as usize + ((layer as usize * rows + y + 1) * row + x + 1) * CHANNELS;
     let mut atomic_add = |at: usize, value: u32| table[at] = table[at].wrapping_add(value);
     atomic_add(base, 1);
