@@ -205,8 +205,7 @@ pub struct LayerTable {
 /// the CPU, and on the standard frame (README, "Tables over their boxes' region") more than half of that
 /// went to cells no hypothesis of the group reads.
 ///
-/// The GPU path builds its tables over the same regions (`gpu::fast`, from the first and last boundaries of
-/// its hypotheses, `voxel_boundary_extremes`).
+/// The GPU path builds its tables over the same regions (`gpu::fast`'s packer).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct CellRegion {
     lo: [usize; 2],
@@ -243,20 +242,16 @@ impl CellRegion {
         }
     }
 
-    /// The smallest region holding the voxels of every hypothesis whose boundaries `bounds` yields (their
-    /// first and last boundary along each axis; boundaries ascend).
+    /// The cells the voxels of the hypothesis with boundaries `b` cover: from its first to its last
+    /// boundary along each axis (boundaries ascend).
+    pub(crate) fn of(b: &VoxelBoundaries) -> CellRegion {
+        let (xs, ys) = (b.xs(), b.ys());
+        CellRegion { lo: [xs[0] as usize, ys[0] as usize], hi: [xs[xs.len() - 1] as usize, ys[ys.len() - 1] as usize] }
+    }
+
+    /// The smallest region holding the voxels of every hypothesis whose boundaries `bounds` yields.
     fn of_boundaries(bounds: impl IntoIterator<Item = VoxelBoundaries>) -> Option<CellRegion> {
-        let mut region: Option<CellRegion> = None;
-        for b in bounds {
-            let (xs, ys) = (b.xs(), b.ys());
-            let lo = [xs[0] as usize, ys[0] as usize];
-            let hi = [xs[xs.len() - 1] as usize, ys[ys.len() - 1] as usize];
-            region = Some(match region {
-                None => CellRegion { lo, hi },
-                Some(r) => r.union(CellRegion { lo, hi }),
-            });
-        }
-        region
+        bounds.into_iter().map(|b| CellRegion::of(&b)).reduce(CellRegion::union)
     }
 }
 
@@ -698,17 +693,6 @@ impl VoxelBoundaries {
     pub(crate) fn all(&self) -> &[u32] {
         &self.cells[..self.counts[0] + self.counts[1]]
     }
-
-    /// The boundaries as entries of a table over `region` (which holds the hypothesis's voxels): less the
-    /// region's first cell along each axis.
-    pub(crate) fn relative_to(&self, region: CellRegion) -> VoxelBoundaries {
-        let mut out = *self;
-        let nx1 = self.counts[0];
-        for (k, cell) in out.cells[..self.counts[0] + self.counts[1]].iter_mut().enumerate() {
-            *cell -= region.lo[usize::from(k >= nx1)] as u32;
-        }
-        out
-    }
 }
 
 /// Step 3's membership rule: voxel i along s covers the lattice cells `xs[i]..xs[i+1]` (those whose centre
@@ -751,19 +735,8 @@ fn voxel_boundaries(g: &[u32; 3], expanded: &ExpandedBox, lattice: &YawLattice) 
     boundaries
 }
 
-/// The first and last cell boundaries along s and t of the hypothesis `expanded` (those of
-/// [`voxel_boundaries`], which ascend): the cells `lo ≤ c < hi` its voxels cover, by the rule one boundary
-/// at a time ([`boundary_scalar`], equal to the lanes' — tested), four boundaries instead of all.
-pub(crate) fn voxel_boundary_extremes(g: &[u32; 3], expanded: &ExpandedBox, lattice: &YawLattice) -> [[usize; 2]; 2] {
-    let first_and_last = |axis: usize| {
-        let last = g[axis] as usize;
-        [boundary_scalar(expanded, lattice, axis, 0) as usize, boundary_scalar(expanded, lattice, axis, last) as usize]
-    };
-    let (s, t) = (first_and_last(0), first_and_last(1));
-    [[s[0], t[0]], [s[1], t[1]]]
-}
-
 /// Boundary `i` along `axis` by the rule's formula, one at a time (the reference of [`voxel_boundaries`]).
+#[cfg(test)]
 fn boundary_scalar(expanded: &ExpandedBox, lattice: &YawLattice, axis: usize, i: usize) -> u32 {
     let face = expanded.lo[axis] + i as f32 * expanded.cell[axis];
     // Ties (a cell centre on a face, common: centres and sizes are round numbers) go to the voxel above

@@ -81,9 +81,7 @@ use super::fast_tables::{
 use super::{buffer_range, Binding, GpuContext, KernelSpec, TexelRows};
 use crate::error::{Error, Result};
 use crate::features::cpu::{dot, ExpandedBox, VIEW_MIN_DISTANCE};
-use crate::features::fast::{
-    group_by_table, voxel_boundary_extremes, CellRegion, FastEngine, LayerTable, TableKey, TableSpan, CHANNELS,
-};
+use crate::features::fast::{group_by_table, CellRegion, FastEngine, LayerTable, TableKey, TableSpan, CHANNELS};
 use crate::features::feature_layout::{
     view_features, FeatureLayout, COG, COG_BINS, COG_EPSILON, NORMALS, PER_VOXEL, VIEW,
 };
@@ -288,18 +286,7 @@ impl PackedGroup {
         let layout = engine.layout();
         let g = layout.grid();
         let words = boundary_words(&g);
-        let lattice = engine.lattice(key.yaw_index as usize);
-        // The region first (from each hypothesis's first and last boundaries), so the boundaries packed
-        // below can be made relative to it.
-        let region = members
-            .par_iter()
-            .flat_map_iter(|(job, job_members)| job_members.iter().map(move |&n| &jobs[*job].hypotheses[n]))
-            .map(|hyp| {
-                let [lo, hi] = voxel_boundary_extremes(&g, &ExpandedBox::new(layout, hyp), lattice);
-                CellRegion::new(lattice, lo, hi).expect("boundaries lie within the lattice")
-            })
-            .reduce_with(CellRegion::union)
-            .unwrap_or(CellRegion::whole(lattice));
+        let mut region: Option<CellRegion> = None;
         let mut chunks = Vec::new();
         for (job, job_members) in members {
             for part in job_members.chunks(max_chunk.max(1)) {
@@ -307,22 +294,43 @@ impl PackedGroup {
                 // thread left most threads idle while the largest groups packed).
                 let mut records = vec![FastRecord::default(); part.len()];
                 let mut bounds = vec![0u32; part.len() * words];
-                records.par_iter_mut().zip(bounds.par_chunks_mut(words)).zip(part).for_each(
-                    |((record, bounds), &n)| {
+                let part_region = records
+                    .par_iter_mut()
+                    .zip(bounds.par_chunks_mut(words))
+                    .zip(part)
+                    .map(|((record, bounds), &n)| {
                         let hyp = &jobs[*job].hypotheses[n];
                         let expanded = ExpandedBox::new(layout, hyp);
-                        let boundaries = engine.voxel_boundaries(&expanded, key.yaw_index).relative_to(region);
+                        let boundaries = engine.voxel_boundaries(&expanded, key.yaw_index);
                         pack_boundaries(boundaries.all(), bounds);
                         let ExpandedBox { lo, cell, .. } = expanded;
                         *record = FastRecord {
                             lo: [lo[0], lo[1], lo[2], hyp.centre.x],
                             cell: [cell[0], cell[1], cell[2], hyp.centre.y],
                         };
-                    },
-                );
+                        CellRegion::of(&boundaries)
+                    })
+                    .reduce_with(CellRegion::union);
+                region = match (region, part_region) {
+                    (Some(a), Some(b)) => Some(a.union(b)),
+                    (a, b) => a.or(b),
+                };
                 chunks.push(PackedChunk { job: *job, members: part.to_vec(), records, bounds });
             }
         }
+        // The group's table covers the cells its voxels reach (as the CPU path's); its boundaries become
+        // relative to that region's first cells: each packed word less the same two cells packed alike
+        // (each half of a word is at least its cell, so no borrow crosses from one half to the other).
+        let region = region.unwrap_or(CellRegion::whole(engine.lattice(key.yaw_index as usize)));
+        let [lo_s, lo_t] = region.lo().map(|c| c as u32);
+        let firsts: Vec<u32> = (0..g[0] + 1).map(|_| lo_s).chain((0..g[1] + 1).map(|_| lo_t)).collect();
+        let mut offsets = vec![0u32; words];
+        pack_boundaries(&firsts, &mut offsets);
+        chunks.par_iter_mut().flat_map(|chunk| chunk.bounds.par_chunks_mut(words)).for_each(|bounds| {
+            for (word, offset) in bounds.iter_mut().zip(&offsets) {
+                *word -= offset;
+            }
+        });
         let span = engine.table_span(key);
         let table = build_table.then(|| engine.build_table(key, region));
         PackedGroup { yaw_index: key.yaw_index as usize, span, region, table, chunks }
