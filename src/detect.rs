@@ -28,7 +28,10 @@ use rayon::prelude::*;
 
 use crate::backend::{Backend, FastJob};
 use crate::category::{SurfaceCategories, SURFACE_CATEGORIES};
-use crate::draw::{category_colour, contrasting, draw_cuboid_with, draw_label, shade_convex_polygon};
+use crate::draw::{
+    category_colour, contrasting, draw_cuboid_with, draw_label, label_size, place_labels, shade_convex_polygon,
+    LabelBox,
+};
 use crate::error::{Error, Result};
 use crate::eval::{Detection, FrameDetections};
 use crate::features::budget;
@@ -823,7 +826,11 @@ pub fn overlay(frame: &Frame, detections: &FrameDetections) -> RgbImage {
         }
         draw_cuboid_with(&mut image, &camera, &cuboid, category_colour(&d.category), scale, 2 * scale + 1);
     }
-    for d in &order {
+    // Labels, best first, each at the top-left of its box's projection and moved down or up where a
+    // better one's label is in the way (`place_labels`); drawn worst first, so that any overlap left shows
+    // the better label on top.
+    let mut labels: Vec<(LabelBox, String, [u8; 3])> = Vec::new();
+    for d in order.iter().rev() {
         let cuboid = d.cuboid();
         let projected: Vec<_> = cuboid.corners().iter().filter_map(|&c| camera.project(c)).collect();
         if projected.is_empty() {
@@ -831,11 +838,16 @@ pub fn overlay(frame: &Frame, detections: &FrameDetections) -> RgbImage {
         }
         let x = projected.iter().map(|p| p.x).fold(f32::INFINITY, f32::min);
         let y = projected.iter().map(|p| p.y).fold(f32::INFINITY, f32::min);
-        let colour = category_colour(&d.category);
         let text = format!("{} {:.2}", d.category, d.score);
+        let (width, height) = label_size(&text, scale);
         let x = (x as i64).clamp(0, image.width() as i64 - 1);
-        let y = (y as i64 - 10 * scale as i64).clamp(0, image.height() as i64 - 1);
-        draw_label(&mut image, x, y, &text, contrasting(colour), colour, scale);
+        let y = (y as i64 - 10 * scale as i64).clamp(0, (image.height() as i64 - height as i64).max(0));
+        labels.push((LabelBox { x, y, width, height }, text, category_colour(&d.category)));
+    }
+    let wanted: Vec<LabelBox> = labels.iter().map(|l| l.0).collect();
+    let places = place_labels(&wanted, image.height());
+    for (place, (_, text, colour)) in places.iter().zip(&labels).rev() {
+        draw_label(&mut image, place.x, place.y, text, contrasting(*colour), *colour, scale);
     }
     image
 }

@@ -411,6 +411,69 @@ pub fn draw_text(img: &mut RgbImage, x: i64, y: i64, text: &str, colour: Colour,
     text_size(text, scale)
 }
 
+/// A label's box on the image: top-left corner and size in pixels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LabelBox {
+    pub x: i64,
+    pub y: i64,
+    pub width: u32,
+    pub height: u32,
+}
+
+impl LabelBox {
+    fn overlaps(&self, other: &LabelBox) -> bool {
+        self.x < other.x + other.width as i64
+            && other.x < self.x + self.width as i64
+            && self.y < other.y + other.height as i64
+            && other.y < self.y + self.height as i64
+    }
+
+    fn fits_rows(&self, image_height: u32) -> bool {
+        self.y >= 0 && self.y + self.height as i64 <= image_height as i64
+    }
+}
+
+/// Where labels go so that none hides another: `wanted` in priority order (the first keeps its place),
+/// each moved only along y, to the nearest free place. A label that overlaps one already placed first tries
+/// just below each label in its way (moving down), then just above (moving up), and takes the free
+/// candidate nearest its wanted `y` (ties: the lower one, below its box's top edge where the labels sit);
+/// a label with no free place within the image rows keeps its wanted place (drawn under the better ones), as
+/// does one that does not fit the rows where it is wanted.
+/// Deterministic: the same boxes give the same places.
+///
+/// Why only along y: a label names the box whose top-left corner it sits at; a label moved sideways
+/// would read as naming its neighbour, one moved up or down stays in the box's column.
+pub fn place_labels(wanted: &[LabelBox], image_height: u32) -> Vec<LabelBox> {
+    let mut placed: Vec<LabelBox> = Vec::with_capacity(wanted.len());
+    for &label in wanted {
+        let free =
+            |candidate: &LabelBox| candidate.fits_rows(image_height) && placed.iter().all(|p| !p.overlaps(candidate));
+        let chosen = if free(&label) || !label.fits_rows(image_height) {
+            label
+        } else {
+            // Each free place a label can move to is flush with a placed label's bottom or top edge.
+            let candidates =
+                placed.iter().filter(|p| p.x < label.x + label.width as i64 && label.x < p.x + p.width as i64);
+            candidates
+                .flat_map(|p| [p.y + p.height as i64, p.y - label.height as i64])
+                .map(|y| LabelBox { y, ..label })
+                .filter(|c| free(c))
+                .min_by_key(|c| ((c.y - label.y).abs(), std::cmp::Reverse(c.y)))
+                .unwrap_or(label)
+        };
+        placed.push(chosen);
+    }
+    placed
+}
+
+/// Size in pixels of the box [`draw_label`] draws for `text` at `scale` (0 counts as 1): the text's
+/// [`text_size`] plus `scale` pixels of padding on every side.
+pub fn label_size(text: &str, scale: u32) -> (u32, u32) {
+    let scale = scale.max(1);
+    let (w, h) = text_size(text, scale);
+    (w + 2 * scale, h + 2 * scale)
+}
+
 /// Draws `text` on a filled `background` box for legibility: the box is the text's [`text_size`] plus
 /// `scale` pixels of padding on every side, with its top-left corner at `(x, y)`. Returns the box size.
 pub fn draw_label(
@@ -423,8 +486,7 @@ pub fn draw_label(
     scale: u32,
 ) -> (u32, u32) {
     let scale = scale.max(1);
-    let (w, h) = text_size(text, scale);
-    let (box_w, box_h) = (w + 2 * scale, h + 2 * scale);
+    let (box_w, box_h) = label_size(text, scale);
     fill_rect(img, x, y, box_w, box_h, background);
     draw_text(img, x + scale as i64, y + scale as i64, text, colour, scale);
     (box_w, box_h)

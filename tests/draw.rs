@@ -3,8 +3,8 @@
 use std::collections::HashSet;
 
 use cog_gpu::draw::{
-    category_colour, draw_cuboid, draw_label, draw_line, draw_text, fill_rect, text_size, ADVANCE, CATEGORY_PALETTE,
-    GLYPH_HEIGHT, LINE_HEIGHT,
+    category_colour, draw_cuboid, draw_label, draw_line, draw_text, fill_rect, label_size, place_labels, text_size,
+    LabelBox, ADVANCE, CATEGORY_PALETTE, GLYPH_HEIGHT, LINE_HEIGHT,
 };
 use cog_gpu::geometry::{Camera, Cuboid};
 use glam::{Mat3, Vec2, Vec3};
@@ -195,6 +195,61 @@ fn labels_sit_on_a_background_box() {
     // The padding corner keeps the background colour; the text is white on it.
     assert_eq!(img.get_pixel(2, 2).0, blue);
     assert!(img.pixels().any(|p| p.0 == [255, 255, 255]));
+}
+
+fn label(x: i64, y: i64, width: u32, height: u32) -> LabelBox {
+    LabelBox { x, y, width, height }
+}
+
+/// `draw_label`'s box is `label_size`: what `place_labels` is given is what gets drawn.
+#[test]
+fn label_size_is_the_drawn_box() {
+    for (text, scale) in [("AP", 1), ("chair 0.54", 2), ("x\ny", 3)] {
+        let mut img = RgbImage::new(200, 80);
+        let drawn = draw_label(&mut img, 0, 0, text, [255, 255, 255], [0, 0, 200], scale);
+        assert_eq!(label_size(text, scale), drawn, "{text} at {scale}");
+    }
+}
+
+/// Labels already apart keep their places; labels wanted at one place stack below the first, which keeps
+/// its place, each flush with the one above (hand-computed rows); none overlaps another.
+#[test]
+fn labels_in_each_others_way_stack_without_overlap() {
+    let apart = [label(0, 0, 20, 9), label(30, 0, 20, 9), label(0, 20, 20, 9)];
+    assert_eq!(place_labels(&apart, 100), apart.to_vec());
+
+    let same = [label(10, 5, 40, 9), label(12, 5, 30, 9), label(0, 7, 60, 9)];
+    let placed = place_labels(&same, 100);
+    assert_eq!(placed[0], same[0], "the first (best) label keeps its place");
+    // The second overlaps [5, 14): just below it (14) is 9 rows away, just above (−4) leaves the image.
+    assert_eq!(placed[1], label(12, 14, 30, 9));
+    // The third (wanted at 7) overlaps both: free places 23 (below the second, 16 away) and −4 (above the
+    // first, outside): 23.
+    assert_eq!(placed[2], label(0, 23, 60, 9));
+    for (a, b) in [(0, 1), (0, 2), (1, 2)] {
+        let (p, q) = (placed[a], placed[b]);
+        let apart_x = p.x + p.width as i64 <= q.x || q.x + q.width as i64 <= p.x;
+        let apart_y = p.y + p.height as i64 <= q.y || q.y + q.height as i64 <= p.y;
+        assert!(apart_x || apart_y, "{p:?} and {q:?} overlap");
+    }
+}
+
+/// A label moves to the nearer side of the one in its way (up when that is nearer), stays inside the image
+/// rows, and keeps its place when there is no free place (image too short).
+#[test]
+fn labels_move_to_the_nearest_free_place_inside_the_image() {
+    // Wanted 3 rows above the first's top: up to 50 − 9 = 41 (6 away) is nearer than down to 59 (12 away).
+    let placed = place_labels(&[label(0, 50, 20, 9), label(5, 47, 20, 9)], 100);
+    assert_eq!(placed[1].y, 41);
+    // Near the bottom: below (95, ending at 105) would leave the 100-row image, so up (90 − 10 = 80).
+    let placed = place_labels(&[label(0, 90, 20, 5), label(0, 88, 20, 10)], 100);
+    assert_eq!(placed[1].y, 80);
+    // A 12-row image with a 9-row label in the way: neither 9 (ends at 18) nor −9 fits; it stays.
+    let placed = place_labels(&[label(0, 0, 20, 9), label(0, 2, 20, 9)], 12);
+    assert_eq!(placed[1], label(0, 2, 20, 9));
+    // Equally far up and down: the lower place.
+    let placed = place_labels(&[label(0, 20, 20, 10), label(0, 20, 20, 10)], 100);
+    assert_eq!(placed[1].y, 30);
 }
 
 #[test]
