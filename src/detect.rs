@@ -29,7 +29,7 @@ use rayon::prelude::*;
 use crate::backend::{Backend, FastJob};
 use crate::category::{SurfaceCategories, SURFACE_CATEGORIES};
 use crate::draw::{
-    category_colour, contrasting, draw_cuboid_with, draw_label, label_size, place_labels, shade_convex_polygon,
+    category_colour, contrasting, draw_cuboid_with, draw_label, label_size, place_labels, shade_convex_polygon, Colour,
     LabelBox,
 };
 use crate::error::{Error, Result};
@@ -829,7 +829,7 @@ pub fn overlay(frame: &Frame, detections: &FrameDetections) -> RgbImage {
     // Labels, best first, each at the top-left of its box's projection and moved down or up where a
     // better one's label is in the way (`place_labels`); drawn worst first, so that any overlap left shows
     // the better label on top.
-    let mut labels: Vec<(LabelBox, String, [u8; 3])> = Vec::new();
+    let mut labels: Vec<(LabelBox, String, Colour)> = Vec::new();
     for d in order.iter().rev() {
         let cuboid = d.cuboid();
         let projected: Vec<_> = cuboid.corners().iter().filter_map(|&c| camera.project(c)).collect();

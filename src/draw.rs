@@ -434,11 +434,10 @@ impl LabelBox {
 }
 
 /// Where labels go so that none hides another: `wanted` in priority order (the first keeps its place),
-/// each moved only along y, to the nearest free place. A label that overlaps one already placed first tries
-/// just below each label in its way (moving down), then just above (moving up), and takes the free
-/// candidate nearest its wanted `y` (ties: the lower one, below its box's top edge where the labels sit);
-/// a label with no free place within the image rows keeps its wanted place (drawn under the better ones), as
-/// does one that does not fit the rows where it is wanted.
+/// each moved only along y, to the nearest free place inside the image rows. A label that overlaps one
+/// already placed takes, of the places flush below or flush above each placed label in its column, the
+/// free one nearest its wanted `y` (on a tie the lower one). A label with no free place keeps its wanted
+/// place (drawn under the better ones), as does one that does not fit the rows where it is wanted.
 /// Deterministic: the same boxes give the same places.
 ///
 /// Why only along y: a label names the box whose top-left corner it sits at; a label moved sideways

@@ -201,13 +201,20 @@ fn label(x: i64, y: i64, width: u32, height: u32) -> LabelBox {
     LabelBox { x, y, width, height }
 }
 
-/// `draw_label`'s box is `label_size`: what `place_labels` is given is what gets drawn.
+/// `label_size` is the box `draw_label` paints (the extent of its pixels on a black image), and by hand the
+/// text's advance and line height plus `scale` pixels of padding on every side.
 #[test]
-fn label_size_is_the_drawn_box() {
-    for (text, scale) in [("AP", 1), ("chair 0.54", 2), ("x\ny", 3)] {
+fn label_size_is_the_painted_box() {
+    for (text, scale, hand) in [
+        ("AP", 1, (2 * ADVANCE + 2, LINE_HEIGHT + 2)),
+        ("chair 0.54", 2, (10 * ADVANCE * 2 + 4, LINE_HEIGHT * 2 + 4)),
+        ("x\ny", 3, (ADVANCE * 3 + 6, 2 * LINE_HEIGHT * 3 + 6)),
+    ] {
+        assert_eq!(label_size(text, scale), hand, "{text} at {scale}");
         let mut img = RgbImage::new(200, 80);
-        let drawn = draw_label(&mut img, 0, 0, text, [255, 255, 255], [0, 0, 200], scale);
-        assert_eq!(label_size(text, scale), drawn, "{text} at {scale}");
+        draw_label(&mut img, 3, 4, text, [255, 255, 255], [0, 0, 200], scale);
+        let (x0, y0, x1, y1) = bounding_box(&img);
+        assert_eq!((x0, y0, x1 - x0 + 1, y1 - y0 + 1), (3, 4, hand.0, hand.1), "{text} at {scale}");
     }
 }
 
