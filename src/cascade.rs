@@ -112,14 +112,14 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::calibration::{fit_logistic, Calibration};
-use crate::category::LARGE_CATEGORIES;
+use crate::category::{category_index, LARGE_CATEGORIES};
 use crate::error::{Error, Result};
 use crate::eval::{average_precision, true_positives_in_input_order, Detection, FrameDetections, ScoredBox};
 use crate::frame::Object;
 use crate::geometry::{footprint_overlap_area, intersection_volume, polygon_contains, Cuboid};
 use crate::learn::binary_svm::{balanced_costs, train_linear_svm, LinearSvm};
 use crate::learn::checkpoint::{fnv1a, FNV_OFFSET};
-use crate::model::Model;
+use crate::model::{Model, MAX_WEIGHT};
 use glam::{Vec2, Vec3};
 
 /// The `format` field of a cascade file.
@@ -327,6 +327,18 @@ pub struct SecondStage {
 }
 
 impl SecondStage {
+    /// Its numbers are usable: weights and bias finite and within ±[`MAX_WEIGHT`] as a model's (larger ones
+    /// would overflow the `f32` scores to infinity), and a valid calibration.
+    pub fn check_numbers(&self) -> std::result::Result<(), String> {
+        if self.weights.iter().chain([&self.bias]).any(|v| !v.is_finite()) {
+            return Err("a weight is not finite".into());
+        }
+        if self.weights.iter().chain([&self.bias]).any(|v| v.abs() > MAX_WEIGHT as f64) {
+            return Err(format!("a weight is beyond ±{MAX_WEIGHT:e}: not a trained stage"));
+        }
+        self.calibration.validate()
+    }
+
     /// Whether this stage replaces `incumbent` when stages of several feature sets compete for a category
     /// (`--features best`, [`StageOutcome::chosen`], [`Cascade::merged_with`]): a strictly higher
     /// cross-validated AP, so that ties keep the incumbent (the earlier set or file).
@@ -418,18 +430,34 @@ impl Cascade {
         Ok(())
     }
 
+    /// Writes the file — only a cascade that [`Cascade::check`] accepts, so that nothing this writes is
+    /// refused by its readers (a stage resumed from a damaged checkpoint, say).
     pub fn write(&self, path: &Path) -> Result<()> {
+        self.check().map_err(|problem| Error::invalid(path, format!("not written: {problem}")))?;
         let text = serde_json::to_string_pretty(self).map_err(|e| Error::invalid(path, e.to_string()))?;
         std::fs::write(path, text).map_err(|e| Error::io(path, e))
     }
 
-    /// The stored numbers are usable: known format and features, finite weights of the right length.
+    /// The stored numbers are usable: known format and features; context categories that are cog-gpu's,
+    /// each once; stages of cog-gpu's categories with weights of the right length, finite and within
+    /// ±[`MAX_WEIGHT`] as a model's (larger ones would overflow the `f32` scores to infinity).
     pub fn check(&self) -> std::result::Result<(), String> {
         if self.format != FORMAT || self.version != VERSION {
             return Err(format!(
                 "not a {FORMAT} version {VERSION} file (format '{}', version {})",
                 self.format, self.version
             ));
+        }
+        if self.categories.is_empty() {
+            return Err("no context categories".into());
+        }
+        for (n, category) in self.categories.iter().enumerate() {
+            if category_index(category).is_none() {
+                return Err(format!("context category '{category}' is not one of cog-gpu's"));
+            }
+            if self.categories[..n].contains(category) {
+                return Err(format!("context category '{category}' is listed twice"));
+            }
         }
         let unknown = |name: &str| {
             format!("feature set '{name}' is not one of this build's '{V6_FEATURES}', '{V5_FEATURES}', '{V4_FEATURES}'")
@@ -443,10 +471,10 @@ impl Cascade {
             if stage.weights.len() != dim {
                 return Err(format!("'{category}': {} weights, expected {dim}", stage.weights.len()));
             }
-            if stage.weights.iter().chain([&stage.bias]).any(|v| !v.is_finite()) {
-                return Err(format!("'{category}': a weight is not finite"));
+            if category_index(category).is_none() {
+                return Err(format!("a stage for '{category}', which is not one of cog-gpu's categories"));
             }
-            stage.calibration.validate().map_err(|e| format!("'{category}': {e}"))?;
+            stage.check_numbers().map_err(|e| format!("'{category}': {e}"))?;
         }
         Ok(())
     }
@@ -1041,7 +1069,11 @@ impl StageKey<'_> {
             return None;
         }
         match (stored.stage, stored.no_stage) {
-            (Some(stage), None) if stage.weights.len() == self.set.dim(self.categories.len()) => Some(Ok(stage)),
+            (Some(stage), None)
+                if stage.weights.len() == self.set.dim(self.categories.len()) && stage.check_numbers().is_ok() =>
+            {
+                Some(Ok(stage))
+            }
             (None, Some(reason)) => Some(Err(reason)),
             _ => {
                 log::warn!("{}: an inconsistent stage checkpoint; training the stage again", path.display());

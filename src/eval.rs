@@ -19,6 +19,7 @@ use std::path::Path;
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
+use crate::category::{category_index, normalise_name, CATEGORIES};
 use crate::error::{Error, Result};
 use crate::geometry::{iou_3d, Cuboid};
 use crate::limits::{MAX_COORDINATE_M, MAX_OBJECT_SIZE_M};
@@ -99,6 +100,20 @@ impl FrameDetections {
         let parsed: FrameDetections =
             serde_json::from_str(text).map_err(|e| Error::invalid(path, format!("not a detections file: {e}")))?;
         for (i, d) in parsed.detections.iter().enumerate() {
+            // A category spelt otherwise than cog-gpu writes it would match no annotation and no
+            // `--categories` entry: its detections would drop out of every evaluation without a word.
+            if category_index(&d.category).is_none() {
+                let known = normalise_name(&d.category).0;
+                let hint = if category_index(&known).is_some() {
+                    format!("write '{known}'")
+                } else {
+                    format!("the categories are {}", CATEGORIES.join(", "))
+                };
+                return Err(Error::invalid(
+                    path,
+                    format!("detections[{i}] has category '{}', not one of cog-gpu's ({hint})", d.category),
+                ));
+            }
             let finite = d
                 .centre
                 .iter()

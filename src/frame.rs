@@ -611,7 +611,7 @@ fn read_frame(dir: &Path, depth_source: DepthSource) -> Result<Frame> {
     if !dir.is_dir() {
         return Err(not_a_frame_dir(dir));
     }
-    let name = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| dir.display().to_string());
+    let name = frame_name(dir);
     let rgb_path = single_image(dir, "image")?;
     let rgb = open_image(&rgb_path)?.to_rgb8();
     let depth_path = single_image(dir, depth_source.dir_name())?;
@@ -738,9 +738,32 @@ fn write_frame(dir: &Path, frame: &Frame) -> Result<()> {
 // Datasets
 
 /// A frame directory's name, its identity among a dataset's frames and in a detections directory
-/// (`<name>.json`); the whole path when it has no last component.
+/// (`<name>.json`): its last component — that of its canonical path when it has none (`.` or `..`, a
+/// frame detected from inside it, would otherwise be named `.`) — or the whole path when neither has one.
 pub fn frame_name(dir: &Path) -> String {
-    dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| dir.display().to_string())
+    let last = |path: &Path| path.file_name().map(|n| n.to_string_lossy().into_owned());
+    last(dir)
+        .or_else(|| fs::canonicalize(dir).ok().and_then(|canonical| last(&canonical)))
+        .unwrap_or_else(|| dir.display().to_string())
+}
+
+/// The [`frame_name`] of each of `frames`, in order; an error naming both directories when two share a
+/// name, since their files (`<name>.json`: detections, layouts) would be one file — read for both, or
+/// written over each other.
+pub fn unique_frame_names(frames: &[PathBuf]) -> Result<Vec<String>> {
+    let names: Vec<String> = frames.iter().map(|dir| frame_name(dir)).collect();
+    let mut first: std::collections::HashMap<&str, &Path> = std::collections::HashMap::new();
+    for (name, dir) in names.iter().zip(frames) {
+        if let Some(other) = first.insert(name, dir) {
+            return Err(Error::Input(format!(
+                "frames {} and {} have the same name '{name}', so they would share the file {name}.json: rename \
+                 one of them",
+                other.display(),
+                dir.display()
+            )));
+        }
+    }
+    Ok(names)
 }
 
 /// Whether a directory looks like a frame: it has `intrinsics.txt` and an `image/` directory.
@@ -792,11 +815,13 @@ impl Dataset {
 
     /// Restricts the dataset to a split list: a text file with one frame directory per line, relative to
     /// the dataset root (or absolute); blank lines and lines starting with `#` are ignored. A listed
-    /// directory that is not a frame is an error naming the list and the line.
+    /// directory that is not a frame, or a frame listed twice (it would count twice in training and
+    /// evaluation), is an error naming the list and the line.
     pub fn with_split(mut self, list: impl AsRef<Path>) -> Result<Dataset> {
         let list = list.as_ref();
         let text = read_text(list)?;
         let mut frames = Vec::new();
+        let mut listed: std::collections::HashMap<PathBuf, usize> = std::collections::HashMap::new();
         for (n, line) in text.lines().enumerate() {
             let line = line.trim();
             if line.is_empty() || line.starts_with('#') {
@@ -807,6 +832,13 @@ impl Dataset {
                 return Err(Error::invalid(
                     list,
                     format!("line {}: '{}' is not a frame directory", n + 1, path.display()),
+                ));
+            }
+            let canonical = fs::canonicalize(&path).map_err(|e| Error::io(&path, e))?;
+            if let Some(first) = listed.insert(canonical, n + 1) {
+                return Err(Error::invalid(
+                    list,
+                    format!("line {}: '{}' is listed already on line {first}", n + 1, path.display()),
                 ));
             }
             frames.push(path);

@@ -498,3 +498,97 @@ fn a_closed_output_pipe_ends_the_process_without_a_panic() {
     assert!(!err.contains("panicked"), "panicked: {err}");
     assert_eq!(output.status.signal(), Some(13), "expected the end by SIGPIPE, got {:?}: {err}", output.status);
 }
+
+/// Inputs that were read without complaint and gave a wrong answer, a hang or an abort (found by a probe
+/// of the binary, 2026-12-02): each is now refused naming the file and the problem, or handled.
+#[test]
+fn duplicates_misspelt_categories_huge_rooms_and_stages_are_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tmp.path().join("data");
+    let f = write_frame(&data, &good_frame("f"));
+    write_frame(&data, &good_frame("g"));
+
+    // A detection's category spelt otherwise than cog-gpu writes it matched nothing, silently.
+    let dets = tmp.path().join("dets");
+    std::fs::create_dir_all(&dets).unwrap();
+    let sofa = r#"{"frame": "f", "detections": [{"category": "Sofa", "centre": [0, 2, 0], "size": [1, 1, 1], "yaw": 0, "score": 1}]}"#;
+    std::fs::write(dets.join("f.json"), sofa).unwrap();
+    assert_rejected(
+        &["eval", "--data", text(&data), "--detections", text(&dets)],
+        &["f.json", "'Sofa'", "write 'sofa'"],
+    );
+    std::fs::write(dets.join("f.json"), sofa.replace("Sofa", "wardrobe")).unwrap();
+    assert_rejected(
+        &["eval", "--data", text(&data), "--detections", text(&dets)],
+        &["f.json", "'wardrobe'", "nightstand"],
+    );
+    std::fs::write(dets.join("f.json"), sofa.replace("Sofa", "sofa")).unwrap();
+    assert_accepted(&["eval", "--data", text(&data), "--detections", text(&dets)]);
+
+    // A split list naming a frame twice counted it twice.
+    let split = tmp.path().join("split.txt");
+    std::fs::write(&split, "f\ng\nf\n").unwrap();
+    assert_rejected(
+        &["eval", "--data", text(&data), "--detections", text(&dets), "--split", text(&split)],
+        &["split.txt", "line 3", "line 1"],
+    );
+
+    // Two frames of one name in two directories were both matched with the one file of that name.
+    let twins = tmp.path().join("twins");
+    write_frame(&twins.join("a"), &good_frame("f"));
+    write_frame(&twins.join("b"), &good_frame("f"));
+    assert_rejected(&["calibrate", "--data", text(&twins), "--detections", text(&dets)], &["same name 'f'"]);
+    assert_rejected(&["eval", "--layout", "--data", text(&twins), "--detections", text(&dets)], &["same name 'f'"]);
+
+    // A predicted room kilometres wide: the free-space measure voxelised it for minutes and gigabytes.
+    let layouts = tmp.path().join("layouts");
+    std::fs::create_dir_all(&layouts).unwrap();
+    let room = |c: f64| {
+        serde_json::json!({"frame": "f", "layout": {"method": "model", "corners": [[-c, -c], [c, -c], [c, c], [-c, c]],
+            "floor": -1.5, "ceiling": 1.5, "yaw_deg": 0.0, "score": 0.0, "hypotheses": 1}})
+        .to_string()
+    };
+    std::fs::write(layouts.join("f.json"), room(1e3)).unwrap();
+    assert_rejected(
+        &["eval", "--layout", "--data", text(&data), "--detections", text(&layouts), "--fail-fast"],
+        &["f.json", "beyond ±100 m"],
+    );
+    std::fs::write(layouts.join("f.json"), room(3.0)).unwrap();
+    assert_accepted(&["eval", "--layout", "--data", text(&data), "--detections", text(&layouts)]);
+
+    // A frame detected from inside its directory (`detect .`) was written as `..json`.
+    let out = tmp.path().join("out");
+    let models = models_dir(tmp.path());
+    let status = cog_gpu(&["--cpu", "detect", ".", "--models", text(&models), "--out", text(&out), "--no-overlay"])
+        .current_dir(&f)
+        .output()
+        .unwrap();
+    assert!(status.status.success(), "{}", String::from_utf8_lossy(&status.stderr));
+    assert!(out.join("f.json").is_file(), "{:?}", std::fs::read_dir(&out).unwrap().collect::<Vec<_>>());
+
+    // A cascade stage whose weights overflow the scores to infinity (written as null) is refused.
+    let shipped = concat!(env!("CARGO_MANIFEST_DIR"), "/assets/models/cascade.json");
+    let mut cascade: Value = serde_json::from_str(&std::fs::read_to_string(shipped).unwrap()).unwrap();
+    let stage = &mut cascade["stages"]["bed"];
+    let n = stage["weights"].as_array().unwrap().len();
+    stage["weights"] = serde_json::json!(vec![1e300; n]);
+    let bad = tmp.path().join("cascade.json");
+    std::fs::write(&bad, cascade.to_string()).unwrap();
+    assert_rejected(
+        &["rescore", "--detections", text(&dets), "--out", text(&tmp.path().join("r")), "--cascade", text(&bad)],
+        &["cascade.json", "'bed'", "beyond"],
+    );
+    let mut cascade: Value = serde_json::from_str(&std::fs::read_to_string(shipped).unwrap()).unwrap();
+    cascade["categories"][1] = cascade["categories"][0].clone();
+    std::fs::write(&bad, cascade.to_string()).unwrap();
+    assert_rejected(
+        &["rescore", "--detections", text(&dets), "--out", text(&tmp.path().join("r")), "--cascade", text(&bad)],
+        &["cascade.json", "twice"],
+    );
+
+    // synth beyond six-digit frame names panicked allocating.
+    assert_rejected(
+        &["synth", "--out", text(&tmp.path().join("s")), "--frames", "18446744073709551615"],
+        &["--frames", "at most 1000000"],
+    );
+}

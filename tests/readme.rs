@@ -1,8 +1,11 @@
 //! The README's table of contents lists every `##` and `###` heading, in order, with the anchor GitHub
 //! gives it, and every in-page link (`](#anchor)`) points at a heading: a renamed section cannot leave a
-//! dead entry behind.
+//! dead entry behind. The README's command lines and the binary's flags agree: every flag a `cog-gpu`
+//! command line of a code block uses is one its subcommand's `--help` lists, and every flag a
+//! subcommand's `--help` lists is written in the README (a renamed or new flag cannot go unnoticed).
 
-use std::collections::HashMap;
+use std::collections::{BTreeSet, HashMap};
+use std::process::Command;
 
 fn readme() -> String {
     let path = concat!(env!("CARGO_MANIFEST_DIR"), "/README.md");
@@ -87,4 +90,130 @@ fn in_page_links_point_at_headings() {
         let target = piece.split(')').next().unwrap_or_default();
         assert!(anchors.iter().any(|a| a == target), "README links to #{target}, which no heading has");
     }
+}
+
+/// The binary's output for `args` (stdout; it must succeed).
+fn cog_gpu(args: &[&str]) -> String {
+    let out = Command::new(env!("CARGO_BIN_EXE_cog-gpu")).args(args).output().expect("run cog-gpu");
+    assert!(out.status.success(), "cog-gpu {args:?} failed: {}", String::from_utf8_lossy(&out.stderr));
+    String::from_utf8(out.stdout).expect("UTF-8 help")
+}
+
+/// The long flags (`--name`) a help text lists in its Options section, in order.
+fn help_flags(help: &str) -> BTreeSet<String> {
+    help.lines()
+        .filter_map(|line| {
+            let line = line.trim_start();
+            let line = line.strip_prefix("-h, ").or(line.strip_prefix("-V, ")).unwrap_or(line);
+            let flag = line.strip_prefix("--")?;
+            let name: String = flag.chars().take_while(|c| c.is_ascii_alphanumeric() || *c == '-').collect();
+            Some(format!("--{name}"))
+        })
+        .collect()
+}
+
+/// The subcommands `cog-gpu --help` lists (but `help`).
+fn subcommands() -> Vec<String> {
+    let help = cog_gpu(&["--help"]);
+    let commands = help.split("Commands:").nth(1).expect("a Commands section").split("Options:").next().unwrap();
+    commands
+        .lines()
+        .filter_map(|line| line.split_whitespace().next())
+        .filter(|name| *name != "help")
+        .map(str::to_string)
+        .collect()
+}
+
+/// Every `cog-gpu SUBCOMMAND ...` command line of the README's code blocks (continuation lines joined,
+/// `#` comments dropped), as (line number, subcommand, the flags it writes).
+fn readme_command_lines(text: &str, subcommands: &[String]) -> Vec<(usize, String, Vec<String>)> {
+    let mut out = Vec::new();
+    let mut in_code = false;
+    let lines: Vec<&str> = text.lines().collect();
+    let mut n = 0;
+    while n < lines.len() {
+        let line = lines[n];
+        n += 1;
+        if line.starts_with("```") {
+            in_code = !in_code;
+            continue;
+        }
+        if !in_code {
+            continue;
+        }
+        let start = n;
+        let mut command = line.split(" #").next().unwrap().to_string();
+        while command.trim_end().ends_with('\\') && n < lines.len() {
+            command = command.trim_end().trim_end_matches('\\').to_string();
+            command.push(' ');
+            command.push_str(lines[n].split(" #").next().unwrap());
+            n += 1;
+        }
+        // A command line: `cog-gpu` (or a path ending in it) as a word, then the subcommand, after
+        // global flags.
+        let words: Vec<&str> = command.split_whitespace().collect();
+        let Some(at) = words.iter().position(|w| *w == "cog-gpu" || w.ends_with("/cog-gpu")) else { continue };
+        let Some(sub) = words[at + 1..].iter().find(|w| !w.starts_with('-')) else { continue };
+        if !subcommands.iter().any(|s| s == sub) {
+            continue;
+        }
+        let flags = words[at + 1..]
+            .iter()
+            .filter_map(|w| {
+                let w = w.trim_start_matches(['[', '(']);
+                let flag = w.strip_prefix("--")?;
+                let name: String = flag.chars().take_while(|c| c.is_ascii_alphanumeric() || *c == '-').collect();
+                (!name.is_empty()).then(|| format!("--{name}"))
+            })
+            .collect();
+        out.push((start, sub.to_string(), flags));
+    }
+    out
+}
+
+#[test]
+fn readme_command_lines_use_only_flags_the_binary_accepts() {
+    let text = readme();
+    let subcommands = subcommands();
+    let global = help_flags(&cog_gpu(&["--help"]));
+    let mut problems = Vec::new();
+    let mut checked = 0;
+    for (line, sub, flags) in readme_command_lines(&text, &subcommands) {
+        let accepted = help_flags(&cog_gpu(&[&sub, "--help"]));
+        for flag in flags {
+            checked += 1;
+            if !accepted.contains(&flag) && !global.contains(&flag) {
+                problems.push(format!("README line {line}: `cog-gpu {sub}` has no {flag}"));
+            }
+        }
+    }
+    assert!(problems.is_empty(), "{}", problems.join("\n"));
+    // The scan found the README's command lines (it cannot pass by finding none).
+    assert!(checked > 300, "only {checked} flags found in the README's command lines");
+}
+
+#[test]
+fn every_flag_of_every_subcommand_is_in_the_readme() {
+    let text = readme();
+    let mut missing = Vec::new();
+    for sub in subcommands() {
+        for flag in help_flags(&cog_gpu(&[&sub, "--help"])) {
+            // A flag counts as written when it stands as a whole word (not as the prefix of a longer one).
+            let written = text.match_indices(flag.as_str()).any(|(at, _)| {
+                let next = text[at + flag.len()..].chars().next();
+                !next.is_some_and(|c| c.is_ascii_alphanumeric() || c == '-')
+            });
+            if !written && flag != "--help" {
+                missing.push(format!("`cog-gpu {sub} {flag}`"));
+            }
+        }
+    }
+    assert!(missing.is_empty(), "flags the README never writes: {}", missing.join(", "));
+}
+
+#[test]
+fn help_flags_reads_clap_options() {
+    let help = "Options:\n      --cpu                 Force\n  -h, --help   Print help\n      --min-score <S>  x\n  -V, --version  v\n";
+    let flags: Vec<String> = help_flags(help).into_iter().collect();
+    assert_eq!(flags, ["--cpu", "--help", "--min-score", "--version"]);
 }

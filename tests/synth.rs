@@ -535,6 +535,8 @@ fn bad_command_lines_fail_with_clear_errors() {
     for (extra, needle) in [
         (&["--frames", "2", "--rooms", "bedroom,garage"][..], "unknown room type 'garage'"),
         (&["--frames", "0"][..], "--frames must be at least 1"),
+        // Beyond six-digit frame names (it panicked allocating before the limit).
+        (&["--frames", "18446744073709551615"][..], "at most 1000000"),
         (&["--frames", "1", "--width", "5", "--height", "4"][..], "outside"),
         (&["--frames", "1", "--sensor", "kinect9"][..], "unknown sensor"),
     ] {

@@ -47,10 +47,13 @@ pub struct Args {
     /// Score at most this many of the kept hypotheses (evenly spread), for a quick run.
     #[arg(long, value_parser = options::at_least_one)]
     pub limit: Option<usize>,
+    /// Size statistics the window's sizes come from (the --category's quantiles).
     #[arg(long, default_value = DEFAULT_SIZE_STATS)]
     pub sizes: PathBuf,
+    /// Ground-plane step of the window's hypothesis centres (metres).
     #[arg(long, default_value_t = DEFAULT_STEP, value_parser = options::step)]
     pub step: f32,
+    /// Skip hypotheses with fewer points inside.
     #[arg(long, default_value_t = DEFAULT_MIN_POINTS)]
     pub min_points: u32,
     /// Which feature path to time: `exact` (the CPU and/or GPU path chosen by --cpu/--gpu/--both),
@@ -73,7 +76,7 @@ pub struct Args {
     #[arg(long, default_value = "assets/models")]
     pub models: PathBuf,
     /// With --detect: overrides every model's window step (as `detect --step`).
-    #[arg(long, value_parser = options::step)]
+    #[arg(long, value_parser = options::step, requires = "detect")]
     pub detect_step: Option<f32>,
     /// With --detect: timed detections of each frame.
     #[arg(long, default_value_t = 1, value_parser = options::at_least_one)]
@@ -84,7 +87,7 @@ pub struct Args {
     /// With --detect: after the stage-by-stage pass (one frame at a time), detect every frame `--repeat`
     /// times again with N frames in flight (as `detect --in-flight N`) and report the wall-clock seconds
     /// per frame of that pass, its detections compared with the first pass's.
-    #[arg(long, value_name = "N", value_parser = options::at_least_one)]
+    #[arg(long, value_name = "N", value_parser = options::at_least_one, requires = "detect")]
     pub in_flight: Option<usize>,
 }
 

@@ -16,7 +16,7 @@ use anyhow::{bail, Context};
 use cog_gpu::calibration::{fit_logistic, label_detections, Calibration};
 use cog_gpu::category::normalise_name;
 use cog_gpu::eval::Detection;
-use cog_gpu::frame::{read_annotations, Dataset, Object};
+use cog_gpu::frame::{read_annotations, unique_frame_names, Dataset, Object};
 use cog_gpu::model::read_models_dir;
 
 use super::GlobalOptions;
@@ -133,12 +133,12 @@ pub fn read_labelled_detections(
     if !detections_dir.is_dir() {
         bail!("{}: detections directory not found", detections_dir.display());
     }
+    let names = unique_frame_names(&dataset.frames)?;
     let mut truth = Vec::new();
     let mut detections: Vec<Vec<Detection>> = Vec::new();
     let mut rooms = Vec::new();
     let mut missing = 0;
-    for dir in &dataset.frames {
-        let name = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    for (dir, name) in dataset.frames.iter().zip(&names) {
         truth.push(read_annotations(dir)?.0);
         let path = detections_dir.join(format!("{name}.json"));
         if path.is_file() {

@@ -48,9 +48,10 @@ pub struct Args {
     #[arg(long, default_value = "detections")]
     pub out: PathBuf,
     /// Only these categories (comma-separated); default: every model in --models. A category searched on
-    /// support surfaces (a model with `"support": "surfaces"`: pillow, monitor, sink) brings the models of the
-    /// surface categories (bed, table, desk, dresser, nightstand, sofa, counter) with it, whose detections
-    /// carry the surfaces; their detections are reported too.
+    /// support surfaces (a model with `"support": "surfaces"` or `"floor+surfaces"`: in the shipped models
+    /// the monitor and the sink) brings the models of its supporters among the surface categories (bed,
+    /// table, desk, dresser, nightstand, sofa, counter; the shipped monitor's desks, the sink's counters)
+    /// with it, whose detections carry the surfaces; their detections are reported too.
     #[arg(long, value_delimiter = ',')]
     pub categories: Vec<String>,
     /// IoU above which 3D NMS suppresses a lower-scoring box of the same category.
@@ -157,18 +158,7 @@ pub(super) fn frame_dirs(args: &[PathBuf]) -> anyhow::Result<Vec<PathBuf>> {
         frames.extend(found);
     }
     // One output file per frame name: two frames with the same directory name would overwrite each other.
-    let mut seen = std::collections::HashMap::new();
-    for dir in &frames {
-        let name = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-        if let Some(first) = seen.insert(name.clone(), dir) {
-            bail!(
-                "frames {} and {} have the same name '{name}', so they would share the output {name}.json: \
-                 rename one of them",
-                first.display(),
-                dir.display()
-            );
-        }
-    }
+    cog_gpu::frame::unique_frame_names(&frames)?;
     Ok(frames)
 }
 
@@ -274,7 +264,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         &frames,
         in_flight,
         |n, dir| {
-            progress.set_message(dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default());
+            progress.set_message(cog_gpu::frame::frame_name(dir));
             if let Some(report) = finished[n].lock().ok().and_then(|mut f| f.take()) {
                 progress.inc(1);
                 return Ok(report);
@@ -432,7 +422,7 @@ fn finished_reports(out: &Path, frames: &[PathBuf], run: &str) -> anyhow::Result
 /// `<frame>.json` is there and reads as that frame's detections file (with a readable room when it has
 /// one); else `None`, and the frame is detected again.
 fn finished_report(out: &Path, dir: &Path) -> Option<(PathBuf, FrameReport)> {
-    let name = dir.file_name()?.to_string_lossy().into_owned();
+    let name = cog_gpu::frame::frame_name(dir);
     let path = out.join(format!("{name}.json"));
     let text = std::fs::read_to_string(&path).ok()?;
     let detections = FrameDetections::parse(&path, &text).ok().filter(|d| d.frame == name)?;

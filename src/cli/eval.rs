@@ -21,7 +21,7 @@
 //!   get no window numbers and a warning). `--models` and `--step` need `--diagnose`; so do
 //!   `--overlay-top` and `--overlay-min-score`, the rule of the "overlay as drawn" line (`detect`'s).
 
-use std::collections::{BTreeMap, HashMap, HashSet};
+use std::collections::{BTreeMap, HashSet};
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
@@ -36,7 +36,7 @@ use cog_gpu::eval::{
     Detection, FrameDetections, SurfaceAccuracy,
 };
 use cog_gpu::features::Preprocessed;
-use cog_gpu::frame::{frame_name, read_annotations, Dataset, DepthSource, Frame, Object};
+use cog_gpu::frame::{frame_name, read_annotations, unique_frame_names, Dataset, DepthSource, Frame, Object};
 use cog_gpu::model::{read_models_dir, Model};
 use cog_gpu::synth::{read_support_heights, SUPPORT_FILE};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -239,6 +239,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
             settings: Bootstrap { resamples: resamples as usize, seed: args.bootstrap_seed },
             versus: args.versus.clone(),
         });
+        unique_frame_names(&dataset.frames)?;
         return super::eval_layout::run(&dataset.frames, &args.detections, args.json, args.fail_fast, bootstrap);
     }
     let categories = categories(&args.categories)?;
@@ -253,17 +254,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     if dataset.is_empty() {
         bail!("{}: no frame directories to evaluate", args.data.display());
     }
-    let names: Vec<String> = dataset.frames.iter().map(|d| frame_name(d)).collect();
-    let mut first_dir: HashMap<&str, &Path> = HashMap::new();
-    for (name, dir) in names.iter().zip(&dataset.frames) {
-        if let Some(other) = first_dir.insert(name, dir) {
-            bail!(
-                "frames {} and {} have the same name '{name}', so they would share the detections file {name}.json",
-                other.display(),
-                dir.display()
-            );
-        }
-    }
+    let names = unique_frame_names(&dataset.frames)?;
 
     let files = detection_files(&args.detections)?;
     let known: HashSet<&str> = names.iter().map(String::as_str).collect();

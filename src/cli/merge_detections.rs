@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context};
 use cog_gpu::category::normalise_name;
 use cog_gpu::detect::{replace_categories, replacement_problem};
-use cog_gpu::eval::FrameDetections;
+use cog_gpu::eval::{Detection, FrameDetections};
 use cog_gpu::model::read_models_dir;
 
 use super::GlobalOptions;
@@ -91,13 +91,14 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         if update.frame != base.frame {
             bail!("{}: frame '{}', but the --base file is frame '{}'", update_path.display(), update.frame, base.frame);
         }
-        if let Some(d) =
-            base.detections.iter().chain(&update.detections).find(|d| !models.iter().any(|m| m.category == d.category))
+        let unmodelled = |d: &&Detection| !models.iter().any(|m| m.category == d.category);
+        let stray = base.detections.iter().find(unmodelled).map(|d| (&base_path, d));
+        if let Some((path, d)) = stray.or_else(|| update.detections.iter().find(unmodelled).map(|d| (&update_path, d)))
         {
             bail!(
                 "{}: a '{}' detection, and {} has no {}.json: --models must hold the models of every category \
                  in the detections",
-                base_path.display(),
+                path.display(),
                 d.category,
                 args.models.display(),
                 d.category

@@ -14,7 +14,7 @@ pub struct Args {
     /// Output directory (created if missing); frames go to DIR/synth-NNNNNN/.
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
-    /// Number of frames.
+    /// Number of frames (at most 1 000 000: frame names have six digits).
     #[arg(long, value_name = "N")]
     pub frames: u64,
     /// Random seed: the same seed and options give byte-identical files.
@@ -74,8 +74,12 @@ pub fn options(args: &Args) -> anyhow::Result<SynthOptions> {
 }
 
 pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
-    if args.frames == 0 {
-        bail!("--frames must be at least 1");
+    if !(1..=synth::MAX_FRAMES).contains(&args.frames) {
+        bail!(
+            "--frames must be at least 1 and at most {} (frame names have six digits), got {}",
+            synth::MAX_FRAMES,
+            args.frames
+        );
     }
     let options = options(&args)?;
     let bar = ProgressBar::new(args.frames);

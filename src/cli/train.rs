@@ -134,7 +134,8 @@ pub struct Args {
     /// Lattice cells per centre step of the fast path.
     #[arg(long, default_value_t = DEFAULT_SUBDIVISIONS)]
     pub subdivisions: u32,
-    /// Feature groups (the paper's ablation): comma-separated of density, normals, cog, view.
+    /// Feature groups (the paper's ablation): comma-separated of density, normals, cog, view, and geom
+    /// (density and normals together).
     #[arg(long, default_value = "density,normals,cog,view")]
     pub groups: String,
     /// Do not expand the 5×5×5 grid by a voxel layer (the paper's "+expanded" off).

@@ -20,6 +20,7 @@ use crate::draw::{draw_line, project_segment, Colour};
 use crate::error::{Error, Result};
 use crate::frame::RoomLayout;
 use crate::geometry::Camera;
+use crate::limits::MAX_COORDINATE_M;
 use crate::ply::LineSet;
 
 /// Colour of the room's edges in overlays and PLY files.
@@ -57,11 +58,22 @@ impl LayoutRecord {
         }
     }
 
-    /// What is wrong with a record read from a file, if anything.
+    /// What is wrong with a record read from a file, if anything: as for annotated rooms, every coordinate
+    /// lies within ±[`MAX_COORDINATE_M`] of the camera (the free-space measure voxelises the rooms' bounding
+    /// box, so a room kilometres wide would take hours and gigabytes to score).
     fn check(&self) -> std::result::Result<(), String> {
         let finite = self.corners.iter().flatten().chain([&self.floor, &self.ceiling]).all(|v| v.is_finite());
         if self.corners.len() < 3 || !finite || self.floor >= self.ceiling {
             return Err("layout needs at least 3 finite corners and floor < ceiling".into());
+        }
+        let far = self
+            .corners
+            .iter()
+            .flatten()
+            .chain([&self.floor, &self.ceiling])
+            .any(|v| v.abs() as f64 > MAX_COORDINATE_M);
+        if far {
+            return Err(format!("layout has a coordinate beyond ±{MAX_COORDINATE_M} m of the camera"));
         }
         Ok(())
     }

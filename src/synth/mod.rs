@@ -197,6 +197,9 @@ const STREAM_RENDER: u64 = 4;
 const STREAM_NOISE: u64 = 5;
 const STREAM_DEPTH: u64 = 6;
 
+/// Most frames one data set may have: frame names have six digits ([`frame_name`]).
+pub const MAX_FRAMES: u64 = 1_000_000;
+
 /// The directory name of frame `index`: `synth-000042`.
 pub fn frame_name(index: u64) -> String {
     format!("synth-{index:06}")
@@ -645,8 +648,8 @@ pub fn generate_dataset(
     progress: &(dyn Fn() + Sync),
 ) -> Result<Summary> {
     options.validate()?;
-    if frames == 0 {
-        return Err(Error::Input("the number of frames must be at least 1".into()));
+    if !(1..=MAX_FRAMES).contains(&frames) {
+        return Err(Error::Input(format!("the number of frames must be in 1..={MAX_FRAMES}, got {frames}")));
     }
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
     let results: Vec<Result<(Vec<String>, &'static str, &'static str)>> = (0..frames)
