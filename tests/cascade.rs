@@ -2,6 +2,7 @@
 //! computation, and training on constructed frames where only the context tells true from false.
 
 use std::collections::BTreeMap;
+use std::path::Path;
 use std::process::Command;
 
 mod common;
@@ -230,7 +231,7 @@ fn earlier_feature_sets_are_read_and_rescore_with_their_own_features() {
     cascade.stages.remove("bed");
     for previous in PREVIOUS_FEATURES {
         cascade.features = previous.to_string();
-        cascade.write(&path).unwrap();
+        write_unchecked(&cascade, &path);
         let err = Cascade::read(&path).unwrap_err().to_string();
         assert!(err.contains("cascade.json") && err.contains(previous), "{err}");
     }
@@ -239,7 +240,7 @@ fn earlier_feature_sets_are_read_and_rescore_with_their_own_features() {
     assert!(Cascade::read(&path).is_ok(), "the same file as v4 is read");
     // v4's length under v5's name: refused.
     cascade.features = V5_FEATURES.to_string();
-    cascade.write(&path).unwrap();
+    write_unchecked(&cascade, &path);
     let err = Cascade::read(&path).unwrap_err().to_string();
     assert!(err.contains("cascade.json") && err.contains("weights"), "{err}");
 }
@@ -340,10 +341,14 @@ fn cascade_files_round_trip_and_are_checked() {
     let path = dir.join("cascade.json");
     cascade.write(&path).unwrap();
     assert_eq!(Cascade::read(&path).unwrap(), cascade);
-    // One weight too few: refused with the file named.
+    // One weight too few: refused with the file named — by the reader, and by `write` (nothing is
+    // written that its readers would refuse).
     let mut broken = cascade.clone();
     broken.stages.get_mut("table").unwrap().weights.pop();
-    broken.write(&path).unwrap();
+    let err = broken.write(&path).unwrap_err().to_string();
+    assert!(err.contains("not written") && err.contains("weights"), "{err}");
+    assert_eq!(Cascade::read(&path).unwrap(), cascade, "the file before is left alone");
+    write_unchecked(&broken, &path);
     let err = Cascade::read(&path).unwrap_err().to_string();
     assert!(err.contains("cascade.json") && err.contains("weights"), "{err}");
     // Uncalibrated detections (no raw score) are refused.
@@ -944,7 +949,7 @@ fn the_best_feature_set_is_chosen_per_category_by_cross_validation() {
     // A stage naming a set this build does not know: refused, the file and the category named.
     let mut broken = read.clone();
     broken.stages.get_mut("table").unwrap().features = Some("object-overlap-v9".to_string());
-    broken.write(&path).unwrap();
+    write_unchecked(&broken, &path);
     let err = Cascade::read(&path).unwrap_err().to_string();
     assert!(err.contains("cascade.json") && err.contains("'table'") && err.contains("object-overlap-v9"), "{err}");
 }
@@ -1067,4 +1072,10 @@ fn cascade_training_resumes_from_its_stage_checkpoints() {
     std::fs::write(stage_checkpoint_path(dir.path(), "bed", FeatureSet::V4), "{ not json").unwrap();
     let (_, _, resumed) = run(&other, &sets);
     assert_eq!(resumed, 3);
+}
+
+/// Writes `cascade` as `Cascade::write` does but without its check: the damaged files the readers must
+/// refuse.
+fn write_unchecked(cascade: &Cascade, path: &Path) {
+    std::fs::write(path, serde_json::to_string_pretty(cascade).unwrap()).unwrap();
 }

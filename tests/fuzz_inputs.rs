@@ -554,7 +554,12 @@ fn duplicates_misspelt_categories_huge_rooms_and_stages_are_refused() {
         &["f.json", "beyond ±100 m"],
     );
     std::fs::write(layouts.join("f.json"), room(3.0)).unwrap();
-    assert_accepted(&["eval", "--layout", "--data", text(&data), "--detections", text(&layouts)]);
+    let (_, err) = assert_accepted(&["eval", "--layout", "--data", text(&data), "--detections", text(&layouts)]);
+    assert!(!err.contains("its \"frame\""), "{err}");
+    // A layout file whose "frame" is another frame's is used for its file name's frame, with a warning.
+    std::fs::write(layouts.join("f.json"), room(3.0).replace("\"frame\":\"f\"", "\"frame\":\"g\"")).unwrap();
+    let (_, err) = assert_accepted(&["eval", "--layout", "--data", text(&data), "--detections", text(&layouts)]);
+    assert!(err.contains("its \"frame\" is 'g', not 'f'"), "{err}");
 
     // A frame detected from inside its directory (`detect .`) was written as `..json`.
     let out = tmp.path().join("out");

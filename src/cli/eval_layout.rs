@@ -82,6 +82,15 @@ fn frame_iou(dir: &Path, layouts: &Path, versus: Option<&Path>) -> anyhow::Resul
             return Ok(None);
         }
         let predicted = LayoutFile::read(&path)?;
+        if predicted.frame != frame.name {
+            log::warn!(
+                "{}: its \"frame\" is '{}', not '{}'; used for {}",
+                path.display(),
+                predicted.frame,
+                frame.name,
+                frame.name
+            );
+        }
         Ok(Some(free_space_iou(&predicted.layout.room(), truth, &camera, [frame.width(), frame.height()])))
     };
     let versus_iou = match versus {
