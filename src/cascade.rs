@@ -119,7 +119,7 @@ use crate::frame::Object;
 use crate::geometry::{footprint_overlap_area, intersection_volume, polygon_contains, Cuboid};
 use crate::learn::binary_svm::{balanced_costs, train_linear_svm, LinearSvm};
 use crate::learn::checkpoint::{fnv1a, FNV_OFFSET};
-use crate::model::{Model, MAX_WEIGHT};
+use crate::model::{check_weight_magnitudes, Model};
 use glam::{Vec2, Vec3};
 
 /// The `format` field of a cascade file.
@@ -327,15 +327,15 @@ pub struct SecondStage {
 }
 
 impl SecondStage {
-    /// Its numbers are usable: weights and bias finite and within ±[`MAX_WEIGHT`] as a model's (larger ones
+    /// Its numbers are usable: weights and bias finite and within ±[`MAX_WEIGHT`](crate::model::MAX_WEIGHT) as a model's (larger ones
     /// would overflow the `f32` scores to infinity), and a valid calibration.
     pub fn check_numbers(&self) -> std::result::Result<(), String> {
         if self.weights.iter().chain([&self.bias]).any(|v| !v.is_finite()) {
             return Err("a weight is not finite".into());
         }
-        if self.weights.iter().chain([&self.bias]).any(|v| v.abs() > MAX_WEIGHT as f64) {
-            return Err(format!("a weight is beyond ±{MAX_WEIGHT:e}: not a trained stage"));
-        }
+        // The models' check, on the weights as the scores use them (`f32`: beyond its range, infinite).
+        let weights: Vec<f32> = self.weights.iter().map(|&w| w as f32).collect();
+        check_weight_magnitudes(&weights, self.bias as f32)?;
         self.calibration.validate()
     }
 
@@ -440,7 +440,7 @@ impl Cascade {
 
     /// The stored numbers are usable: known format and features; context categories that are cog-gpu's,
     /// each once; stages of cog-gpu's categories with weights of the right length, finite and within
-    /// ±[`MAX_WEIGHT`] as a model's (larger ones would overflow the `f32` scores to infinity).
+    /// ±[`MAX_WEIGHT`](crate::model::MAX_WEIGHT) as a model's (larger ones would overflow the `f32` scores to infinity).
     pub fn check(&self) -> std::result::Result<(), String> {
         if self.format != FORMAT || self.version != VERSION {
             return Err(format!(

@@ -239,7 +239,6 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
             settings: Bootstrap { resamples: resamples as usize, seed: args.bootstrap_seed },
             versus: args.versus.clone(),
         });
-        unique_frame_names(&dataset.frames)?;
         return super::eval_layout::run(&dataset.frames, &args.detections, args.json, args.fail_fast, bootstrap);
     }
     let categories = categories(&args.categories)?;

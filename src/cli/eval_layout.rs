@@ -139,6 +139,8 @@ pub fn run(
     fail_fast: bool,
     bootstrap: Option<LayoutBootstrap>,
 ) -> anyhow::Result<()> {
+    // One layout file per frame name: frames of one name would all be scored against the one file.
+    cog_gpu::frame::unique_frame_names(frames)?;
     let versus = bootstrap.as_ref().and_then(|b| b.versus.as_deref());
     for dir in std::iter::once(layouts).chain(versus) {
         if !dir.is_dir() {

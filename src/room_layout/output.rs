@@ -62,17 +62,12 @@ impl LayoutRecord {
     /// lies within ±[`MAX_COORDINATE_M`] of the camera (the free-space measure voxelises the rooms' bounding
     /// box, so a room kilometres wide would take hours and gigabytes to score).
     fn check(&self) -> std::result::Result<(), String> {
-        let finite = self.corners.iter().flatten().chain([&self.floor, &self.ceiling]).all(|v| v.is_finite());
+        let values = || self.corners.iter().flatten().chain([&self.floor, &self.ceiling]);
+        let finite = values().all(|v| v.is_finite());
         if self.corners.len() < 3 || !finite || self.floor >= self.ceiling {
             return Err("layout needs at least 3 finite corners and floor < ceiling".into());
         }
-        let far = self
-            .corners
-            .iter()
-            .flatten()
-            .chain([&self.floor, &self.ceiling])
-            .any(|v| v.abs() as f64 > MAX_COORDINATE_M);
-        if far {
+        if values().any(|v| v.abs() as f64 > MAX_COORDINATE_M) {
             return Err(format!("layout has a coordinate beyond ±{MAX_COORDINATE_M} m of the camera"));
         }
         Ok(())
