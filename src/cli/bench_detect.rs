@@ -42,7 +42,7 @@ use serde_json::json;
 
 use super::bench::Args;
 use super::detect::{
-    best_of, cascade_for, frame_dirs, lay_out, overlay_picture, rescore_in_room, resolve_default, FrameReport,
+    best_of, cascade_for, frame_dirs, lay_out, overlay_picture, rescore_in_room, shipped_or, FrameReport,
 };
 use super::GlobalOptions;
 use cog_gpu::backend::Backend;
@@ -82,8 +82,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         bail!("--cpu cannot be combined with --gpu or --both");
     }
     let frames = frame_dirs(&frames_args)?;
-    let models_dir =
-        if args.models == Path::new("assets/models") { resolve_default(&args.models) } else { args.models.clone() };
+    let models_dir = shipped_or(&args.models, "assets/models");
     let mut models = read_models_dir(&models_dir, None)?;
     if models.is_empty() {
         bail!("{}: no detector models (<category>.json) to benchmark", models_dir.display());

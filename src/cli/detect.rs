@@ -126,6 +126,18 @@ pub struct Args {
 /// one.
 pub const GPU_IN_FLIGHT: usize = 3;
 
+/// `given`, unless it is the flag's `default` (a path under `assets/`): then [`resolve_default`]'s, so that
+/// the shipped models and frames are found from any directory. Only flags that read use it (`detect`,
+/// `bench`, `layout`, `rescore`, `merge-detections`); `calibrate` and `cascade` write into their models
+/// directory, which stays relative to the working directory.
+pub(super) fn shipped_or(given: &Path, default: &str) -> PathBuf {
+    if given == Path::new(default) {
+        resolve_default(given)
+    } else {
+        given.to_path_buf()
+    }
+}
+
 /// `path` if it exists, else the same relative path inside the crate's checkout (for the defaults).
 pub(super) fn resolve_default(path: &Path) -> PathBuf {
     if path.exists() || path.is_absolute() {
@@ -174,8 +186,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     detect_options.validate()?;
     let categories: Vec<String> =
         options::names("--categories", &args.categories)?.iter().map(|c| normalise_name(c).0).collect();
-    let models_dir =
-        if args.models == Path::new("assets/models") { resolve_default(&args.models) } else { args.models.clone() };
+    let models_dir = shipped_or(&args.models, "assets/models");
     let mut models = read_models_dir(&models_dir, (!categories.is_empty()).then_some(categories.as_slice()))?;
     let has_surface_models = models.iter().any(|m| m.window.support.uses_surfaces());
     // The surface models search the surfaces of their supporters' detections.

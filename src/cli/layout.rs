@@ -18,7 +18,7 @@ use cog_gpu::room_layout::model::LayoutModel;
 use cog_gpu::room_layout::output::{draw_room, room_line_set, LayoutFile, LayoutRecord};
 use cog_gpu::room_layout::{predict, predict_heuristic, LayoutScene, PredictedLayout};
 
-use super::detect::{frame_dirs, resolve_default};
+use super::detect::{frame_dirs, shipped_or};
 use super::GlobalOptions;
 
 #[derive(clap::Args)]
@@ -119,11 +119,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     let model = if args.heuristic {
         None
     } else {
-        let path = if args.model == Path::new("assets/models/layout.json") {
-            resolve_default(&args.model)
-        } else {
-            args.model.clone()
-        };
+        let path = shipped_or(&args.model, "assets/models/layout.json");
         Some(LayoutModel::read(&path)?)
     };
     let frames = frame_dirs(&args.frames)?;

@@ -45,10 +45,11 @@ pub struct Args {
 pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     let categories: Vec<String> =
         super::options::names("--categories", &args.categories)?.iter().map(|c| normalise_name(c).0).collect();
-    let models = read_models_dir(&args.models, None)?;
+    let models_dir = super::detect::shipped_or(&args.models, "assets/models");
+    let models = read_models_dir(&models_dir, None)?;
     for category in &categories {
         if !models.iter().any(|m| &m.category == category) {
-            bail!("{}: no model for category '{category}' ({category}.json)", args.models.display());
+            bail!("{}: no model for category '{category}' ({category}.json)", models_dir.display());
         }
     }
     if let Some(problem) = replacement_problem(&categories, &models) {
@@ -100,7 +101,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
                  in the detections",
                 path.display(),
                 d.category,
-                args.models.display(),
+                models_dir.display(),
                 d.category
             );
         }

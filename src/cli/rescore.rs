@@ -26,7 +26,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
-    let cascade = Cascade::read(&args.cascade)?;
+    let cascade = Cascade::read(&super::detect::shipped_or(&args.cascade, "assets/models/cascade.json"))?;
     if !args.detections.is_dir() {
         bail!("{}: detections directory not found", args.detections.display());
     }
