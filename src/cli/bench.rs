@@ -73,7 +73,7 @@ pub struct Args {
     #[arg(long, num_args = 0.., value_name = "FRAME|DIR")]
     pub detect: Option<Vec<PathBuf>>,
     /// With --detect: the models directory.
-    #[arg(long, default_value = "assets/models")]
+    #[arg(long, default_value = super::detect::SHIPPED_MODELS)]
     pub models: PathBuf,
     /// With --detect: overrides every model's window step (as `detect --step`).
     #[arg(long, value_parser = options::step, requires = "detect")]

@@ -82,7 +82,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         bail!("--cpu cannot be combined with --gpu or --both");
     }
     let frames = frame_dirs(&frames_args)?;
-    let models_dir = shipped_or(&args.models, "assets/models");
+    let models_dir = shipped_or(&args.models, super::detect::SHIPPED_MODELS);
     let mut models = read_models_dir(&models_dir, None)?;
     if models.is_empty() {
         bail!("{}: no detector models (<category>.json) to benchmark", models_dir.display());

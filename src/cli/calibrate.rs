@@ -42,7 +42,7 @@ pub struct HeldOutArgs {
     #[arg(long)]
     pub detections: PathBuf,
     /// The models (`<category>.json`) that made the detections.
-    #[arg(long, default_value = "assets/models")]
+    #[arg(long, default_value = super::detect::SHIPPED_MODELS)]
     pub models: PathBuf,
     /// 3D IoU that makes a detection a true positive.
     #[arg(long, default_value_t = 0.25, value_parser = super::options::iou)]

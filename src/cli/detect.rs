@@ -42,7 +42,7 @@ pub struct Args {
     /// Frame directories, or directories searched recursively for frames; default: `assets/sample/`.
     pub frames: Vec<PathBuf>,
     /// Directory of model files (`<category>.json`).
-    #[arg(long, default_value = "assets/models")]
+    #[arg(long, default_value = SHIPPED_MODELS)]
     pub models: PathBuf,
     /// Output directory for `<frame>.json` and `<frame>.png`.
     #[arg(long, default_value = "detections")]
@@ -126,6 +126,14 @@ pub struct Args {
 /// one.
 pub const GPU_IN_FLIGHT: usize = 3;
 
+/// The shipped models directory: the default of `--models` wherever a command reads models, one constant
+/// for the flag and for [`shipped_or`].
+pub(super) const SHIPPED_MODELS: &str = "assets/models";
+/// The shipped layout model (`layout --model`).
+pub(super) const SHIPPED_LAYOUT: &str = "assets/models/layout.json";
+/// The shipped cascade (`rescore --cascade`).
+pub(super) const SHIPPED_CASCADE: &str = "assets/models/cascade.json";
+
 /// `given`, unless it is the flag's `default` (a path under `assets/`): then [`resolve_default`]'s, so that
 /// the shipped models and frames are found from any directory. Only flags that read use it (`detect`,
 /// `bench`, `layout`, `rescore`, `merge-detections`); `calibrate` and `cascade` write into their models
@@ -186,7 +194,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     detect_options.validate()?;
     let categories: Vec<String> =
         options::names("--categories", &args.categories)?.iter().map(|c| normalise_name(c).0).collect();
-    let models_dir = shipped_or(&args.models, "assets/models");
+    let models_dir = shipped_or(&args.models, SHIPPED_MODELS);
     let mut models = read_models_dir(&models_dir, (!categories.is_empty()).then_some(categories.as_slice()))?;
     let has_surface_models = models.iter().any(|m| m.window.support.uses_surfaces());
     // The surface models search the surfaces of their supporters' detections.

@@ -26,7 +26,7 @@ pub struct Args {
     /// Frame directories, or directories searched recursively for frames; default: `assets/sample/`.
     pub frames: Vec<PathBuf>,
     /// Layout model file.
-    #[arg(long, default_value = "assets/models/layout.json")]
+    #[arg(long, default_value = super::detect::SHIPPED_LAYOUT)]
     pub model: PathBuf,
     /// Use the plane-fitting heuristic baseline instead of a model.
     #[arg(long, conflicts_with = "model")]
@@ -119,7 +119,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     let model = if args.heuristic {
         None
     } else {
-        let path = shipped_or(&args.model, "assets/models/layout.json");
+        let path = shipped_or(&args.model, super::detect::SHIPPED_LAYOUT);
         Some(LayoutModel::read(&path)?)
     };
     let frames = frame_dirs(&args.frames)?;

@@ -35,7 +35,7 @@ pub struct Args {
     /// The models of the merged detections (--base's, with the new ones of --categories): they say which
     /// models search support surfaces, for the order `detect` writes detections in and for the check that
     /// no kept category depends on a replaced one.
-    #[arg(long, default_value = "assets/models")]
+    #[arg(long, default_value = super::detect::SHIPPED_MODELS)]
     pub models: PathBuf,
     /// Where to write the merged files (neither --base nor --update).
     #[arg(long)]
@@ -45,7 +45,7 @@ pub struct Args {
 pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     let categories: Vec<String> =
         super::options::names("--categories", &args.categories)?.iter().map(|c| normalise_name(c).0).collect();
-    let models_dir = super::detect::shipped_or(&args.models, "assets/models");
+    let models_dir = super::detect::shipped_or(&args.models, super::detect::SHIPPED_MODELS);
     let models = read_models_dir(&models_dir, None)?;
     for category in &categories {
         if !models.iter().any(|m| &m.category == category) {

@@ -21,12 +21,12 @@ pub struct Args {
     #[arg(long)]
     pub out: PathBuf,
     /// The cascade file.
-    #[arg(long, default_value = "assets/models/cascade.json")]
+    #[arg(long, default_value = super::detect::SHIPPED_CASCADE)]
     pub cascade: PathBuf,
 }
 
 pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
-    let cascade = Cascade::read(&super::detect::shipped_or(&args.cascade, "assets/models/cascade.json"))?;
+    let cascade = Cascade::read(&super::detect::shipped_or(&args.cascade, super::detect::SHIPPED_CASCADE))?;
     if !args.detections.is_dir() {
         bail!("{}: detections directory not found", args.detections.display());
     }
