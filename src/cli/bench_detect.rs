@@ -92,6 +92,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
             model.window.step = step;
         }
     }
+    super::detect::warn_if_no_supporters(&models_dir, &models);
     let cascade = cascade_for(&models_dir, &models, false)?;
     let layout_model = super::layout::model_in_dir(&models_dir)?;
     let gpu = if options.force_cpu { None } else { cog_gpu::gpu::acquire(false) };

@@ -28,7 +28,7 @@ use cog_gpu::eval::FrameDetections;
 use cog_gpu::frame::RoomLayout;
 use cog_gpu::frame::{is_frame_dir, DepthSource, Frame};
 use cog_gpu::gpu::fast::use_kernel_on;
-use cog_gpu::model::read_models_dir;
+use cog_gpu::model::{read_models_dir, Model};
 use cog_gpu::nms::DEFAULT_NMS_IOU;
 use cog_gpu::room_layout::output::LayoutRecord;
 use cog_gpu::room_layout::PredictedLayout;
@@ -182,6 +182,29 @@ pub(super) fn frame_dirs(args: &[PathBuf]) -> anyhow::Result<Vec<PathBuf>> {
     Ok(frames)
 }
 
+/// Warns when `models` (read from `models_dir`) hold models searched on support surfaces but none of the
+/// models of their supporters: those models then find nothing on surfaces (`detect` and `bench --detect`).
+pub(super) fn warn_if_no_supporters(models_dir: &Path, models: &[Model]) {
+    let supporters = supporters_of(models);
+    let has_surface_models = models.iter().any(|m| m.window.support.uses_surfaces());
+    if has_surface_models && !models.iter().any(|m| supporters.contains(&m.category.as_str())) {
+        log::warn!(
+            "{} has models searched on support surfaces but none of {}: they will find nothing on surfaces",
+            models_dir.display(),
+            supporters.join(", ")
+        );
+    }
+}
+
+/// The surface categories whose detections' surfaces some surface model of `models` searches.
+fn supporters_of(models: &[Model]) -> Vec<&'static str> {
+    SURFACE_CATEGORIES
+        .iter()
+        .copied()
+        .filter(|c| models.iter().any(|m| m.window.support.uses_surfaces() && m.window.supporters.contains(c)))
+        .collect()
+}
+
 pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     let detect_options = DetectOptions {
         nms_iou: args.nms_iou,
@@ -198,11 +221,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     let mut models = read_models_dir(&models_dir, (!categories.is_empty()).then_some(categories.as_slice()))?;
     let has_surface_models = models.iter().any(|m| m.window.support.uses_surfaces());
     // The surface models search the surfaces of their supporters' detections.
-    let supporters: Vec<&str> = SURFACE_CATEGORIES
-        .iter()
-        .copied()
-        .filter(|c| models.iter().any(|m| m.window.support.uses_surfaces() && m.window.supporters.contains(c)))
-        .collect();
+    let supporters = supporters_of(&models);
     if has_surface_models && !categories.is_empty() {
         let missing: Vec<String> = supporters
             .iter()
@@ -214,13 +233,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
             models.extend(read_models_dir(&models_dir, Some(missing.as_slice()))?);
         }
     }
-    if has_surface_models && !models.iter().any(|m| supporters.contains(&m.category.as_str())) {
-        log::warn!(
-            "{} has models searched on support surfaces but none of {}: they will find nothing on surfaces",
-            models_dir.display(),
-            supporters.join(", ")
-        );
-    }
+    warn_if_no_supporters(&models_dir, &models);
     if let Some(step) = args.step {
         for model in &mut models {
             model.window.step = step;
