@@ -39,6 +39,7 @@ use crate::features::fast::FastEngine;
 use crate::features::hypotheses::{
     free_bottoms, windows, FrameYaws, HypothesisSet, Support, SupportSurface, WindowOptions, WindowRequest,
 };
+use crate::features::preprocess::NormalSearch;
 use crate::features::surface::{
     best_slice, measured_surface_height, refined_surface_height, slice_at, surface_height, SurfaceEngine,
 };
@@ -69,6 +70,9 @@ pub struct DetectOptions {
     /// Smallest calibrated probability of a detection of a surface category whose support surface the
     /// surface models (small objects) search ([`detected_surfaces`]).
     pub support_min_score: f32,
+    /// How the points' normals find their plane-fit neighbours ([`NormalSearch`]; the shipped models were
+    /// trained with the default, [`NormalSearch::KdTree`]).
+    pub normals: NormalSearch,
 }
 
 impl Default for DetectOptions {
@@ -80,6 +84,7 @@ impl Default for DetectOptions {
             min_score: None,
             min_probability: None,
             support_min_score: DEFAULT_SUPPORT_MIN_SCORE,
+            normals: NormalSearch::default(),
         }
     }
 }
@@ -316,7 +321,7 @@ pub fn detect_frame(
     options: &DetectOptions,
 ) -> Result<FrameDetections> {
     options.validate()?;
-    let pre = Preprocessed::from_frame(frame)?;
+    let pre = backend.preprocess(frame, options.normals)?;
     detect_preprocessed(&frame.name, pre, models, backend, options)
 }
 

@@ -559,10 +559,22 @@ fn bench_detect_times_the_detection_the_cli_makes() {
 /// as the CPU path, checked by `bench --detect --both`, which fails when they differ.
 #[test]
 fn bench_detect_finds_the_gpu_and_cpu_paths_agree() {
+    bench_detect_paths_agree("kdtree");
+}
+
+/// The same with the window normals, searched by the `normal_window` kernel on the GPU path and by its CPU
+/// twin on the CPU path.
+#[test]
+fn bench_detect_finds_the_paths_agree_with_window_normals() {
+    bench_detect_paths_agree("window");
+}
+
+fn bench_detect_paths_agree(normals: &str) {
     let dir = tempfile::tempdir().unwrap();
     let models = models_dir(dir.path());
     let output = Command::new(binary())
         .args(["bench", "--detect", SAMPLE, "--models", models.to_str().unwrap(), "--both", "--json", "--warmup", "0"])
+        .args(["--normals", normals])
         .env("NODEVICE_SELECT", "1")
         .env("COG_GPU_FAST_KERNEL", "always")
         .output()
@@ -579,6 +591,7 @@ fn bench_detect_finds_the_gpu_and_cpu_paths_agree() {
         return;
     }
     assert_eq!(report["paths"]["gpu"]["fast_kernel"], true);
+    assert_eq!(report["normals"], normals);
     assert_eq!(report["gpu_vs_cpu"]["same"], true, "{}", report["gpu_vs_cpu"]);
     assert_eq!(report["gpu_vs_cpu"]["frames_compared"], 1);
     assert!(report["paths"]["gpu"]["frames"][0]["detections"].as_u64().unwrap() > 0);

@@ -1,7 +1,8 @@
 //! `cog-gpu bench [--frame DIR] [--category bed] [--cpu|--gpu|--both] [--json]`: throughput of one
 //! category's full sliding window on one frame, for the CPU path and the GPU path side by side.
 //! `cog-gpu bench --detect [FRAME|DIR ...]`: the whole `detect` per frame, stage by stage
-//! ([`super::bench_detect`]).
+//! ([`super::bench_detect`]). `cog-gpu bench --compare-normals [FRAME|DIR ...]`: the two normal searches
+//! side by side ([`super::bench_normals`]).
 //!
 //! The weights are a fixed-seed pseudo-random vector (the arithmetic does not depend on their values).
 //! `--cpu` is the global flag; without any of the three flags both paths run. `preprocess_s` is the shared
@@ -23,6 +24,7 @@ use super::{options, GlobalOptions};
 use cog_gpu::backend::Backend;
 use cog_gpu::features::fast::{FastEngine, FastOptions};
 use cog_gpu::features::hypotheses::{DEFAULT_MIN_POINTS, DEFAULT_STEP};
+use cog_gpu::features::preprocess::NormalSearch;
 use cog_gpu::features::window::{category_sizes, DEFAULT_SIZE_STATS};
 use cog_gpu::features::{budget, cpu, FeatureLayout, Hypothesis, PreparedWindow};
 use cog_gpu::frame::{DepthSource, Frame};
@@ -72,12 +74,20 @@ pub struct Args {
     /// `--models`, GPU and CPU paths side by side (see `cli::bench_detect`).
     #[arg(long, num_args = 0.., value_name = "FRAME|DIR")]
     pub detect: Option<Vec<PathBuf>>,
+    /// The two normal searches (`kdtree`, `window`; see `detect --normals`) instead of one window: on these
+    /// frames (frame directories or directories of frames; none: the shipped sample frames), their time and
+    /// how far their normals agree (see `cli::bench_normals`).
+    #[arg(long, num_args = 0.., value_name = "FRAME|DIR", conflicts_with = "detect")]
+    pub compare_normals: Option<Vec<PathBuf>>,
     /// With --detect: the models directory.
     #[arg(long, default_value = super::detect::SHIPPED_MODELS)]
     pub models: PathBuf,
     /// With --detect: overrides every model's window step (as `detect --step`).
     #[arg(long, value_parser = options::step, requires = "detect")]
     pub detect_step: Option<f32>,
+    /// With --detect: how the normals find their neighbours (as `detect --normals`).
+    #[arg(long, default_value = "kdtree", value_parser = options::normal_search, requires = "detect")]
+    pub normals: NormalSearch,
     /// With --detect: timed detections of each frame.
     #[arg(long, default_value_t = 1, value_parser = options::at_least_one)]
     pub repeat: usize,
@@ -113,6 +123,9 @@ pub fn bench_weights(dim: usize, seed: u64) -> Vec<f32> {
 pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     if args.detect.is_some() {
         return super::bench_detect::run(args, options);
+    }
+    if let Some(frames) = args.compare_normals.clone() {
+        return super::bench_normals::run(args, &frames);
     }
     if options.force_cpu && (args.gpu || args.both) {
         bail!("--cpu cannot be combined with --gpu or --both");

@@ -51,7 +51,6 @@ use cog_gpu::detect::{
     DEFAULT_OVERLAY_TOP,
 };
 use cog_gpu::eval::Detection;
-use cog_gpu::features::Preprocessed;
 use cog_gpu::frame::{DepthSource, Frame};
 use cog_gpu::gpu::fast::use_kernel_on;
 use cog_gpu::model::read_models_dir;
@@ -106,7 +105,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     if !args.gpu {
         backends.push(Backend::Cpu);
     }
-    let detect_options = DetectOptions::default();
+    let detect_options = DetectOptions { normals: args.normals, ..DetectOptions::default() };
     let bench = Bench { models: &models, cascade: cascade.as_ref(), layout_model: layout_model.as_ref() };
     let mut paths = serde_json::Map::new();
     let mut detections_per_path = Vec::new();
@@ -171,6 +170,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         "warmup": args.warmup,
         "models": models.iter().map(|m| m.category.as_str()).collect::<Vec<_>>(),
         "steps": models.iter().map(|m| m.window.step).collect::<Vec<_>>(),
+        "normals": detect_options.normals.name(),
         "layout_model": layout_model.is_some(),
         "cascade": cascade.is_some(),
         "paths": paths,
@@ -220,7 +220,9 @@ impl Bench<'_> {
         times.frame = frame.name.clone();
         let read = lap();
         times.read_s = read.wall_s;
-        let pre = Preprocessed::from_frame(&frame).with_context(|| format!("preprocessing {}", dir.display()))?;
+        let pre = backend
+            .preprocess(&frame, detect_options.normals)
+            .with_context(|| format!("preprocessing {}", dir.display()))?;
         let preprocess = lap();
         (times.preprocess_s, times.preprocess_cpu_s) = (preprocess.wall_s, read.cpu_s + preprocess.cpu_s);
         let mut detections =

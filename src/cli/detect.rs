@@ -25,6 +25,7 @@ use cog_gpu::detect::{
 };
 use cog_gpu::draw::category_colour;
 use cog_gpu::eval::FrameDetections;
+use cog_gpu::features::preprocess::NormalSearch;
 use cog_gpu::frame::RoomLayout;
 use cog_gpu::frame::{is_frame_dir, DepthSource, Frame};
 use cog_gpu::gpu::fast::use_kernel_on;
@@ -78,6 +79,11 @@ pub struct Args {
     /// is slower (4× the hypotheses at 0.1) and places boxes more precisely.
     #[arg(long, value_parser = options::step)]
     pub step: Option<f32>,
+    /// How each point's normal finds its 15 plane-fit neighbours: `kdtree` (all points, by a k-d tree; the
+    /// shipped models were trained so) or `window` (the nearest within the 7×7 pixels around it; README,
+    /// "Normals in an image window").
+    #[arg(long, default_value = "kdtree", value_parser = options::normal_search)]
+    pub normals: NormalSearch,
     /// Do not write the overlay pictures.
     #[arg(long)]
     pub no_overlay: bool,
@@ -212,6 +218,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         min_score: args.min_score,
         min_probability: args.min_probability,
         support_min_score: args.support_min_score,
+        normals: args.normals,
         ..DetectOptions::default()
     };
     detect_options.validate()?;

@@ -2,6 +2,7 @@
 
 pub mod bench;
 pub mod bench_detect;
+pub mod bench_normals;
 pub mod calibrate;
 pub mod cascade;
 pub mod detect;

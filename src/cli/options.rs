@@ -20,6 +20,11 @@ pub fn step(text: &str) -> Result<f32, String> {
     Ok(value)
 }
 
+/// `--normals`: how the points' normals find their neighbours (`kdtree`, `window`).
+pub fn normal_search(text: &str) -> Result<cog_gpu::features::preprocess::NormalSearch, String> {
+    text.trim().parse().map_err(|e: cog_gpu::error::Error| e.to_string())
+}
+
 /// A finite number (clap adds the flag and the value to the message).
 fn number(text: &str) -> Result<f64, String> {
     let value: f64 = text.trim().parse().map_err(|_| format!("'{text}' is not a number"))?;

@@ -95,6 +95,223 @@ pub fn gradient_orientation(g: Vec2) -> f32 {
     angle
 }
 
+/// How each point's plane-fit neighbours are found (paper §3.1.2: its [`NORMAL_NEIGHBOURS`] nearest 3D
+/// neighbours, after Song & Xiao, without saying how they are searched).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum NormalSearch {
+    /// The nearest of all the frame's points, by a k-d tree ([`estimate_normals`]). The default, and what
+    /// every shipped model was trained with.
+    #[default]
+    KdTree,
+    /// The nearest among the points of the [`NORMAL_WINDOW`]×[`NORMAL_WINDOW`] image window around the
+    /// point's pixel ([`window_neighbour_mask`], [`window_normals`]): a search of fixed size and shape per
+    /// pixel, the one a GPU does well (issue #10's "image-space neighbourhood"). Near points of one
+    /// surface are near in the image too, so the two searches mostly agree; they part where the 15 nearest
+    /// reach beyond the window (far, sparse points at 320×240) or across a depth edge.
+    Window,
+}
+
+impl NormalSearch {
+    /// The names the command line takes: `kdtree`, `window`.
+    pub const NAMES: [&'static str; 2] = ["kdtree", "window"];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            NormalSearch::KdTree => "kdtree",
+            NormalSearch::Window => "window",
+        }
+    }
+}
+
+impl std::str::FromStr for NormalSearch {
+    type Err = Error;
+
+    fn from_str(name: &str) -> Result<Self> {
+        match name {
+            "kdtree" => Ok(NormalSearch::KdTree),
+            "window" => Ok(NormalSearch::Window),
+            other => Err(Error::Input(format!(
+                "unknown normal search '{other}' (expected one of: {})",
+                NormalSearch::NAMES.join(", ")
+            ))),
+        }
+    }
+}
+
+/// Side of the image window of [`NormalSearch::Window`], in pixels (odd; the point's pixel at its centre).
+pub const NORMAL_WINDOW: u32 = 7;
+/// [`NORMAL_WINDOW`]`²` window pixels: a selection fits in a `[u32; 2]` bit mask.
+pub const NORMAL_WINDOW_PIXELS: u32 = NORMAL_WINDOW * NORMAL_WINDOW;
+const _: () = assert!(NORMAL_WINDOW % 2 == 1 && NORMAL_WINDOW_PIXELS <= 64);
+/// Fixed-point units per metre of the window search's offsets (a quarter millimetre): distances are
+/// compared as integers, so the CPU and a GPU pick the same neighbours bit for bit (float sums of squares
+/// could be fused into different roundings on a GPU).
+pub const NORMAL_WINDOW_UNITS: f32 = 4000.0;
+/// Largest offset per axis, in units (4.1 m): `3 · 16 383²` fits in a `u32`.
+pub const NORMAL_WINDOW_CLAMP: f32 = 16383.0;
+
+/// The frame's points laid out by pixel for the window search: `[x, y, z, 1]` at a pixel with a point,
+/// `[0, 0, 0, 0]` elsewhere (the layout of the `depth_points` kernel's output), row-major.
+pub fn point_grid(image_size: [u32; 2], points: &[Vec3], pixels: &[[u32; 2]]) -> Vec<[f32; 4]> {
+    let [width, height] = image_size;
+    let mut grid = vec![[0.0f32; 4]; width as usize * height as usize];
+    for (p, &[col, row]) in points.iter().zip(pixels) {
+        grid[(row * width + col) as usize] = [p.x, p.y, p.z, 1.0];
+    }
+    grid
+}
+
+/// One axis of a window offset in fixed point: `⌊(a − b) · units⌋` clamped to ±[`NORMAL_WINDOW_CLAMP`].
+/// A subtraction, then a product, then a floor — each correctly rounded in WGSL as in Rust, and nothing
+/// a compiler may fuse — so the GPU twin gets the same integer.
+fn window_offset(a: f32, b: f32) -> i32 {
+    ((a - b) * NORMAL_WINDOW_UNITS).floor().clamp(-NORMAL_WINDOW_CLAMP, NORMAL_WINDOW_CLAMP) as i32
+}
+
+/// The neighbours of pixel (`col`, `row`)'s point for [`NormalSearch::Window`]: of the points at the
+/// [`NORMAL_WINDOW_PIXELS`] pixels of the window centred on it (inside the image), the
+/// [`NORMAL_NEIGHBOURS`] nearest in 3D (the point itself, at distance 0, among them), as a bit mask of
+/// window slots (`slot = (dy + r)·NORMAL_WINDOW + (dx + r)`, bit `slot % 32` of word `slot / 32`).
+/// Distances are squared fixed-point offsets ([`NORMAL_WINDOW_UNITS`]); of equal distances the earlier
+/// slot is kept. `[0, 0]` for a pixel without a point.
+///
+/// CPU twin of `shaders/normal_window.wgsl` (`window_mask`; same names, same order of operations).
+pub fn window_neighbour_mask(grid: &[[f32; 4]], width: u32, height: u32, col: u32, row: u32) -> [u32; 2] {
+    let centre = grid[(row * width + col) as usize];
+    if centre[3] == 0.0 {
+        return [0, 0];
+    }
+    let radius = (NORMAL_WINDOW / 2) as i32;
+    // The nearest so far, sorted by (distance, slot).
+    let mut keys = [0u32; NORMAL_NEIGHBOURS];
+    let mut slots = [0u32; NORMAL_NEIGHBOURS];
+    let mut count = 0usize;
+    for dy in -radius..=radius {
+        for dx in -radius..=radius {
+            let (c, r) = (col as i32 + dx, row as i32 + dy);
+            if c < 0 || r < 0 || c >= width as i32 || r >= height as i32 {
+                continue;
+            }
+            let p = grid[(r as u32 * width + c as u32) as usize];
+            if p[3] == 0.0 {
+                continue;
+            }
+            let ox = window_offset(p[0], centre[0]);
+            let oy = window_offset(p[1], centre[1]);
+            let oz = window_offset(p[2], centre[2]);
+            let key = (ox * ox) as u32 + (oy * oy) as u32 + (oz * oz) as u32;
+            let slot = ((dy + radius) * NORMAL_WINDOW as i32 + (dx + radius)) as u32;
+            if count == NORMAL_NEIGHBOURS && key >= keys[NORMAL_NEIGHBOURS - 1] {
+                continue;
+            }
+            // Insertion: later slots of an equal distance go after the earlier ones.
+            let mut i = count.min(NORMAL_NEIGHBOURS - 1);
+            while i > 0 && keys[i - 1] > key {
+                keys[i] = keys[i - 1];
+                slots[i] = slots[i - 1];
+                i -= 1;
+            }
+            keys[i] = key;
+            slots[i] = slot;
+            count = (count + 1).min(NORMAL_NEIGHBOURS);
+        }
+    }
+    let mut mask = [0u32; 2];
+    for &slot in &slots[..count] {
+        mask[(slot / 32) as usize] |= 1 << (slot % 32);
+    }
+    mask
+}
+
+/// The points of a window mask (see [`window_neighbour_mask`]) around pixel (`col`, `row`), in slot order.
+pub fn window_mask_points(
+    grid: &[[f32; 4]],
+    width: u32,
+    col: u32,
+    row: u32,
+    mask: [u32; 2],
+) -> impl Iterator<Item = Vec3> + '_ {
+    let radius = (NORMAL_WINDOW / 2) as i32;
+    (0..NORMAL_WINDOW_PIXELS).filter(move |slot| mask[(slot / 32) as usize] >> (slot % 32) & 1 == 1).map(move |slot| {
+        let (dx, dy) = ((slot % NORMAL_WINDOW) as i32 - radius, (slot / NORMAL_WINDOW) as i32 - radius);
+        let p = grid[((row as i32 + dy) as u32 * width + (col as i32 + dx) as u32) as usize];
+        Vec3::new(p[0], p[1], p[2])
+    })
+}
+
+/// Normals of [`NormalSearch::Window`] for the points at `pixels`, from each point's window mask
+/// (`masks[i]` of `pixels[i]`, computed by [`window_neighbour_mask`] or its GPU twin): the same plane fit
+/// as [`estimate_normals`] ([`plane_normal`], double precision) over the mask's points in slot order, turned
+/// toward the camera; fewer than 3 points, or coincident ones, give the unit vector toward the camera.
+pub fn normals_from_window_masks(grid: &[[f32; 4]], width: u32, pixels: &[[u32; 2]], masks: &[[u32; 2]]) -> Vec<Vec3> {
+    pixels
+        .par_iter()
+        .zip(masks)
+        .map(|(&[col, row], &mask)| {
+            let c = grid[(row * width + col) as usize];
+            let p = Vec3::new(c[0], c[1], c[2]);
+            let normal =
+                plane_normal(window_mask_points(grid, width, col, row, mask)).unwrap_or_else(|| toward_camera(p));
+            if normal.dot(-p) < 0.0 {
+                -normal
+            } else {
+                normal
+            }
+        })
+        .collect()
+}
+
+/// Normals of [`NormalSearch::Window`] on the CPU: [`window_neighbour_mask`] per point, then
+/// [`normals_from_window_masks`].
+pub fn window_normals(image_size: [u32; 2], points: &[Vec3], pixels: &[[u32; 2]]) -> Vec<Vec3> {
+    let [width, height] = image_size;
+    let grid = point_grid(image_size, points, pixels);
+    let masks: Vec<[u32; 2]> =
+        pixels.par_iter().map(|&[col, row]| window_neighbour_mask(&grid, width, height, col, row)).collect();
+    normals_from_window_masks(&grid, width, pixels, &masks)
+}
+
+/// How far two sets of normals of the same points agree ([`normal_agreement`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NormalAgreement {
+    pub points: usize,
+    /// Share of (point, yaw) pairs whose 25-bin code ([`normal_bin`] of the normal rotated by −yaw, as a
+    /// hypothesis of that yaw bins it) is the same for both normals: what the features see.
+    pub same_code: f64,
+    /// Median angle between the two normals of a point, degrees (normals are oriented toward the camera,
+    /// so this is the angle, not the angle between lines).
+    pub median_angle_deg: f64,
+    /// Share of points whose two normals are within 10°.
+    pub within_10_deg: f64,
+}
+
+/// Agreement of normals `a` and `b` (one each per point) over the hypothesis `yaws` (radians).
+pub fn normal_agreement(a: &[Vec3], b: &[Vec3], yaws: &[f32]) -> NormalAgreement {
+    assert_eq!(a.len(), b.len(), "one normal of each per point");
+    let rotations: Vec<glam::Mat3> = yaws.iter().map(|&yaw| glam::Mat3::from_rotation_z(-yaw)).collect();
+    let same: usize = a
+        .par_iter()
+        .zip(b)
+        .map(|(&na, &nb)| rotations.iter().filter(|r| normal_bin(**r * na) == normal_bin(**r * nb)).count())
+        .sum();
+    let mut angles: Vec<f64> =
+        a.iter().zip(b).map(|(na, nb)| (na.dot(*nb).clamp(-1.0, 1.0) as f64).acos().to_degrees()).collect();
+    angles.sort_by(f64::total_cmp);
+    let n = a.len();
+    let median_angle_deg = match n {
+        0 => 0.0,
+        _ if n % 2 == 1 => angles[n / 2],
+        _ => 0.5 * (angles[n / 2 - 1] + angles[n / 2]),
+    };
+    let share = |count: usize, of: usize| if of == 0 { 1.0 } else { count as f64 / of as f64 };
+    NormalAgreement {
+        points: n,
+        same_code: share(same, n * yaws.len()),
+        median_angle_deg,
+        within_10_deg: share(angles.iter().filter(|&&d| d <= 10.0).count(), n),
+    }
+}
+
 /// The frame data every hypothesis reads: upright points with their normals and image gradients, the
 /// camera and the floor height.
 #[derive(Clone, Debug)]
@@ -116,6 +333,25 @@ impl Preprocessed {
     /// Preprocesses a frame: point cloud, gradients at the points' pixels, normals and floor.
     /// Fails on a frame without any valid depth.
     pub fn from_frame(frame: &Frame) -> Result<Preprocessed> {
+        Self::from_frame_with(frame, NormalSearch::default())
+    }
+
+    /// [`Preprocessed::from_frame`] with the normals' neighbours found by `search`.
+    pub fn from_frame_with(frame: &Frame, search: NormalSearch) -> Result<Preprocessed> {
+        Self::from_frame_using(frame, |cloud, image_size| {
+            Ok(match search {
+                NormalSearch::KdTree => estimate_normals(&cloud.points),
+                NormalSearch::Window => window_normals(image_size, &cloud.points, &cloud.pixels),
+            })
+        })
+    }
+
+    /// [`Preprocessed::from_frame`] with the normals given by `normals(point cloud, image size)`, one per
+    /// point (the GPU's window search: `backend::Backend::preprocess`).
+    pub fn from_frame_using(
+        frame: &Frame,
+        normals: impl FnOnce(&PointCloud, [u32; 2]) -> Result<Vec<Vec3>>,
+    ) -> Result<Preprocessed> {
         let cloud = frame.point_cloud();
         if cloud.len() < NORMAL_NEIGHBOURS {
             return Err(Error::Input(format!(
@@ -126,7 +362,17 @@ impl Preprocessed {
         }
         let camera = Camera::new(frame.intrinsics(), frame.rtilt());
         let image = ImageGradients::compute(&frame.rgb);
-        Ok(Self::from_cloud(camera, [frame.width(), frame.height()], &cloud, &image))
+        let image_size = [frame.width(), frame.height()];
+        let normals = normals(&cloud, image_size)?;
+        if normals.len() != cloud.len() {
+            return Err(Error::Input(format!(
+                "frame '{}': {} normals for {} points",
+                frame.name,
+                normals.len(),
+                cloud.len()
+            )));
+        }
+        Ok(Self::from_cloud_and_normals(camera, image_size, &cloud, &image, normals))
     }
 
     /// Preprocesses a point cloud with precomputed image gradients.
@@ -136,8 +382,19 @@ impl Preprocessed {
         cloud: &PointCloud,
         image: &ImageGradients,
     ) -> Preprocessed {
+        Self::from_cloud_and_normals(camera, image_size, cloud, image, estimate_normals(&cloud.points))
+    }
+
+    /// Preprocesses a point cloud whose normals (one per point) are already known.
+    pub fn from_cloud_and_normals(
+        camera: Camera,
+        image_size: [u32; 2],
+        cloud: &PointCloud,
+        image: &ImageGradients,
+        normals: Vec<Vec3>,
+    ) -> Preprocessed {
+        assert_eq!(normals.len(), cloud.len(), "one normal per point");
         let gradients = cloud.pixels.iter().map(|&[col, row]| image.at(col, row)).collect();
-        let normals = estimate_normals(&cloud.points);
         let floor = floor_height(&cloud.points);
         Preprocessed { camera, image_size, points: cloud.points.clone(), normals, gradients, floor }
     }

@@ -39,6 +39,7 @@ pub mod depth_points;
 pub mod fast;
 pub mod fast_tables;
 pub mod features;
+pub mod normal_window;
 pub mod room_layout;
 
 use std::borrow::Cow;
@@ -262,6 +263,7 @@ pub struct Kernels {
     pub fast_table_scatter: Kernel,
     pub fast_table_scan: Kernel,
     pub room_layout: Kernel,
+    pub normal_window: Kernel,
 }
 
 impl Kernels {
@@ -273,6 +275,7 @@ impl Kernels {
             fast_table_scatter: Kernel::new(device, &fast_tables::SCATTER_KERNEL)?,
             fast_table_scan: Kernel::new(device, &fast_tables::SCAN_KERNEL)?,
             room_layout: Kernel::new(device, &room_layout::KERNEL)?,
+            normal_window: Kernel::new(device, &normal_window::KERNEL)?,
         })
     }
 }
