@@ -367,6 +367,11 @@ fn resume_refuses_files_of_other_models_or_options() {
     let refused = stderr.contains("2 of the detections files") && stderr.contains("other models or options");
     assert!(!ok && refused && stderr.contains(&format!("run {fingerprint}")), "{stderr}");
     assert_eq!(read(&synth), first);
+    // Another normal search decides other detections: refused too; naming the default is the same run.
+    let (ok, stderr) = detect(&["--resume", "--normals", "window"]);
+    assert!(!ok && stderr.contains("other models or options"), "{stderr}");
+    let (ok, stderr) = detect(&["--resume", "--normals", "kdtree"]);
+    assert!(ok && stderr.contains("--resume: kept 2 frame(s)"), "{stderr}");
     let bed = models.join("bed.json");
     let model = read(&bed);
     let mut changed: serde_json::Value = serde_json::from_str(&model).unwrap();

@@ -397,8 +397,8 @@ pub(super) struct FrameReport {
 /// The `"run"` of a detections file: a 64-bit FNV-1a fingerprint (16 hex digits) of everything that
 /// decides a frame's detections besides the frame — every model as loaded (after `--step`; their JSON,
 /// in category order), the context cascade when one is applied, the layout model, and the detection
-/// options (NMS IoU, detections per category, the cut, the support surfaces' cut) — so that `--resume`
-/// keeps only files that this run would have written. Options that change only the pictures (`--overlay-*`,
+/// options (NMS IoU, detections per category, the cut, the support surfaces' cut, the normals' search) — so
+/// that `--resume` keeps only files that this run would have written. Options that change only the pictures (`--overlay-*`,
 /// `--no-overlay`, `--ply`) and the backend are left out; the GPU and CPU paths give the same detections.
 /// A cog-gpu build that serialises a model differently gives another fingerprint (such files are refused
 /// by `--resume`, which is the safe side).
@@ -416,7 +416,13 @@ fn run_fingerprint(
     }
     parts.push(cascade.map(serde_json::to_string).transpose()?.unwrap_or_default());
     parts.push(layout_model.map(serde_json::to_string).transpose()?.unwrap_or_default());
-    parts.push(format!("{options:?}"));
+    // The options as they printed before `normals` existed, so that files written with the k-d tree's
+    // normals by an earlier build keep their fingerprint; another search is a part of its own.
+    let without_normals = format!("{:?}", DetectOptions { normals: NormalSearch::KdTree, ..*options });
+    parts.push(without_normals.replace(", normals: KdTree", ""));
+    if options.normals != NormalSearch::KdTree {
+        parts.push(format!("normals: {}", options.normals.name()));
+    }
     let hash = parts.iter().fold(cog_gpu::learn::checkpoint::FNV_OFFSET, |hash, part| {
         // Each part's length first, so that no two different lists of parts hash the same bytes.
         let hash = cog_gpu::learn::checkpoint::fnv1a(hash, &(part.len() as u64).to_le_bytes());
