@@ -18,13 +18,14 @@
 #      every shipped model, at `--detect-step 0.1` (the issue's setting; with the GPU debug log) and at the
 #      models' own steps, each path also with IN_FLIGHT frames in flight (`--in-flight`); at 0.1 m the GPU
 #      path alone with 3 and 4 frames in flight, and with 3 and four buffer-pool sets
-#      (COG_GPU_POOL_SLOTS=4); with BASE_BIN, that binary's GPU
+#      (COG_GPU_POOL_SLOTS=4); both paths at 0.1 m with `--normals window` (the normal_window kernel),
+#      and `bench --compare-normals` of the 4 frames; with BASE_BIN, that binary's GPU
 #      path at 0.1 m (a baseline, same machine), one frame at a time and then BASE_IN_FLIGHT frames in
 #      flight;
 #   3. the README's main command, `cog-gpu detect` of the shipped sample frames with overlays, timed from
 #      process start to exit (and BASE_BIN's).
 # Results go to $OUT (set by the device tool; default gpu-bench-out/), six files: fast-bed.json,
-# detect-0.1.json, detect-own.json, variants.jsonl (one line per variant of 2: {"variant", "report"}),
+# detect-0.1.json, detect-own.json, variants.jsonl (one line per variant of 2 and 2c: {"variant", "report"}),
 # sample-detect.txt and log.txt (every step's stderr: adapter, GPU debug log). On an H200 and its 16-core
 # host the whole run (without the own steps, with a baseline) took 140 s (2026-11-27).
 #
@@ -109,6 +110,11 @@ if [ "${QUICK:-0}" != 1 ]; then
     variant gpu-in-flight-3 40 "${gpu_at_0_1[@]}" --in-flight 3
     variant gpu-in-flight-3-pool-4 40 env COG_GPU_POOL_SLOTS=4 "${gpu_at_0_1[@]}" --in-flight 3
     variant gpu-in-flight-4 40 "${gpu_at_0_1[@]}" --in-flight 4
+    # The window normals (README "Normals in an image window"): the neighbour search by the normal_window
+    # kernel on the GPU path, its twin on the CPU path, both paths; and the two searches' time and agreement.
+    variant window-normals-0.1 60 "$BIN" bench --detect "$work/frames" --detect-step 0.1 --both --repeat "$REPEAT" \
+        --normals window --json
+    variant compare-normals 30 "$BIN" bench --compare-normals "$work/frames" --json
 fi
 # 2c. A baseline build (BASE_BIN, e.g. the previous release), GPU path, same machine, same frames.
 if [ -n "${BASE_BIN:-}" ]; then
