@@ -49,6 +49,7 @@ use crate::category::{normalise_name, SurfaceCategories, CATEGORIES};
 use crate::error::{Error, Result};
 use crate::features::fast::FastOptions;
 use crate::features::hypotheses::{FrameYaws, Support, YawAnchor};
+use crate::features::preprocess::NormalSearch;
 use crate::features::scene::LatticePhase;
 use crate::features::surface::SurfaceWeights;
 /// The weight bounds live with the weight vectors' definition ([`crate::features::weights`]).
@@ -81,6 +82,10 @@ pub struct FeatureSettings {
     /// Lattice cells per centre step of the fast path.
     #[serde(default = "default_subdivisions")]
     pub subdivisions: u32,
+    /// How the points' normals found their neighbours when the model was trained (`train --normals`);
+    /// `detect` preprocesses with it. Absent: the k-d tree's.
+    #[serde(default, skip_serializing_if = "NormalSearch::is_default")]
+    pub normals: NormalSearch,
 }
 
 fn default_subdivisions() -> u32 {
@@ -186,6 +191,24 @@ pub struct Model {
     /// The latent support surface's weights (version 2; see the module doc).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub surface: Option<SurfaceWeights>,
+}
+
+/// The normal search of `models` (their `features.normals`, the one each was trained with): a frame is
+/// preprocessed once for all its models, so they must agree; an error names two that do not. The default
+/// search for no models.
+pub fn common_normal_search(models: &[Model]) -> Result<NormalSearch> {
+    let Some(first) = models.first() else { return Ok(NormalSearch::default()) };
+    match models.iter().find(|m| m.features.normals != first.features.normals) {
+        None => Ok(first.features.normals),
+        Some(other) => Err(Error::Input(format!(
+            "the models were trained with different normal searches ({}: {}, {}: {}); a frame's models share \
+             one preprocessing — retrain them alike, or choose one with --normals",
+            first.category,
+            first.features.normals.name(),
+            other.category,
+            other.features.normals.name()
+        ))),
+    }
 }
 
 fn default_threshold() -> f32 {

@@ -154,7 +154,7 @@ fn tiny_model(category: &str) -> Model {
             lattice: LatticePhase::Camera,
             supporters: cog_gpu::category::SurfaceCategories::ALL,
         },
-        FeatureSettings { path: FeaturePath::Fast, subdivisions: 2 },
+        FeatureSettings { path: FeaturePath::Fast, subdivisions: 2, normals: Default::default() },
         vec![0.0; layout.dim()],
         serde_json::json!({}),
     )

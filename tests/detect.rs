@@ -37,7 +37,7 @@ fn density_model(path: FeaturePath, step: f32) -> Model {
             lattice: LatticePhase::Camera,
             supporters: cog_gpu::category::SurfaceCategories::ALL,
         },
-        FeatureSettings { path, subdivisions: 2 },
+        FeatureSettings { path, subdivisions: 2, normals: Default::default() },
         weights,
         serde_json::Value::Null,
     )

@@ -331,7 +331,7 @@ fn window_recall_on_a_synthetic_frame() {
             lattice: LatticePhase::Camera,
             supporters: cog_gpu::category::SurfaceCategories::ALL,
         },
-        FeatureSettings { path: FeaturePath::Fast, subdivisions: 2 },
+        FeatureSettings { path: FeaturePath::Fast, subdivisions: 2, normals: Default::default() },
         vec![0.0; layout.dim()],
         serde_json::Value::Null,
     )
@@ -475,7 +475,7 @@ fn cli_window_recall_with_models() {
             lattice: LatticePhase::Camera,
             supporters: cog_gpu::category::SurfaceCategories::ALL,
         },
-        FeatureSettings { path: FeaturePath::Fast, subdivisions: 2 },
+        FeatureSettings { path: FeaturePath::Fast, subdivisions: 2, normals: Default::default() },
         vec![0.0; layout.dim()],
         serde_json::Value::Null,
     )

@@ -28,7 +28,7 @@ fn model(category: &str) -> Model {
             lattice: LatticePhase::Camera,
             supporters: cog_gpu::category::SurfaceCategories::ALL,
         },
-        FeatureSettings { path: FeaturePath::Fast, subdivisions: 2 },
+        FeatureSettings { path: FeaturePath::Fast, subdivisions: 2, normals: Default::default() },
         weights,
         serde_json::json!({"note": "test"}),
     )

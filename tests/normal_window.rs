@@ -237,3 +237,71 @@ fn normal_window_kernel_equals_its_cpu_twin() {
     let error = normal_window_gpu(&ctx, &[[0.0; 4]; 5], 3, 2).unwrap_err().to_string();
     assert!(error.contains("5 grid pixels for a 3×2 image"), "{error}");
 }
+
+#[test]
+fn model_files_record_their_normal_search_only_when_not_the_default() {
+    use cog_gpu::model::{common_normal_search, Model};
+    let dir = tempfile::tempdir().unwrap();
+    let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/models/bed.json");
+    let bed = Model::read(&shipped).unwrap();
+    assert_eq!(bed.features.normals, NormalSearch::KdTree);
+    // A model of the default search is written without the field: its `features` as in the file (and the
+    // `detect --resume` fingerprint, which hashes the model's JSON, as before the field existed).
+    let same = dir.path().join("bed.json");
+    bed.write(&same).unwrap();
+    let json = |p: &Path| serde_json::from_str::<serde_json::Value>(&std::fs::read_to_string(p).unwrap()).unwrap();
+    assert_eq!(json(&same)["features"], json(&shipped)["features"]);
+    assert!(json(&same)["features"].get("normals").is_none());
+    // With the window search the field is written and read back.
+    let mut window = bed.clone();
+    window.features.normals = NormalSearch::Window;
+    let path = dir.path().join("window.json");
+    window.write(&path).unwrap();
+    let text = std::fs::read_to_string(&path).unwrap();
+    assert!(text.contains(r#""normals":"window""#), "{text}");
+    assert_eq!(Model::read(&path).unwrap().features.normals, NormalSearch::Window);
+    // The models of a run must agree; an error names two that do not.
+    assert_eq!(common_normal_search(&[]).unwrap(), NormalSearch::KdTree);
+    assert_eq!(common_normal_search(&[window.clone(), window.clone()]).unwrap(), NormalSearch::Window);
+    let mut chair = bed.clone();
+    chair.category = "chair".into();
+    let error = common_normal_search(&[window, chair]).unwrap_err().to_string();
+    assert!(error.contains("bed: window") && error.contains("chair: kdtree"), "{error}");
+}
+
+#[test]
+fn detect_takes_the_models_normal_search_and_refuses_a_mixed_set() {
+    use cog_gpu::model::Model;
+    let dir = tempfile::tempdir().unwrap();
+    let models = dir.path().join("models");
+    std::fs::create_dir_all(&models).unwrap();
+    let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/models");
+    let mut bed = Model::read(&shipped.join("bed.json")).unwrap();
+    bed.features.normals = NormalSearch::Window;
+    bed.write(&models.join("bed.json")).unwrap();
+    let frame = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/sample/synth-bedroom-s52");
+    let bench = |extra: &[&str]| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_cog-gpu"))
+            .args(["--cpu", "bench", "--detect", frame.to_str().unwrap(), "--models", models.to_str().unwrap()])
+            .args(["--warmup", "0", "--json"])
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    // The model's own search, unless --normals says otherwise (with a warning).
+    let output = bench(&[]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    assert_eq!(report["normals"], "window");
+    let output = bench(&["--normals", "kdtree"]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success() && stderr.contains("trained with the window normals"), "{stderr}");
+    let report: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    assert_eq!(report["normals"], "kdtree");
+    // Models trained with different searches: an error naming the directory and two of them.
+    std::fs::copy(shipped.join("chair.json"), models.join("chair.json")).unwrap();
+    let output = bench(&[]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!output.status.success(), "{stderr}");
+    assert!(stderr.contains(models.to_str().unwrap()) && stderr.contains("bed: window, chair: kdtree"), "{stderr}");
+}

@@ -179,7 +179,7 @@ fn detection_reports_the_inferred_surface_of_a_constructed_table() {
         lattice: LatticePhase::Camera,
         supporters: cog_gpu::category::SurfaceCategories::ALL,
     };
-    let features = FeatureSettings { path: FeaturePath::Fast, subdivisions: 2 };
+    let features = FeatureSettings { path: FeaturePath::Fast, subdivisions: 2, normals: Default::default() };
     let up = NORMALS + normal_bin(Vec3::Z) as usize;
     let mut slice = vec![0.0f32; SLICE_DIM];
     for v in 0..SLICE_VOXELS {

@@ -188,7 +188,7 @@ fn surfaces_come_from_confident_detections_of_surface_categories() {
                 lattice: LatticePhase::Camera,
                 supporters: SurfaceCategories::ALL,
             },
-            FeatureSettings { path: FeaturePath::Fast, subdivisions: 2 },
+            FeatureSettings { path: FeaturePath::Fast, subdivisions: 2, normals: Default::default() },
             vec![0.0; layout.dim()],
             serde_json::json!({}),
         )

@@ -288,6 +288,7 @@ fn example_limits(negatives: usize) -> cog_gpu::learn::detector::ExampleLimits {
         others: OtherInstances::Removed,
         support: Support::Floor,
         seen: None,
+        normals: Default::default(),
     }
 }
 

@@ -85,9 +85,9 @@ pub struct Args {
     /// With --detect: overrides every model's window step (as `detect --step`).
     #[arg(long, value_parser = options::step, requires = "detect")]
     pub detect_step: Option<f32>,
-    /// With --detect: how the normals find their neighbours (as `detect --normals`).
-    #[arg(long, default_value = "kdtree", value_parser = options::normal_search, requires = "detect")]
-    pub normals: NormalSearch,
+    /// With --detect: how the normals find their neighbours (as `detect --normals`; default: the models').
+    #[arg(long, value_parser = options::normal_search, requires = "detect")]
+    pub normals: Option<NormalSearch>,
     /// With --detect: timed detections of each frame.
     #[arg(long, default_value_t = 1, value_parser = options::at_least_one)]
     pub repeat: usize,

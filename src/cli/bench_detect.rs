@@ -105,7 +105,8 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     if !args.gpu {
         backends.push(Backend::Cpu);
     }
-    let detect_options = DetectOptions { normals: args.normals, ..DetectOptions::default() };
+    let normals = super::detect::normal_search_for(&models_dir, &models, args.normals)?;
+    let detect_options = DetectOptions { normals, ..DetectOptions::default() };
     let bench = Bench { models: &models, cascade: cascade.as_ref(), layout_model: layout_model.as_ref() };
     let mut paths = serde_json::Map::new();
     let mut detections_per_path = Vec::new();

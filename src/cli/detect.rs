@@ -29,7 +29,7 @@ use cog_gpu::features::preprocess::NormalSearch;
 use cog_gpu::frame::RoomLayout;
 use cog_gpu::frame::{is_frame_dir, DepthSource, Frame};
 use cog_gpu::gpu::fast::use_kernel_on;
-use cog_gpu::model::{read_models_dir, Model};
+use cog_gpu::model::{common_normal_search, read_models_dir, Model};
 use cog_gpu::nms::DEFAULT_NMS_IOU;
 use cog_gpu::room_layout::output::LayoutRecord;
 use cog_gpu::room_layout::PredictedLayout;
@@ -82,8 +82,10 @@ pub struct Args {
     /// How each point's normal finds its 15 plane-fit neighbours: `kdtree` (all points, by a k-d tree; the
     /// shipped models were trained so) or `window` (the nearest within the 7×7 pixels around it; README,
     /// "Normals in an image window").
-    #[arg(long, default_value = "kdtree", value_parser = options::normal_search)]
-    pub normals: NormalSearch,
+    /// Default: the one the models were trained with (`features.normals` in their files; every shipped
+    /// model's is `kdtree`).
+    #[arg(long, value_parser = options::normal_search)]
+    pub normals: Option<NormalSearch>,
     /// Do not write the overlay pictures.
     #[arg(long)]
     pub no_overlay: bool,
@@ -202,6 +204,34 @@ pub(super) fn warn_if_no_supporters(models_dir: &Path, models: &[Model]) {
     }
 }
 
+/// The normal search a run preprocesses with: `flag` (`--normals`) when given — with a warning when a model
+/// was trained with another —, else the one the models share ([`common_normal_search`]; an error when they
+/// differ).
+pub(super) fn normal_search_for(
+    models_dir: &Path,
+    models: &[Model],
+    flag: Option<NormalSearch>,
+) -> anyhow::Result<NormalSearch> {
+    let shared = common_normal_search(models);
+    match (flag, shared) {
+        (None, shared) => Ok(shared.with_context(|| models_dir.display().to_string())?),
+        (Some(search), Ok(trained)) if search == trained => Ok(search),
+        (Some(search), trained) => {
+            let trained = match trained {
+                Ok(trained) => format!("the {} normals", trained.name()),
+                Err(_) => "different normal searches".to_string(),
+            };
+            log::warn!(
+                "--normals {}: the models in {} were trained with {trained}; their scores will differ from \
+                 those they were trained and calibrated on",
+                search.name(),
+                models_dir.display()
+            );
+            Ok(search)
+        }
+    }
+}
+
 /// The surface categories whose detections' surfaces some surface model of `models` searches.
 fn supporters_of(models: &[Model]) -> Vec<&'static str> {
     SURFACE_CATEGORIES
@@ -218,7 +248,6 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         min_score: args.min_score,
         min_probability: args.min_probability,
         support_min_score: args.support_min_score,
-        normals: args.normals,
         ..DetectOptions::default()
     };
     detect_options.validate()?;
@@ -241,6 +270,8 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         }
     }
     warn_if_no_supporters(&models_dir, &models);
+    let detect_options =
+        DetectOptions { normals: normal_search_for(&models_dir, &models, args.normals)?, ..detect_options };
     if let Some(step) = args.step {
         for model in &mut models {
             model.window.step = step;

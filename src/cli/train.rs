@@ -61,6 +61,7 @@ use cog_gpu::learn::{CuttingPlane, SsvmOptions};
 use cog_gpu::model::{FeaturePath, FeatureSettings, Model, WindowSettings};
 
 use super::{options, GlobalOptions};
+use cog_gpu::features::preprocess::NormalSearch;
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -88,6 +89,11 @@ pub struct Args {
     /// Cap on cutting-plane iterations (QP solves), counted across resumes.
     #[arg(long, default_value_t = 300)]
     pub max_iterations: usize,
+    /// How the training frames' normals find their 15 plane-fit neighbours: `kdtree` (the default, every
+    /// shipped model's) or `window` (the 7×7 pixels around each point; README, "Normals in an image
+    /// window"). The model file records it and `detect` preprocesses with it.
+    #[arg(long, default_value = "kdtree", value_parser = options::normal_search)]
+    pub normals: NormalSearch,
     /// Continue from the checkpoint `<out>.ckpt`.
     #[arg(long)]
     pub resume: bool,
@@ -517,6 +523,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         others: args.other_instances.into(),
         support: args.support.into(),
         seen: args.skip_unseen.then_some(SeenRule { min_points: args.min_points, floor_slab: args.step }),
+        normals: args.normals,
     };
     log::info!(
         "{category}: {} instances in {} frames; preparing up to {} positive and {} negative examples",
@@ -668,6 +675,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
             PathArg::Exact => FeaturePath::Exact,
         },
         subdivisions: args.subdivisions.max(1),
+        normals: args.normals,
     };
     let window = WindowSettings {
         step: args.detect_step,

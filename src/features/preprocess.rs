@@ -98,7 +98,12 @@ pub fn gradient_orientation(g: Vec2) -> f32 {
 
 /// How each point's plane-fit neighbours are found (paper §3.1.2: its [`NORMAL_NEIGHBOURS`] nearest 3D
 /// neighbours, after Song & Xiao, without saying how they are searched).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+///
+/// In a model file (`features.normals`) it is the search the model was trained with, written only when it
+/// is not the default (files written before the field read as the k-d tree's, and models with it are
+/// written byte for byte as before).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum NormalSearch {
     /// The nearest of all the frame's points, by a k-d tree ([`estimate_normals`]). The default, and what
     /// every shipped model was trained with.
@@ -115,6 +120,11 @@ pub enum NormalSearch {
 impl NormalSearch {
     /// The names the command line takes: `kdtree`, `window`.
     pub const NAMES: [&'static str; 2] = ["kdtree", "window"];
+
+    /// Whether this is the default search (a model file leaves the field out then).
+    pub fn is_default(&self) -> bool {
+        *self == NormalSearch::default()
+    }
 
     pub fn name(self) -> &'static str {
         match self {

@@ -60,6 +60,7 @@ use crate::features::hypotheses::{
     self, frame_wall_direction, nearest_yaw_index, yaws_under, HypothesisSet, Support, SupportSurface, WindowOptions,
     YawAnchor,
 };
+use crate::features::preprocess::NormalSearch;
 use crate::features::scene::LatticePhase;
 use crate::features::surface::{
     annotated_surfaces_by_category, best_slice, SurfaceEngine, SurfaceWeights, SLICES, SLICE_DIM, SLICE_VOXELS,
@@ -1032,6 +1033,8 @@ pub struct ExampleLimits {
     /// empty boxes. `None` trains on every instance (as every shipped model was trained). The choice among
     /// the seen instances is [`spread`] over them, as over all.
     pub seen: Option<SeenRule>,
+    /// How the frames' normals find their neighbours (the model records it: `features.normals`).
+    pub normals: NormalSearch,
 }
 
 /// How [`collect_examples`] chooses its negative frames (frames without the category) when there are more
@@ -1252,7 +1255,7 @@ pub fn collect_examples(
         .par_iter()
         .map(|&f| {
             let frame = crate::frame::Frame::read(&frames[f], crate::frame::DepthSource::Raw)?;
-            Ok((f, Preprocessed::from_frame(&frame)?))
+            Ok((f, Preprocessed::from_frame_with(&frame, limits.normals)?))
         })
         .collect::<Result<_>>()?;
     // The support surfaces of every preprocessed frame, in the same order, with their categories (which
