@@ -429,8 +429,9 @@ pub(super) struct FrameReport {
 /// decides a frame's detections besides the frame — every model as loaded (after `--step`; their JSON,
 /// in category order), the context cascade when one is applied, the layout model, and the detection
 /// options (NMS IoU, detections per category, the cut, the support surfaces' cut, the normals' search) — so
-/// that `--resume` keeps only files that this run would have written. Options that change only the pictures (`--overlay-*`,
-/// `--no-overlay`, `--ply`) and the backend are left out; the GPU and CPU paths give the same detections.
+/// that `--resume` keeps only files that this run would have written. Options that change only the pictures
+/// (`--overlay-*`, `--no-overlay`, `--ply`) and the backend are left out; the GPU and CPU paths give the
+/// same detections.
 /// A cog-gpu build that serialises a model differently gives another fingerprint (such files are refused
 /// by `--resume`, which is the safe side).
 fn run_fingerprint(

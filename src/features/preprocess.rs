@@ -100,8 +100,8 @@ pub fn gradient_orientation(g: Vec2) -> f32 {
 /// neighbours, after Song & Xiao, without saying how they are searched).
 ///
 /// In a model file (`features.normals`) it is the search the model was trained with, written only when it
-/// is not the default (files written before the field read as the k-d tree's, and models with it are
-/// written byte for byte as before).
+/// is not the default: files written before the field read as the k-d tree's, and a model of the default
+/// search serialises as it did before the field existed (so `detect --resume`'s fingerprints stay).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum NormalSearch {
