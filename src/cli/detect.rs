@@ -448,8 +448,8 @@ fn run_fingerprint(
     }
     parts.push(cascade.map(serde_json::to_string).transpose()?.unwrap_or_default());
     parts.push(layout_model.map(serde_json::to_string).transpose()?.unwrap_or_default());
-    // The options as they printed before `normals` existed, so that files written with the k-d tree's
-    // normals by an earlier build keep their fingerprint; another search is a part of its own.
+    // The options as they printed before `normals` existed (the default search adds nothing); another
+    // search is a part of its own.
     let without_normals = format!("{:?}", DetectOptions { normals: NormalSearch::KdTree, ..*options });
     parts.push(without_normals.replace(", normals: KdTree", ""));
     if options.normals != NormalSearch::KdTree {

@@ -101,7 +101,7 @@ pub fn gradient_orientation(g: Vec2) -> f32 {
 ///
 /// In a model file (`features.normals`) it is the search the model was trained with, written only when it
 /// is not the default: files written before the field read as the k-d tree's, and a model of the default
-/// search serialises as it did before the field existed (so `detect --resume`'s fingerprints stay).
+/// search serialises as it did before the field existed.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum NormalSearch {
