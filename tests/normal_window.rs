@@ -305,3 +305,14 @@ fn detect_takes_the_models_normal_search_and_refuses_a_mixed_set() {
     assert!(!output.status.success(), "{stderr}");
     assert!(stderr.contains(models.to_str().unwrap()) && stderr.contains("bed: window, chair: kdtree"), "{stderr}");
 }
+
+#[test]
+fn normal_search_names_parse_back_and_an_unknown_one_is_named() {
+    for search in NormalSearch::ALL {
+        assert_eq!(search.name().parse::<NormalSearch>().unwrap(), search);
+        // The model files' spelling is the command line's.
+        assert_eq!(serde_json::to_string(&search).unwrap(), format!("\"{}\"", search.name()));
+    }
+    let error = "octree".parse::<NormalSearch>().unwrap_err().to_string();
+    assert!(error.contains("'octree'") && error.contains("kdtree, window"), "{error}");
+}

@@ -36,6 +36,11 @@ const RING_SIN: f32 = 0.382_683_43;
 /// gradient is a one-sided difference `I(1) − I(0)` (HOG's implementations use the same). For every pixel
 /// the colour channel with the largest magnitude `dx² + dy²` gives (dx, dy) (ties: the first channel, R).
 /// Image x runs along columns (right), y along rows (down).
+///
+/// [`ImageGradients::compute`] runs [`table_gradient`], the CPU twin of the `image_gradients` kernel
+/// (`shaders/image_gradients.wgsl`), which gives the same floats as this definition ([`pixel_gradient`])
+/// through a table of differences and their squares, so that no float product is left for a GPU compiler
+/// to fuse into another rounding.
 #[derive(Clone, Debug)]
 pub struct ImageGradients {
     pub width: u32,
@@ -47,8 +52,11 @@ pub struct ImageGradients {
 impl ImageGradients {
     pub fn compute(rgb: &image::RgbImage) -> ImageGradients {
         let (w, h) = rgb.dimensions();
-        let gradients =
-            (0..h).into_par_iter().flat_map_iter(|row| (0..w).map(move |col| pixel_gradient(rgb, col, row))).collect();
+        let (raw, table) = (rgb.as_raw().as_slice(), gradient_table());
+        let gradients = (0..h)
+            .into_par_iter()
+            .flat_map_iter(|row| (0..w).map(move |col| table_gradient(raw, w, h, table, col, row)))
+            .collect();
         ImageGradients { width: w, height: h, gradients }
     }
 
@@ -74,6 +82,55 @@ pub fn pixel_gradient(rgb: &image::RgbImage, col: u32, row: u32) -> Vec2 {
         if sq > best_sq {
             best_sq = sq;
             best = g;
+        }
+    }
+    best
+}
+
+/// Intensity levels of a colour channel (8 bits): [`gradient_table`] has `GRADIENT_LEVELS²` entries.
+pub const GRADIENT_LEVELS: u32 = 256;
+
+/// One intensity level as [`pixel_gradient`] scales it to [0, 1].
+fn gradient_level(byte: u32) -> f32 {
+    byte as f32 * (1.0 / 255.0)
+}
+
+/// The table of the `image_gradients` kernel and its twin: entry `high · GRADIENT_LEVELS + low` is
+/// `(level(high) − level(low), that difference squared)`, each rounded to f32 as [`pixel_gradient`] rounds
+/// it. A kernel that looks these up does no float multiplication, so nothing can be fused into a
+/// multiply-add with another rounding: the GPU's gradients are the CPU's bit for bit. Built once (512 KiB).
+pub fn gradient_table() -> &'static [[f32; 2]] {
+    static TABLE: std::sync::OnceLock<Vec<[f32; 2]>> = std::sync::OnceLock::new();
+    TABLE.get_or_init(|| {
+        (0..GRADIENT_LEVELS * GRADIENT_LEVELS)
+            .map(|entry| {
+                let d = gradient_level(entry / GRADIENT_LEVELS) - gradient_level(entry % GRADIENT_LEVELS);
+                [d, d * d]
+            })
+            .collect()
+    })
+}
+
+/// CPU twin of `shaders/image_gradients.wgsl`: the gradient of pixel (`col`, `row`) of the `width × height`
+/// RGB image `raw` (row-major, three bytes a pixel) looked up in `table` ([`gradient_table`]); equal bit for
+/// bit to [`pixel_gradient`]. Per channel, the squared magnitude is the sum of the two looked-up squares (the
+/// same two roundings and one addition as `Vec2::length_squared`), and the channel of the largest wins,
+/// the first on ties.
+pub fn table_gradient(raw: &[u8], width: u32, height: u32, table: &[[f32; 2]], col: u32, row: u32) -> Vec2 {
+    let channel = |col: u32, row: u32, ch: u32| raw[((row * width + col) * 3 + ch) as usize] as u32;
+    let left = if col == 0 { 0 } else { col - 1 };
+    let right = (col + 1).min(width - 1);
+    let up = if row == 0 { 0 } else { row - 1 };
+    let down = (row + 1).min(height - 1);
+    let mut best = Vec2::ZERO;
+    let mut best_sq = -1.0f32;
+    for ch in 0..3 {
+        let x = table[(channel(right, row, ch) * GRADIENT_LEVELS + channel(left, row, ch)) as usize];
+        let y = table[(channel(col, down, ch) * GRADIENT_LEVELS + channel(col, up, ch)) as usize];
+        let sq = x[1] + y[1];
+        if sq > best_sq {
+            best_sq = sq;
+            best = Vec2::new(x[0], y[0]);
         }
     }
     best
@@ -118,14 +175,15 @@ pub enum NormalSearch {
 }
 
 impl NormalSearch {
-    /// The names the command line takes: `kdtree`, `window`.
-    pub const NAMES: [&'static str; 2] = ["kdtree", "window"];
+    /// Every search, in the order the command line's help lists their [`NormalSearch::name`]s.
+    pub const ALL: [NormalSearch; 2] = [NormalSearch::KdTree, NormalSearch::Window];
 
     /// Whether this is the default search (a model file leaves the field out then).
     pub fn is_default(&self) -> bool {
         *self == NormalSearch::default()
     }
 
+    /// The name the command line and model files use (`kdtree`, `window`).
     pub fn name(self) -> &'static str {
         match self {
             NormalSearch::KdTree => "kdtree",
@@ -138,14 +196,10 @@ impl std::str::FromStr for NormalSearch {
     type Err = Error;
 
     fn from_str(name: &str) -> Result<Self> {
-        match name {
-            "kdtree" => Ok(NormalSearch::KdTree),
-            "window" => Ok(NormalSearch::Window),
-            other => Err(Error::Input(format!(
-                "unknown normal search '{other}' (expected one of: {})",
-                NormalSearch::NAMES.join(", ")
-            ))),
-        }
+        NormalSearch::ALL.into_iter().find(|search| search.name() == name).ok_or_else(|| {
+            let names: Vec<&str> = NormalSearch::ALL.iter().map(|search| search.name()).collect();
+            Error::Input(format!("unknown normal search '{name}' (expected one of: {})", names.join(", ")))
+        })
     }
 }
 
@@ -352,18 +406,24 @@ impl Preprocessed {
 
     /// [`Preprocessed::from_frame`] with the normals' neighbours found by `search`.
     pub fn from_frame_with(frame: &Frame, search: NormalSearch) -> Result<Preprocessed> {
-        Self::from_frame_using(frame, |cloud, image_size| {
-            Ok(match search {
-                NormalSearch::KdTree => estimate_normals(&cloud.points),
-                NormalSearch::Window => window_normals(image_size, &cloud.points, &cloud.pixels),
-            })
-        })
+        Self::from_frame_using(
+            frame,
+            |rgb| Ok(ImageGradients::compute(rgb)),
+            |cloud, image_size| {
+                Ok(match search {
+                    NormalSearch::KdTree => estimate_normals(&cloud.points),
+                    NormalSearch::Window => window_normals(image_size, &cloud.points, &cloud.pixels),
+                })
+            },
+        )
     }
 
-    /// [`Preprocessed::from_frame`] with the normals given by `normals(point cloud, image size)`, one per
-    /// point (the GPU's window search: `backend::Backend::preprocess`).
+    /// [`Preprocessed::from_frame`] with the image gradients given by `gradients(RGB image)` and the normals
+    /// by `normals(point cloud, image size)`, one per point (the GPU's kernels:
+    /// `backend::Backend::preprocess`).
     pub fn from_frame_using(
         frame: &Frame,
+        gradients: impl FnOnce(&image::RgbImage) -> Result<ImageGradients>,
         normals: impl FnOnce(&PointCloud, [u32; 2]) -> Result<Vec<Vec3>>,
     ) -> Result<Preprocessed> {
         let cloud = frame.point_cloud();
@@ -375,8 +435,19 @@ impl Preprocessed {
             )));
         }
         let camera = Camera::new(frame.intrinsics(), frame.rtilt());
-        let image = ImageGradients::compute(&frame.rgb);
+        let image = gradients(&frame.rgb)?;
         let image_size = [frame.width(), frame.height()];
+        if [image.width, image.height] != image_size || image.gradients.len() != (image.width * image.height) as usize {
+            return Err(Error::Input(format!(
+                "frame '{}': {} gradients of a {}×{} image for a {}×{} frame",
+                frame.name,
+                image.gradients.len(),
+                image.width,
+                image.height,
+                image_size[0],
+                image_size[1]
+            )));
+        }
         let normals = normals(&cloud, image_size)?;
         if normals.len() != cloud.len() {
             return Err(Error::Input(format!(

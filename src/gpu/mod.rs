@@ -39,6 +39,7 @@ pub mod depth_points;
 pub mod fast;
 pub mod fast_tables;
 pub mod features;
+pub mod image_gradients;
 pub mod normal_window;
 pub mod room_layout;
 
@@ -264,6 +265,7 @@ pub struct Kernels {
     pub fast_table_scan: Kernel,
     pub room_layout: Kernel,
     pub normal_window: Kernel,
+    pub image_gradients: Kernel,
 }
 
 impl Kernels {
@@ -276,6 +278,7 @@ impl Kernels {
             fast_table_scan: Kernel::new(device, &fast_tables::SCAN_KERNEL)?,
             room_layout: Kernel::new(device, &room_layout::KERNEL)?,
             normal_window: Kernel::new(device, &normal_window::KERNEL)?,
+            image_gradients: Kernel::new(device, &image_gradients::KERNEL)?,
         })
     }
 }
@@ -301,6 +304,9 @@ pub struct GpuContext {
     pub pools: Vec<Mutex<BufferPool>>,
     /// Which set a caller waits for when every set is taken (round robin).
     next_pool: AtomicUsize,
+    /// The `image_gradients` kernel's constant table, uploaded on its first use and kept for the
+    /// context's life ([`image_gradients::resident_table`]).
+    pub(crate) gradient_table: std::sync::OnceLock<wgpu::Buffer>,
 }
 
 /// Default number of [`BufferPool`] sets of a context ([`pool_slots`]).
@@ -643,6 +649,7 @@ impl GpuContext {
             timestamps,
             pools,
             next_pool: AtomicUsize::new(0),
+            gradient_table: std::sync::OnceLock::new(),
         })
     }
 
