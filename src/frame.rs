@@ -400,8 +400,8 @@ fn single_image(dir: &Path, sub: &str) -> Result<PathBuf> {
 }
 
 /// Decodes an image strictly: its size is checked against [`MAX_PIXELS`] before any pixel is decoded,
-/// and a JPEG must end with its end-of-image marker (the decoder fills a truncated JPEG with grey and
-/// reports no error).
+/// and a JPEG must be whole — end with its end-of-image marker, and hold the data of every row
+/// ([`jpeg_runs_out`]): the decoder fills a truncated JPEG with grey and reports no error.
 fn open_image(path: &Path) -> Result<image::DynamicImage> {
     let image_error = |e| Error::Image { path: path.to_path_buf(), source: e };
     let reader = image::ImageReader::open(path)
@@ -417,18 +417,57 @@ fn open_image(path: &Path) -> Result<image::DynamicImage> {
             format!("the image is {w}×{h} pixels; cog-gpu reads images of 1 to {MAX_PIXELS} pixels"),
         ));
     }
-    if format == Some(image::ImageFormat::Jpeg) && !jpeg_is_complete(path)? {
-        return Err(Error::invalid(path, "truncated JPEG: the file ends before its end-of-image marker"));
+    if format == Some(image::ImageFormat::Jpeg) {
+        let bytes = fs::read(path).map_err(|e| Error::io(path, e))?;
+        if !jpeg_is_complete(&bytes) {
+            return Err(Error::invalid(path, "truncated JPEG: the file ends before its end-of-image marker"));
+        }
+        if let Some(why) = jpeg_runs_out(&bytes) {
+            return Err(Error::invalid(path, format!("truncated JPEG: its image data runs out {why}")));
+        }
     }
     image::DynamicImage::from_decoder(decoder).map_err(image_error)
 }
 
 /// Whether a JPEG file ends with the end-of-image marker `FF D9` (trailing zero padding allowed).
-fn jpeg_is_complete(path: &Path) -> Result<bool> {
-    let bytes = fs::read(path).map_err(|e| Error::io(path, e))?;
+fn jpeg_is_complete(bytes: &[u8]) -> bool {
     let end = bytes.iter().rposition(|&b| b != 0).map_or(0, |i| i + 1);
-    Ok(bytes[..end].ends_with(&[0xFF, 0xD9]))
+    bytes[..end].ends_with(&[0xFF, 0xD9])
 }
+
+/// Why a JPEG's entropy-coded data runs out before its last rows, if it does. A file cut short with an
+/// end-of-image marker after the cut passes [`jpeg_is_complete`], and JPEG decoders (zune-jpeg, which
+/// `image` uses, in its strict mode too; libjpeg's and jpeg-decoder's likewise) read the bits missing before
+/// a marker as zeros, without an error. So the file is decoded twice by zune-jpeg, as it is and with
+/// [`JPEG_FILLER`] bytes put before its final marker: a whole file's decoder stops after its last block and
+/// never reads them, so both give the same pixels; a truncated file's decoder reads them in place of the
+/// zeros, and the pixels differ. Two extra decodes per JPEG read, about 5 ms for a 730×530 frame (the synthetic frames
+/// are PNGs, unaffected). A file zune-jpeg cannot decode at all is left to `image`'s decoder, which reports it.
+fn jpeg_runs_out(bytes: &[u8]) -> Option<String> {
+    let decode = |data: &[u8]| {
+        let options = zune_core::options::DecoderOptions::default()
+            .jpeg_set_out_colorspace(zune_core::colorspace::ColorSpace::RGB)
+            .set_strict_mode(false);
+        zune_jpeg::JpegDecoder::new_with_options(zune_core::bytestream::ZCursor::new(data), options).decode().ok()
+    };
+    let end = bytes.iter().rposition(|&b| b != 0).map_or(0, |i| i + 1);
+    let marker = end.checked_sub(2)?;
+    let mut filled = Vec::with_capacity(bytes.len() + JPEG_FILLER.len());
+    filled.extend_from_slice(&bytes[..marker]);
+    filled.extend_from_slice(&JPEG_FILLER);
+    filled.extend_from_slice(&bytes[marker..]);
+    let (as_is, with_filler) = (decode(bytes)?, decode(&filled)?);
+    if as_is == with_filler {
+        return None;
+    }
+    let first = as_is.iter().zip(&with_filler).position(|(a, b)| a != b).unwrap_or(0);
+    let through = 100.0 * first as f64 / as_is.len().max(1) as f64;
+    Some(format!("about {through:.0} % of the way through the image"))
+}
+
+/// Bytes that [`jpeg_runs_out`] puts before a JPEG's final marker: no `0xFF` (which would start a marker),
+/// and ones and zeros mixed, so that Huffman codes read from them differ from codes read from zeros.
+const JPEG_FILLER: [u8; 64] = [0x5A; 64];
 
 /// Reads a depth PNG (16-bit grey, the toolbox's encoding) into decoded millimetres.
 pub fn read_depth_png(path: &Path) -> Result<(u32, u32, Vec<u16>)> {

@@ -187,6 +187,19 @@ fn broken_images_are_errors() {
     let bytes = std::fs::read(&jpeg).unwrap();
     std::fs::write(&jpeg, &bytes[..bytes.len() * 2 / 3]).unwrap();
     assert_rejected(&["info", text(&dir)], &["jpeg.jpg", "truncated"]);
+    // The same cut with an end-of-image marker appended: the file ends as a JPEG should, but its
+    // entropy-coded data runs out before the last rows.
+    // Cut at two thirds, and just before the final marker (the last block's data incomplete).
+    let marker = bytes.len() - 2;
+    assert_eq!(bytes[marker..], [0xFF, 0xD9]);
+    for cut in [bytes.len() * 2 / 3, marker - 3] {
+        let mut cut_with_end = bytes[..cut].to_vec();
+        cut_with_end.extend_from_slice(&[0xFF, 0xD9]);
+        std::fs::write(&jpeg, &cut_with_end).unwrap();
+        assert_rejected(&["info", text(&dir)], &["jpeg.jpg", "truncated", "image data runs out"]);
+    }
+    std::fs::write(&jpeg, &bytes).unwrap();
+    assert_accepted(&["info", text(&dir)]);
 
     let dir = write_frame(tmp.path(), &good_frame("png"));
     let depth = dir.join("depth/png.png");
