@@ -8,14 +8,13 @@
 
 use crate::error::Result;
 use crate::features::fast::FastEngine;
-use crate::features::preprocess::{estimate_normals, NormalSearch};
+use crate::features::preprocess::NormalSearch;
 use crate::features::Preprocessed;
 use crate::features::{cpu, FeatureLayout, FeatureScene, Hypothesis};
 use crate::frame::Frame;
 pub use crate::gpu::fast::FastJob;
 use crate::gpu::fast::{fast_scores_gpu, fast_scores_gpu_jobs, use_kernel_on, FastChunking};
-use crate::gpu::image_gradients;
-use crate::gpu::normal_window::window_normals_gpu;
+use crate::gpu::preprocess::gradients_and_normals_gpu;
 use crate::gpu::GpuContext;
 use crate::room_layout::voxels::{self, ScoringTables, YawCells};
 use crate::room_layout::RoomBox;
@@ -30,19 +29,15 @@ pub enum Backend<'a> {
 impl<'a> Backend<'a> {
     /// Preprocesses `frame` with the normals' neighbours found by `search`. On a GPU that runs kernels
     /// ([`use_kernel_on`]: a hardware adapter, or `COG_GPU_FAST_KERNEL=always`) the image gradients run as
-    /// the `image_gradients` kernel and the window search as the `normal_window` kernel; each gives its CPU
-    /// twin's result bit for bit, so both paths get the same gradients and normals. The k-d tree search and
+    /// the `image_gradients` kernel and the window search as the `normal_window` kernel, both in one submission
+    /// ([`crate::gpu::preprocess`]); each gives its CPU twin's result bit for bit, so both paths get the same
+    /// gradients and normals. The k-d tree search and
     /// the plane fits stay on the CPU.
     pub fn preprocess(&self, frame: &Frame, search: NormalSearch) -> Result<Preprocessed> {
         match self {
-            Backend::Gpu(ctx) if use_kernel_on(ctx) => Preprocessed::from_frame_using(
-                frame,
-                |rgb| image_gradients::compute_gpu(ctx, rgb),
-                |cloud, image_size| match search {
-                    NormalSearch::Window => window_normals_gpu(ctx, image_size, &cloud.points, &cloud.pixels),
-                    NormalSearch::KdTree => Ok(estimate_normals(&cloud.points)),
-                },
-            ),
+            Backend::Gpu(ctx) if use_kernel_on(ctx) => {
+                Preprocessed::from_frame_using(frame, |rgb, cloud| gradients_and_normals_gpu(ctx, rgb, cloud, search))
+            }
             _ => Preprocessed::from_frame_with(frame, search),
         }
     }

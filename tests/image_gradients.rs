@@ -9,9 +9,9 @@ use std::path::Path;
 
 use cog_gpu::features::preprocess::{gradient_table, pixel_gradient, table_gradient, ImageGradients, GRADIENT_LEVELS};
 use cog_gpu::frame::{DepthSource, Frame};
-use cog_gpu::gpu::image_gradients::{
-    compute_gpu, image_gradients_cpu, image_gradients_gpu, pack_rgb, ImageGradientsParams,
-};
+use cog_gpu::gpu::image_gradients::{image_gradients_cpu, image_gradients_gpu, pack_rgb, ImageGradientsParams};
+use cog_gpu::gpu::normal_window::normal_window_cpu;
+use cog_gpu::gpu::preprocess::{gradients_and_normals_gpu, preprocess_gpu, PointGrid};
 use cog_gpu::synth::{self, SynthOptions};
 use common::{gpu_context, shader_module, wgsl_const, wgsl_struct_size};
 
@@ -170,13 +170,60 @@ fn image_gradients_kernel_equals_its_cpu_twin() {
         assert_eq!(gpu.len(), cpu.len(), "{name}");
         let differing = gpu.iter().zip(&cpu).filter(|(g, c)| bits(**g) != bits(**c)).count();
         assert_eq!(differing, 0, "{name}: {differing} of {} gradients differ", cpu.len());
-        // The whole-image form the GPU path's preprocessing takes.
-        let on_gpu = compute_gpu(&ctx, &rgb).unwrap();
-        let on_cpu = ImageGradients::compute(&rgb);
-        assert_eq!((on_gpu.width, on_gpu.height), (on_cpu.width, on_cpu.height));
-        assert!(on_gpu.gradients.iter().zip(&on_cpu.gradients).all(|(g, c)| bits(g.to_array()) == bits(c.to_array())));
     }
     // An empty image is an error, not a dispatch of nothing.
     let error = image_gradients_gpu(&ctx, &image::RgbImage::new(0, 4)).unwrap_err().to_string();
     assert!(error.contains("0×4 image"), "{error}");
+}
+
+/// The GPU path's preprocessing: both kernels in one submission through the context's pooled buffers give
+/// what each gives alone and what the CPU twins give, frame after frame of different sizes (the pooled
+/// buffers grown by a large frame and reused, not cleared, for smaller ones), and the same `Preprocessed`
+/// as the CPU path.
+#[test]
+fn both_preprocessing_kernels_in_one_submission_equal_the_twins() {
+    use cog_gpu::features::preprocess::{point_grid, window_normals, NormalSearch, Preprocessed};
+    let Some(ctx) = gpu_context() else { return };
+    let frames: Vec<Frame> = ["kv1-b3dodata-img_0063", "synth-bedroom-s52"]
+        .into_iter()
+        .map(|name| {
+            Frame::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/sample").join(name), DepthSource::Raw)
+                .unwrap()
+        })
+        .chain([synth::generate_frame(5, 0, &SynthOptions::small(160, 120)).unwrap().frame])
+        .collect();
+    // Large, small, large again: the second large frame reads buffers the small one left stale.
+    for frame in frames.iter().chain(&frames[..1]) {
+        let (width, height) = (frame.width(), frame.height());
+        let cloud = frame.point_cloud();
+        let grid = point_grid([width, height], &cloud.points, &cloud.pixels);
+        let both = preprocess_gpu(&ctx, Some(&frame.rgb), Some(PointGrid { grid: &grid, width, height })).unwrap();
+        let gradients = both.gradients.expect("gradients asked for");
+        let masks = both.masks.expect("masks asked for");
+        let want_gradients = image_gradients_cpu(&frame.rgb).unwrap();
+        assert!(gradients.iter().zip(&want_gradients).all(|(g, c)| bits(*g) == bits(*c)), "{}", frame.name);
+        assert_eq!(gradients.len(), want_gradients.len());
+        assert_eq!(masks, normal_window_cpu(&grid, width, height).unwrap(), "{}", frame.name);
+        assert_eq!(image_gradients_gpu(&ctx, &frame.rgb).unwrap().len(), want_gradients.len());
+        // The whole stage as the GPU path runs it, against the CPU path's.
+        let (image, normals) = gradients_and_normals_gpu(&ctx, &frame.rgb, &cloud, NormalSearch::Window).unwrap();
+        let cpu = ImageGradients::compute(&frame.rgb);
+        assert!(image.gradients.iter().zip(&cpu.gradients).all(|(g, c)| bits(g.to_array()) == bits(c.to_array())));
+        let want_normals = window_normals([width, height], &cloud.points, &cloud.pixels);
+        assert!(normals
+            .iter()
+            .zip(&want_normals)
+            .all(|(g, c)| g.to_array().map(f32::to_bits) == c.to_array().map(f32::to_bits)));
+        let via_kernels = Preprocessed::from_frame_using(frame, |rgb, cloud| {
+            gradients_and_normals_gpu(&ctx, rgb, cloud, NormalSearch::KdTree)
+        })
+        .unwrap();
+        let on_cpu = Preprocessed::from_frame(frame).unwrap();
+        assert_eq!(via_kernels.gradients, on_cpu.gradients);
+        assert_eq!(via_kernels.normals, on_cpu.normals);
+        assert_eq!(via_kernels.points, on_cpu.points);
+    }
+    // Nothing asked, nothing done.
+    let nothing = preprocess_gpu(&ctx, None, None).unwrap();
+    assert!(nothing.gradients.is_none() && nothing.masks.is_none());
 }

@@ -13,7 +13,8 @@ use cog_gpu::features::preprocess::{
     NORMAL_NEIGHBOURS, NORMAL_WINDOW, NORMAL_WINDOW_CLAMP, NORMAL_WINDOW_UNITS,
 };
 use cog_gpu::frame::{DepthSource, Frame};
-use cog_gpu::gpu::normal_window::{normal_window_cpu, normal_window_gpu, window_normals_gpu, NormalWindowParams};
+use cog_gpu::gpu::normal_window::{normal_window_cpu, normal_window_gpu, NormalWindowParams};
+use cog_gpu::gpu::preprocess::gradients_and_normals_gpu;
 use cog_gpu::synth::{self, SynthOptions};
 use common::{gpu_context, shader_module, wgsl_const, wgsl_const_f32, wgsl_struct_size};
 use glam::Vec3;
@@ -226,7 +227,7 @@ fn normal_window_kernel_equals_its_cpu_twin() {
         assert_eq!(differing, 0, "{}: {differing} of {} masks differ", frame.name, cpu.len());
         // And so the normals, bit for bit.
         let cloud = frame.point_cloud();
-        let on_gpu = window_normals_gpu(&ctx, [width, height], &cloud.points, &cloud.pixels).unwrap();
+        let (_, on_gpu) = gradients_and_normals_gpu(&ctx, &frame.rgb, &cloud, NormalSearch::Window).unwrap();
         let on_cpu = window_normals([width, height], &cloud.points, &cloud.pixels);
         assert!(on_gpu
             .iter()

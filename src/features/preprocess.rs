@@ -406,25 +406,20 @@ impl Preprocessed {
 
     /// [`Preprocessed::from_frame`] with the normals' neighbours found by `search`.
     pub fn from_frame_with(frame: &Frame, search: NormalSearch) -> Result<Preprocessed> {
-        Self::from_frame_using(
-            frame,
-            |rgb| Ok(ImageGradients::compute(rgb)),
-            |cloud, image_size| {
-                Ok(match search {
-                    NormalSearch::KdTree => estimate_normals(&cloud.points),
-                    NormalSearch::Window => window_normals(image_size, &cloud.points, &cloud.pixels),
-                })
-            },
-        )
+        Self::from_frame_using(frame, |rgb, cloud| {
+            let normals = match search {
+                NormalSearch::KdTree => estimate_normals(&cloud.points),
+                NormalSearch::Window => window_normals([rgb.width(), rgb.height()], &cloud.points, &cloud.pixels),
+            };
+            Ok((ImageGradients::compute(rgb), normals))
+        })
     }
 
-    /// [`Preprocessed::from_frame`] with the image gradients given by `gradients(RGB image)` and the normals
-    /// by `normals(point cloud, image size)`, one per point (the GPU's kernels:
-    /// `backend::Backend::preprocess`).
+    /// [`Preprocessed::from_frame`] with the image gradients and the normals (one per point) given by
+    /// `gradients_and_normals(RGB image, point cloud)` (the GPU's kernels: `backend::Backend::preprocess`).
     pub fn from_frame_using(
         frame: &Frame,
-        gradients: impl FnOnce(&image::RgbImage) -> Result<ImageGradients>,
-        normals: impl FnOnce(&PointCloud, [u32; 2]) -> Result<Vec<Vec3>>,
+        gradients_and_normals: impl FnOnce(&image::RgbImage, &PointCloud) -> Result<(ImageGradients, Vec<Vec3>)>,
     ) -> Result<Preprocessed> {
         let cloud = frame.point_cloud();
         if cloud.len() < NORMAL_NEIGHBOURS {
@@ -435,7 +430,7 @@ impl Preprocessed {
             )));
         }
         let camera = Camera::new(frame.intrinsics(), frame.rtilt());
-        let image = gradients(&frame.rgb)?;
+        let (image, normals) = gradients_and_normals(&frame.rgb, &cloud)?;
         let image_size = [frame.width(), frame.height()];
         if [image.width, image.height] != image_size || image.gradients.len() != (image.width * image.height) as usize {
             return Err(Error::Input(format!(
@@ -448,7 +443,6 @@ impl Preprocessed {
                 image_size[1]
             )));
         }
-        let normals = normals(&cloud, image_size)?;
         if normals.len() != cloud.len() {
             return Err(Error::Input(format!(
                 "frame '{}': {} normals for {} points",

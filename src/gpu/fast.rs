@@ -78,7 +78,7 @@ use super::fast_tables::{
     table_invocations, table_params, table_params_at, table_points, table_words, TableParams, TablePoint, SCAN_COLUMNS,
     SCAN_ROWS,
 };
-use super::{buffer_range, Binding, GpuContext, KernelSpec, TexelRows};
+use super::{buffer_range, Arena, Binding, GpuContext, KernelSpec, TexelRows};
 use crate::error::{Error, Result};
 use crate::features::cpu::{dot, ExpandedBox, VIEW_MIN_DISTANCE};
 use crate::features::fast::{group_by_table, CellRegion, FastEngine, LayerTable, TableKey, TableSpan, CHANNELS};
@@ -604,25 +604,6 @@ pub fn fast_scores_gpu_chunked(
 ) -> Result<Vec<f32>> {
     let mut scores = fast_scores_gpu_jobs(ctx, engine, &[FastJob { hypotheses, weights }], chunking)?;
     Ok(scores.pop().unwrap_or_default())
-}
-
-/// Byte offsets of the pieces packed into one buffer, each aligned for binding.
-struct Arena {
-    align: u64,
-    len: u64,
-}
-
-impl Arena {
-    fn new(align: u32) -> Arena {
-        Arena { align: u64::from(align.max(4)), len: 0 }
-    }
-
-    /// Reserves `bytes` and returns their offset.
-    fn place(&mut self, bytes: u64) -> u64 {
-        let at = self.len.next_multiple_of(self.align);
-        self.len = at + bytes;
-        at
-    }
 }
 
 /// Several jobs' fast-path scores on the GPU (see `run`: tables shared between jobs are built once), cut as

@@ -1,9 +1,9 @@
 //! The `image_gradients` kernel: the image gradient of every pixel
-//! ([`ImageGradients`], paper §3.2), the GPU half of the frame's preprocessing with
+//! ([`ImageGradients`](crate::features::preprocess::ImageGradients), paper §3.2), the GPU half of the frame's preprocessing with
 //! [`normal_window`](super::normal_window).
 //!
 //! Shader: `shaders/image_gradients.wgsl`. Its CPU twin is [`table_gradient`], which the CPU path runs
-//! ([`ImageGradients::compute`]); both look the channel differences and their squares up in
+//! ([`ImageGradients::compute`](crate::features::preprocess::ImageGradients::compute)); both look the channel differences and their squares up in
 //! [`gradient_table`] (f32 values rounded on the CPU as [`pixel_gradient`](crate::features::preprocess::pixel_gradient)
 //! rounds them), so the kernel does no float product a GPU compiler could fuse into a multiply-add, and its
 //! gradients are the CPU's bit for bit.
@@ -12,9 +12,10 @@
 
 use bytemuck::{Pod, Zeroable};
 
+use super::preprocess::preprocess_gpu;
 use super::{Binding, GpuContext, KernelSpec};
 use crate::error::{Error, Result};
-use crate::features::preprocess::{gradient_table, table_gradient, ImageGradients};
+use crate::features::preprocess::{gradient_table, table_gradient};
 
 /// The pipeline description, built into [`super::Kernels::image_gradients`].
 pub const KERNEL: KernelSpec = KernelSpec {
@@ -23,9 +24,6 @@ pub const KERNEL: KernelSpec = KernelSpec {
     entry_point: "image_gradients",
     bindings: &[Binding::Uniform, Binding::StorageRead, Binding::StorageRead, Binding::StorageReadWrite],
 };
-
-/// Bytes of one output gradient (`vec2<f32>`).
-const GRADIENT_BYTES: u64 = 8;
 
 /// Uniform parameters; twin of WGSL `struct ImageGradientsParams` in `shaders/image_gradients.wgsl`. A
 /// dispatch covers the whole image (its bytes must fit one binding anyway).
@@ -51,7 +49,7 @@ pub fn pack_rgb(raw: &[u8]) -> Vec<u32> {
 
 /// The parameters of a `width × height` image, with a clear error for one the kernel cannot index (a byte
 /// index past `u32`) or an empty one.
-fn params_for(rgb: &image::RgbImage) -> Result<ImageGradientsParams> {
+pub(crate) fn params_for(rgb: &image::RgbImage) -> Result<ImageGradientsParams> {
     let (width, height) = rgb.dimensions();
     let pixels = width as u64 * height as u64;
     if pixels == 0 || pixels * 3 > u32::MAX as u64 {
@@ -69,7 +67,7 @@ pub(crate) fn resident_table(ctx: &GpuContext) -> &wgpu::Buffer {
 }
 
 /// CPU twin of the whole kernel: the gradient of every pixel, row-major (the entry point's loop over its
-/// invocations, one by one; [`ImageGradients::compute`] runs the same per-pixel twin in parallel).
+/// invocations, one by one; [`ImageGradients::compute`](crate::features::preprocess::ImageGradients::compute) runs the same per-pixel twin in parallel).
 pub fn image_gradients_cpu(rgb: &image::RgbImage) -> Result<Vec<[f32; 2]>> {
     let params = params_for(rgb)?;
     let (raw, table) = (rgb.as_raw().as_slice(), gradient_table());
@@ -81,34 +79,8 @@ pub fn image_gradients_cpu(rgb: &image::RgbImage) -> Result<Vec<[f32; 2]>> {
         .collect())
 }
 
-/// The gradients of every pixel computed on the GPU, in one dispatch; same contract as
-/// [`image_gradients_cpu`].
+/// The gradients of every pixel computed on the GPU; same contract as [`image_gradients_cpu`], in one
+/// submission with the context's pooled buffers ([`preprocess_gpu`]).
 pub fn image_gradients_gpu(ctx: &GpuContext, rgb: &image::RgbImage) -> Result<Vec<[f32; 2]>> {
-    let params = params_for(rgb)?;
-    let count = params.pixel_count;
-    let bytes = ctx.limits.max_storage_buffer_binding_size.min(ctx.limits.max_buffer_size);
-    if count as u64 * GRADIENT_BYTES > bytes {
-        return Err(Error::Gpu(format!(
-            "image_gradients: the gradients of a {}×{} image ({} bytes) exceed the device's {bytes}-byte storage binding",
-            params.width,
-            params.height,
-            count as u64 * GRADIENT_BYTES
-        )));
-    }
-    let kernel = &ctx.kernels.image_gradients;
-    ctx.checked("image_gradients", || {
-        let uniform = ctx.uniform_buffer("image_gradients params", &params);
-        let input = ctx.storage_buffer("image_gradients rgb", &pack_rgb(rgb.as_raw()));
-        let table = resident_table(ctx);
-        let output = ctx.output_buffer("image_gradients gradients", count as u64 * GRADIENT_BYTES);
-        let bind_group = ctx.bind_group(kernel, &[&uniform, &input, table, &output]);
-        ctx.dispatch_and_read::<[f32; 2]>(kernel, &bind_group, count, &output, count as usize)
-    })
-}
-
-/// [`ImageGradients`] of `rgb` computed by the kernel: equal bit for bit to [`ImageGradients::compute`].
-pub fn compute_gpu(ctx: &GpuContext, rgb: &image::RgbImage) -> Result<ImageGradients> {
-    let gradients = image_gradients_gpu(ctx, rgb)?;
-    let (width, height) = rgb.dimensions();
-    Ok(ImageGradients { width, height, gradients: gradients.into_iter().map(glam::Vec2::from).collect() })
+    Ok(preprocess_gpu(ctx, Some(rgb), None)?.gradients.unwrap_or_default())
 }

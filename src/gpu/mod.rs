@@ -41,6 +41,7 @@ pub mod fast_tables;
 pub mod features;
 pub mod image_gradients;
 pub mod normal_window;
+pub mod preprocess;
 pub mod room_layout;
 
 use std::borrow::Cow;
@@ -307,6 +308,25 @@ pub struct GpuContext {
     /// The `image_gradients` kernel's constant table, uploaded on its first use and kept for the
     /// context's life ([`image_gradients::resident_table`]).
     pub(crate) gradient_table: std::sync::OnceLock<wgpu::Buffer>,
+}
+
+/// Byte offsets of the pieces packed into one buffer, each aligned for binding.
+pub(crate) struct Arena {
+    align: u64,
+    pub(crate) len: u64,
+}
+
+impl Arena {
+    pub(crate) fn new(align: u32) -> Arena {
+        Arena { align: u64::from(align.max(4)), len: 0 }
+    }
+
+    /// Reserves `bytes` and returns their offset.
+    pub(crate) fn place(&mut self, bytes: u64) -> u64 {
+        let at = self.len.next_multiple_of(self.align);
+        self.len = at + bytes;
+        at
+    }
 }
 
 /// Default number of [`BufferPool`] sets of a context ([`pool_slots`]).
