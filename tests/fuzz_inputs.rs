@@ -201,6 +201,26 @@ fn broken_images_are_errors() {
     std::fs::write(&jpeg, &bytes).unwrap();
     assert_accepted(&["info", text(&dir)]);
 
+    // A progressive JPEG and one with restart markers (`cjpeg -progressive`, `cjpeg -restart 1` of a
+    // textured 96×64 image; tests/data/): read whole, and refused when cut short with an end marker.
+    for fixture in ["progressive.jpg", "restart-markers.jpg"] {
+        let bytes = std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data").join(fixture)).unwrap();
+        let mut frame = good_frame("coded");
+        frame.rgb = image::load_from_memory(&bytes).unwrap().to_rgb8();
+        assert_eq!(frame.rgb.dimensions(), (96, 64), "{fixture}");
+        frame.depth_mm = vec![2500; 96 * 64];
+        frame.k = [[90.0, 0.0, 48.5], [0.0, 90.0, 32.5], [0.0, 0.0, 1.0]];
+        let dir = write_frame(tmp.path(), &frame);
+        std::fs::remove_file(dir.join("image/coded.png")).unwrap();
+        let jpeg = dir.join("image/coded.jpg");
+        std::fs::write(&jpeg, &bytes).unwrap();
+        assert_accepted(&["info", text(&dir)]);
+        let mut cut_with_end = bytes[..bytes.len() * 2 / 3].to_vec();
+        cut_with_end.extend_from_slice(&[0xFF, 0xD9]);
+        std::fs::write(&jpeg, &cut_with_end).unwrap();
+        assert_rejected(&["info", text(&dir)], &["coded.jpg", "truncated", "image data runs out"]);
+    }
+
     let dir = write_frame(tmp.path(), &good_frame("png"));
     let depth = dir.join("depth/png.png");
     let bytes = std::fs::read(&depth).unwrap();
