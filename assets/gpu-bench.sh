@@ -18,7 +18,8 @@
 #      every shipped model, at `--detect-step 0.1` (the issue's setting; with the GPU debug log) and at the
 #      models' own steps, each path also with IN_FLIGHT frames in flight (`--in-flight`); at 0.1 m the GPU
 #      path alone with 3 and 4 frames in flight, and with 3 and four buffer-pool sets
-#      (COG_GPU_POOL_SLOTS=4); both paths at 0.1 m with `--normals window` (the normal_window kernel),
+#      (COG_GPU_POOL_SLOTS=4); both paths at 0.1 m with `--normals window` (the normal_window kernel beside
+#      the image_gradients kernel, which every GPU pass runs, in one submission),
 #      and `bench --compare-normals` of the 4 frames; with BASE_BIN, that binary's GPU
 #      path at 0.1 m (a baseline, same machine), one frame at a time and then BASE_IN_FLIGHT frames in
 #      flight;
