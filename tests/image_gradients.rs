@@ -1,6 +1,6 @@
 //! Image gradients (paper §3.2) through the `image_gradients` kernel's table: the CPU twin against the
 //! definition ([`pixel_gradient`]) on frames and on noise images whose channels tie, the kernel against its
-//! twin on the GPU (lavapipe in CI) bit for bit, the packing of the bytes, and the shader's constants and
+//! twin on the GPU (lavapipe in CI) bit for bit, and the shader's constants and
 //! struct checked against the Rust side by naga.
 
 mod common;
@@ -9,7 +9,7 @@ use std::path::Path;
 
 use cog_gpu::features::preprocess::{gradient_table, pixel_gradient, table_gradient, ImageGradients, GRADIENT_LEVELS};
 use cog_gpu::frame::{DepthSource, Frame};
-use cog_gpu::gpu::image_gradients::{image_gradients_cpu, image_gradients_gpu, pack_rgb, ImageGradientsParams};
+use cog_gpu::gpu::image_gradients::{image_gradients_gpu, ImageGradientsParams};
 use cog_gpu::gpu::normal_window::normal_window_cpu;
 use cog_gpu::gpu::preprocess::{gradients_and_normals_gpu, preprocess_gpu, PointGrid};
 use cog_gpu::synth::{self, SynthOptions};
@@ -148,13 +148,6 @@ fn the_table_holds_the_definitions_differences_and_squares() {
 }
 
 #[test]
-fn rgb_bytes_pack_four_to_a_word_low_byte_first() {
-    assert_eq!(pack_rgb(&[1, 2, 3, 4, 5]), vec![0x0403_0201, 0x05]);
-    assert_eq!(pack_rgb(&[0xff; 3]), vec![0x00ff_ffff]);
-    assert!(pack_rgb(&[]).is_empty());
-}
-
-#[test]
 fn image_gradients_shader_shares_its_constants_and_struct_with_rust() {
     let module = shader_module("image_gradients.wgsl");
     assert_eq!(wgsl_const(&module, "GRADIENT_LEVELS"), GRADIENT_LEVELS as i64);
@@ -166,7 +159,7 @@ fn image_gradients_kernel_equals_its_cpu_twin() {
     let Some(ctx) = gpu_context() else { return };
     for (name, rgb) in test_images() {
         let gpu = image_gradients_gpu(&ctx, &rgb).unwrap();
-        let cpu = image_gradients_cpu(&rgb).unwrap();
+        let cpu: Vec<[f32; 2]> = ImageGradients::compute(&rgb).gradients.iter().map(|g| g.to_array()).collect();
         assert_eq!(gpu.len(), cpu.len(), "{name}");
         let differing = gpu.iter().zip(&cpu).filter(|(g, c)| bits(**g) != bits(**c)).count();
         assert_eq!(differing, 0, "{name}: {differing} of {} gradients differ", cpu.len());
@@ -200,11 +193,15 @@ fn both_preprocessing_kernels_in_one_submission_equal_the_twins() {
         let both = preprocess_gpu(&ctx, Some(&frame.rgb), Some(PointGrid { grid: &grid, width, height })).unwrap();
         let gradients = both.gradients.expect("gradients asked for");
         let masks = both.masks.expect("masks asked for");
-        let want_gradients = image_gradients_cpu(&frame.rgb).unwrap();
+        let want_gradients: Vec<[f32; 2]> =
+            ImageGradients::compute(&frame.rgb).gradients.iter().map(|g| g.to_array()).collect();
         assert!(gradients.iter().zip(&want_gradients).all(|(g, c)| bits(*g) == bits(*c)), "{}", frame.name);
         assert_eq!(gradients.len(), want_gradients.len());
         assert_eq!(masks, normal_window_cpu(&grid, width, height).unwrap(), "{}", frame.name);
-        assert_eq!(image_gradients_gpu(&ctx, &frame.rgb).unwrap().len(), want_gradients.len());
+        // The gradients kernel alone, through the same pooled buffers, gives the same floats.
+        let alone = image_gradients_gpu(&ctx, &frame.rgb).unwrap();
+        assert_eq!(alone.len(), gradients.len());
+        assert!(alone.iter().zip(&gradients).all(|(a, b)| bits(*a) == bits(*b)), "{}", frame.name);
         // The whole stage as the GPU path runs it, against the CPU path's.
         let (image, normals) = gradients_and_normals_gpu(&ctx, &frame.rgb, &cloud, NormalSearch::Window).unwrap();
         let cpu = ImageGradients::compute(&frame.rgb);

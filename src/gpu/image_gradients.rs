@@ -8,14 +8,17 @@
 //! rounds them), so the kernel does no float product a GPU compiler could fuse into a multiply-add, and its
 //! gradients are the CPU's bit for bit.
 //!
-//! Input: the RGB bytes as stored, four to a u32 word ([`pack_rgb`]); output: one `[f32; 2]` per pixel.
+//! Input: the RGB bytes as stored (`image::RgbImage::as_raw`), which a WGSL `array<u32>` reads four to a
+//! word, the first in the low bits (WebGPU buffers are little-endian); output: one `[f32; 2]` per pixel.
 
 use bytemuck::{Pod, Zeroable};
 
 use super::preprocess::preprocess_gpu;
 use super::{Binding, GpuContext, KernelSpec};
 use crate::error::{Error, Result};
-use crate::features::preprocess::{gradient_table, table_gradient};
+use crate::features::preprocess::gradient_table;
+#[cfg(doc)]
+use crate::features::preprocess::table_gradient;
 
 /// The pipeline description, built into [`super::Kernels::image_gradients`].
 pub const KERNEL: KernelSpec = KernelSpec {
@@ -39,14 +42,6 @@ pub struct ImageGradientsParams {
 
 const _: () = assert!(std::mem::size_of::<ImageGradientsParams>() == 16);
 
-/// The image's bytes four to a u32 word, the first in the low bits (the shader's `channel`), the last word
-/// padded with zeros.
-pub fn pack_rgb(raw: &[u8]) -> Vec<u32> {
-    raw.chunks(4)
-        .map(|chunk| chunk.iter().enumerate().fold(0u32, |word, (i, &byte)| word | (byte as u32) << (8 * i)))
-        .collect()
-}
-
 /// The parameters of a `width × height` image, with a clear error for one the kernel cannot index (a byte
 /// index past `u32`) or an empty one.
 pub(crate) fn params_for(rgb: &image::RgbImage) -> Result<ImageGradientsParams> {
@@ -66,21 +61,9 @@ pub(crate) fn resident_table(ctx: &GpuContext) -> &wgpu::Buffer {
     ctx.gradient_table.get_or_init(|| ctx.storage_buffer("image_gradients table", gradient_table()))
 }
 
-/// CPU twin of the whole kernel: the gradient of every pixel, row-major (the entry point's loop over its
-/// invocations, one by one; [`ImageGradients::compute`](crate::features::preprocess::ImageGradients::compute) runs the same per-pixel twin in parallel).
-pub fn image_gradients_cpu(rgb: &image::RgbImage) -> Result<Vec<[f32; 2]>> {
-    let params = params_for(rgb)?;
-    let (raw, table) = (rgb.as_raw().as_slice(), gradient_table());
-    Ok((0..params.pixel_count)
-        .map(|pixel| {
-            let (col, row) = (pixel % params.width, pixel / params.width);
-            table_gradient(raw, params.width, params.height, table, col, row).to_array()
-        })
-        .collect())
-}
-
-/// The gradients of every pixel computed on the GPU; same contract as [`image_gradients_cpu`], in one
-/// submission with the context's pooled buffers ([`preprocess_gpu`]).
+/// The gradients of every pixel computed on the GPU, row-major: equal bit for bit to
+/// [`ImageGradients::compute`](crate::features::preprocess::ImageGradients::compute) (which runs the twin
+/// [`table_gradient`] over the pixels), in one submission with the context's pooled buffers ([`preprocess_gpu`]).
 pub fn image_gradients_gpu(ctx: &GpuContext, rgb: &image::RgbImage) -> Result<Vec<[f32; 2]>> {
     Ok(preprocess_gpu(ctx, Some(rgb), None)?.gradients.unwrap_or_default())
 }

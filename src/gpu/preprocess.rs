@@ -59,7 +59,8 @@ pub fn preprocess_gpu(
             params.check(g.grid).map(|()| params)
         })
         .transpose()?;
-    let rgb_words = rgb.map(|image| image_gradients::pack_rgb(image.as_raw())).unwrap_or_default();
+    // The bytes as stored: the shader's `array<u32>` reads them four to a word, the first in the low bits.
+    let rgb_bytes: &[u8] = rgb.map_or(&[], |image| image.as_raw());
     let grid_points: &[[f32; 4]] = grid.map_or(&[], |g| g.grid);
     let pixels = |n: Option<u32>| u64::from(n.unwrap_or(0));
     let gradient_count = pixels(gradient_params.map(|p| p.pixel_count));
@@ -72,10 +73,9 @@ pub fn preprocess_gpu(
     let storage_align = ctx.limits.min_storage_buffer_offset_alignment;
     let uniform_stride = (std::mem::size_of::<ImageGradientsParams>() as u64)
         .next_multiple_of(u64::from(ctx.limits.min_uniform_buffer_offset_alignment));
-    let rgb_bytes = (rgb_words.len() * 4) as u64;
     let grid_bytes = std::mem::size_of_val(grid_points) as u64;
     let mut inputs = Arena::new(storage_align);
-    let (rgb_at, grid_at) = (inputs.place(rgb_bytes), inputs.place(grid_bytes));
+    let (rgb_at, grid_at) = (inputs.place(rgb_bytes.len() as u64), inputs.place(grid_bytes));
     let mut outputs = Arena::new(storage_align);
     let (gradients_at, masks_at) =
         (outputs.place(gradient_count * GRADIENT_BYTES), outputs.place(mask_count * MASK_BYTES));
@@ -112,7 +112,7 @@ pub fn preprocess_gpu(
             if let Some(params) = &window_params {
                 put(params_region + uniform_stride, bytemuck::bytes_of(params));
             }
-            put(inputs_region + rgb_at, bytemuck::cast_slice(&rgb_words));
+            put(inputs_region + rgb_at, rgb_bytes);
             put(inputs_region + grid_at, bytemuck::cast_slice(grid_points));
         }
         pool.unmap_upload("preprocess uploads", &upload);
@@ -130,7 +130,7 @@ pub fn preprocess_gpu(
                 kernel,
                 &[
                     (&params_buffer, 0, std::mem::size_of::<ImageGradientsParams>() as u64),
-                    (&input_buffer, rgb_at, range(rgb_at, rgb_bytes)),
+                    (&input_buffer, rgb_at, range(rgb_at, rgb_bytes.len() as u64)),
                     (image_gradients::resident_table(ctx), 0, image_gradients::resident_table(ctx).size()),
                     (&output_buffer, gradients_at, gradient_count * GRADIENT_BYTES),
                 ],
