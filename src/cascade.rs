@@ -117,7 +117,7 @@ use crate::error::{Error, Result};
 use crate::eval::{average_precision, true_positives_in_input_order, Detection, FrameDetections, ScoredBox};
 use crate::frame::Object;
 use crate::geometry::{footprint_overlap_area, intersection_volume, polygon_contains, Cuboid};
-use crate::learn::binary_svm::{balanced_costs, train_linear_svm, LinearSvm};
+use crate::learn::binary_svm::{balanced_costs, train_linear_svm_from, SvmSolution};
 use crate::learn::checkpoint::{fnv1a, FNV_OFFSET};
 use crate::model::{check_weight_magnitudes, Model};
 use glam::{Vec2, Vec3};
@@ -846,27 +846,39 @@ fn subset_ap(s: &Samples, subset: &[usize], scores: &[f32], iou_threshold: f32) 
     average_precision(&boxes, &truth, iou_threshold).ap.unwrap_or(0.0)
 }
 
-/// Trains an SVM on the samples `subset`.
-fn fit_subset(s: &Samples, subset: &[usize], c: f64) -> Result<LinearSvm> {
+/// Trains an SVM on the samples `subset` at `c`, started from `start` (see
+/// [`crate::learn::binary_svm::train_linear_svm_from`]).
+fn fit_subset(s: &Samples, subset: &[usize], c: f64, start: Option<&[f64]>) -> Result<SvmSolution> {
     let psi: Vec<Vec<f64>> = subset.iter().map(|&n| s.psi[n].clone()).collect();
     let labels: Vec<bool> = subset.iter().map(|&n| s.labels[n]).collect();
-    train_linear_svm(&psi, &labels, &balanced_costs(&labels, c))
+    train_linear_svm_from(&psi, &labels, &balanced_costs(&labels, c), start)
 }
 
 /// Cross-validated (two folds: even and odd frames) mean AP of the first-stage and of the combined score
-/// at `c`; `None` when a fold lacks a class.
-fn cross_validate(s: &Samples, c: f64, iou_threshold: f32) -> Option<(f32, f32)> {
-    let (mut first, mut cascade) = (0.0, 0.0);
+/// at each `C` of [`C_GRID`] (in its order); `None` where a fold lacks a class. Each fold's SVMs are
+/// trained from the largest `C` down, each started from the one before with its α scaled by the ratio
+/// of the `C`s (feasible with balanced costs): the same optima, reached in fewer working-set rounds.
+fn cross_validate(s: &Samples, iou_threshold: f32) -> Vec<Option<(f32, f32)>> {
+    let mut sums: Vec<Option<(f32, f32)>> = vec![Some((0.0, 0.0)); C_GRID.len()];
     for fold in 0..2 {
         let train: Vec<usize> = (0..s.labels.len()).filter(|&n| s.frame[n] % 2 != fold).collect();
         let test: Vec<usize> = (0..s.labels.len()).filter(|&n| s.frame[n] % 2 == fold).collect();
-        let svm = fit_subset(s, &train, c).ok()?;
         let base: Vec<f32> = test.iter().map(|&n| s.raw[n]).collect();
-        let combined: Vec<f32> = test.iter().map(|&n| s.raw[n] + svm.decision(&s.psi[n]) as f32).collect();
-        first += subset_ap(s, &test, &base, iou_threshold);
-        cascade += subset_ap(s, &test, &combined, iou_threshold);
+        let first = subset_ap(s, &test, &base, iou_threshold);
+        let mut previous: Option<(f64, Vec<f64>)> = None;
+        for (k, &c) in C_GRID.iter().enumerate().rev() {
+            let start = previous.as_ref().map(|(pc, alpha)| alpha.iter().map(|a| a * c / pc).collect::<Vec<f64>>());
+            let Ok(solution) = fit_subset(s, &train, c, start.as_deref()) else {
+                sums[k] = None;
+                continue;
+            };
+            let combined: Vec<f32> = test.iter().map(|&n| s.raw[n] + solution.svm.decision(&s.psi[n]) as f32).collect();
+            let cascade = subset_ap(s, &test, &combined, iou_threshold);
+            sums[k] = sums[k].map(|(f, g)| (f + first, g + cascade));
+            previous = Some((c, solution.alpha));
+        }
     }
-    Some((first / 2.0, cascade / 2.0))
+    sums.into_iter().map(|sum| sum.map(|(f, g)| (f / 2.0, g / 2.0))).collect()
 }
 
 /// Outcome of training one category: its stage, or why there is none.
@@ -1141,8 +1153,8 @@ fn train_stage(
         return Err(format!("{positives} true positives among {} detections", s.labels.len()));
     }
     let mut best: Option<(f64, f32, f32)> = None;
-    for c in C_GRID {
-        if let Some((first, cascade)) = cross_validate(&s, c, iou_threshold) {
+    for (c, validated) in C_GRID.into_iter().zip(cross_validate(&s, iou_threshold)) {
+        if let Some((first, cascade)) = validated {
             if best.is_none_or(|b| cascade > b.2) {
                 best = Some((c, first, cascade));
             }
@@ -1158,7 +1170,7 @@ fn train_stage(
         ));
     }
     let all: Vec<usize> = (0..s.labels.len()).collect();
-    let svm = fit_subset(&s, &all, c).map_err(|e| e.to_string())?;
+    let svm = fit_subset(&s, &all, c, None).map_err(|e| e.to_string())?.svm;
     let scored: Vec<(f32, bool)> =
         all.iter().map(|&n| (s.raw[n] + svm.decision(&s.psi[n]) as f32, s.labels[n])).collect();
     let (a, b) = fit_logistic(&scored).map_err(|e| e.to_string())?;
