@@ -86,7 +86,9 @@
 //! ([`crate::eval::average_precision`]: true when IoU ≥ the threshold with a ground-truth box not taken by
 //! a better detection), classes balanced ([`crate::learn::binary_svm::balanced_costs`]). `C` is chosen
 //! from [`C_GRID`] by two-fold cross-validation over the frames (even and odd frames), maximising the
-//! mean AP of the combined score; ties go to the smaller `C`. A category whose cross-validated AP with
+//! mean AP of the combined score; ties go to the smaller `C` (each fold's fits go from the largest `C`
+//! down, each started from the one before: the same optima in fewer working-set rounds,
+//! [`crate::learn::binary_svm::train_linear_svm_from`]). A category whose cross-validated AP with
 //! the context is not above its first stage's gets no second stage (its scores are left alone rather
 //! than made worse). **Per-category feature sets** (`cascade --features best`; our addition): each
 //! category's stage is trained with v4, v5 and v6 and keeps the set whose cross-validated AP is highest
