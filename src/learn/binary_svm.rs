@@ -110,7 +110,7 @@ pub fn train_linear_svm_from(
 ) -> Result<SvmSolution> {
     check_problem(samples, labels, costs)?;
     let start = start.filter(|a| feasible(a, labels, costs));
-    WorkingSetSolver::new(samples, labels, costs).solve(start)
+    solve_by_working_sets(samples, labels, costs, start)
 }
 
 /// Whether `alpha` is a feasible point: within the costs' box, Σ α_i y_i = 0 to 10⁻⁶ of Σ c_i (a solution's
@@ -127,10 +127,15 @@ fn feasible(alpha: &[f64], labels: &[bool], costs: &[f64]) -> bool {
 /// working-set solve is tested against).
 pub fn train_linear_svm_whole(samples: &[Vec<f64>], labels: &[bool], costs: &[f64]) -> Result<LinearSvm> {
     check_problem(samples, labels, costs)?;
+    Ok(solve_whole(samples, labels, costs, 0)?.svm)
+}
+
+/// The dual QP over every sample at once, reported as found after `rounds` earlier working-set rounds.
+fn solve_whole(samples: &[Vec<f64>], labels: &[bool], costs: &[f64], rounds: usize) -> Result<SvmSolution> {
     let n = samples.len();
     let all: Vec<usize> = (0..n).collect();
-    let (svm, _) = solve_subproblem(samples, labels, costs, &all, &vec![0.0; n])?;
-    Ok(svm)
+    let (svm, alpha) = solve_subproblem(samples, labels, costs, &all, &vec![0.0; n])?;
+    Ok(SvmSolution { svm, alpha, rounds: rounds + 1 })
 }
 
 fn check_problem(samples: &[Vec<f64>], labels: &[bool], costs: &[f64]) -> Result<()> {
@@ -225,13 +230,6 @@ fn solve_subproblem(
     Ok((LinearSvm { weights: x[..d].to_vec(), bias: z[d] }, work_alpha))
 }
 
-/// Working-set decomposition of the dual (module doc, "Working sets").
-struct WorkingSetSolver<'a> {
-    samples: &'a [Vec<f64>],
-    labels: &'a [bool],
-    costs: &'a [f64],
-}
-
 /// The solve stops when the optimality gap (the highest `up` G less the lowest `low` G, `solve`) is at
 /// most this, in units of the margin (1).
 const KKT_TOLERANCE: f64 = 1e-6;
@@ -244,112 +242,101 @@ const ROUNDS_BUDGET: usize = 20;
 /// Most violators taken into the next working set (at least as many as its free samples).
 const WORKING_SET_ADDITIONS: usize = 1000;
 
-impl<'a> WorkingSetSolver<'a> {
-    fn new(samples: &'a [Vec<f64>], labels: &'a [bool], costs: &'a [f64]) -> Self {
-        WorkingSetSolver { samples, labels, costs }
-    }
-
-    fn solve(self, start: Option<&[f64]>) -> Result<SvmSolution> {
-        let n = self.samples.len();
-        let spread = WORKING_SET_ADDITIONS.min(n);
-        let (mut alpha, mut work): (Vec<f64>, Vec<usize>) = match start {
-            // The start's free samples and an even spread of the rest; the others held at its α.
-            Some(start) => {
-                let free = (0..n).filter(|&i| start[i] > 0.0 && start[i] < self.costs[i]);
-                (start.to_vec(), free.chain((0..spread).map(|k| k * n / spread)).collect())
-            }
-            // Every positive (rare among detections, and mostly support vectors) and an even spread of
-            // the rest, the others at α = 0.
-            None => {
-                (vec![0.0; n], (0..n).filter(|&i| self.labels[i]).chain((0..spread).map(|k| k * n / spread)).collect())
-            }
-        };
+/// Working-set decomposition of the dual (module doc, "Working sets").
+fn solve_by_working_sets(
+    samples: &[Vec<f64>],
+    labels: &[bool],
+    costs: &[f64],
+    start: Option<&[f64]>,
+) -> Result<SvmSolution> {
+    let n = samples.len();
+    let spread = WORKING_SET_ADDITIONS.min(n);
+    let (mut alpha, mut work): (Vec<f64>, Vec<usize>) = match start {
+        // The start's free samples and an even spread of the rest; the others held at its α.
+        Some(start) => {
+            let free = (0..n).filter(|&i| start[i] > 0.0 && start[i] < costs[i]);
+            (start.to_vec(), free.chain((0..spread).map(|k| k * n / spread)).collect())
+        }
+        // Every positive (rare among detections, and mostly support vectors) and an even spread of
+        // the rest, the others at α = 0.
+        None => (vec![0.0; n], (0..n).filter(|&i| labels[i]).chain((0..spread).map(|k| k * n / spread)).collect()),
+    };
+    work.sort_unstable();
+    work.dedup();
+    if !work.iter().any(|&i| !labels[i]) {
+        work.push((0..n).find(|&i| !labels[i]).expect("checked: both classes"));
         work.sort_unstable();
-        work.dedup();
-        if !work.iter().any(|&i| !self.labels[i]) {
-            work.push((0..n).find(|&i| !self.labels[i]).expect("checked: both classes"));
-            work.sort_unstable();
-        }
-        let mut solved = 0usize;
-        for round in 0.. {
-            solved += work.len();
-            let (svm, work_alpha) = match solve_subproblem(self.samples, self.labels, self.costs, &work, &alpha) {
-                Ok(r) => r,
-                // Not expected (every subproblem is feasible: the held α are a feasible point's), but the
-                // whole QP does not depend on the rounds before.
-                Err(e) if work.len() < n => {
-                    log::debug!("SVM working set round {round}: {e}; solving the whole QP");
-                    alpha.iter_mut().for_each(|a| *a = 0.0);
-                    work = (0..n).collect();
-                    continue;
-                }
-                Err(e) => return Err(e),
-            };
-            let mut in_work = vec![false; n];
-            work.iter().for_each(|&i| in_work[i] = true);
-            for (&i, &a) in work.iter().zip(&work_alpha) {
-                let c = self.costs[i];
-                alpha[i] = if a <= BOUND_SNAP * c {
-                    0.0
-                } else if a >= (1.0 - BOUND_SNAP) * c {
-                    c
-                } else {
-                    a
-                };
-            }
-            // Optimality without the bias (Keerthi et al. 2001; Lin 2001): with G_i = y_i − w·x_i, α is
-            // optimal when no G of the samples whose α may rise for y = +1 or fall for y = −1 (`up`)
-            // exceeds a G of those whose α may fall for y = +1 or rise for y = −1 (`low`): any bias
-            // between the two then satisfies every margin condition.
-            let g: Vec<f64> =
-                (0..n).map(|i| sign(self.labels[i]) - svm.decision(&self.samples[i]) + svm.bias).collect();
-            let up = |i: usize| if self.labels[i] { alpha[i] < self.costs[i] } else { alpha[i] > 0.0 };
-            let low = |i: usize| if self.labels[i] { alpha[i] > 0.0 } else { alpha[i] < self.costs[i] };
-            let highest_up = (0..n).filter(|&i| up(i)).map(|i| g[i]).fold(f64::NEG_INFINITY, f64::max);
-            let lowest_low = (0..n).filter(|&i| low(i)).map(|i| g[i]).fold(f64::INFINITY, f64::min);
-            let free: Vec<usize> =
-                work.iter().copied().filter(|&i| alpha[i] > 0.0 && alpha[i] < self.costs[i]).collect();
-            log::trace!(
-                "SVM working set round {round}: {} samples, {} free, gap {:.3e}",
-                work.len(),
-                free.len(),
-                highest_up - lowest_low
-            );
-            if highest_up - lowest_low <= KKT_TOLERANCE {
-                return Ok(SvmSolution { svm, alpha, rounds: round + 1 });
-            }
-            if solved > ROUNDS_BUDGET * n {
-                log::debug!("SVM working sets: {round} rounds without convergence; solving the whole QP");
-                alpha.iter_mut().for_each(|a| *a = 0.0);
-                work = (0..n).collect();
-                continue;
-            }
-            // The most violating of each side (SVMlight's choice of a working set, Joachims 1999): `up`
-            // samples by G descending above the lowest `low` G, `low` samples by G ascending below the
-            // highest `up` G, half the additions each, and the free samples.
-            let additions = WORKING_SET_ADDITIONS.max(free.len());
-            let mut ups: Vec<usize> = (0..n).filter(|&i| up(i) && g[i] > lowest_low + KKT_TOLERANCE).collect();
-            let mut lows: Vec<usize> = (0..n).filter(|&i| low(i) && g[i] < highest_up - KKT_TOLERANCE).collect();
-            ups.sort_by(|&a, &b| g[b].total_cmp(&g[a]).then(a.cmp(&b)));
-            lows.sort_by(|&a, &b| g[a].total_cmp(&g[b]).then(a.cmp(&b)));
-            let take_ups = (additions / 2).max(additions.saturating_sub(lows.len())).min(ups.len());
-            let take_lows = (additions - take_ups).min(lows.len());
-            let mut next: Vec<usize> = free
-                .into_iter()
-                .chain(ups[..take_ups].iter().copied())
-                .chain(lows[..take_lows].iter().copied())
-                .collect();
-            next.sort_unstable();
-            next.dedup();
-            if next.iter().all(|&i| in_work[i]) {
-                // Every violation left is inside the working set just solved: what is left of the gap
-                // comes from α snapped to a bound and the solver's own tolerance.
-                return Ok(SvmSolution { svm, alpha, rounds: round + 1 });
-            }
-            work = next;
-        }
-        unreachable!("the loop returns")
     }
+    let mut solved = 0usize;
+    for round in 0.. {
+        solved += work.len();
+        let (svm, work_alpha) = match solve_subproblem(samples, labels, costs, &work, &alpha) {
+            Ok(r) => r,
+            // Not expected (every subproblem is feasible: the held α are a feasible point's), but the
+            // whole QP does not depend on the rounds before.
+            Err(e) if work.len() < n => {
+                log::debug!("SVM working set round {round}: {e}; solving the whole QP");
+                return solve_whole(samples, labels, costs, round);
+            }
+            Err(e) => return Err(e),
+        };
+        let mut in_work = vec![false; n];
+        work.iter().for_each(|&i| in_work[i] = true);
+        for (&i, &a) in work.iter().zip(&work_alpha) {
+            let c = costs[i];
+            alpha[i] = if a <= BOUND_SNAP * c {
+                0.0
+            } else if a >= (1.0 - BOUND_SNAP) * c {
+                c
+            } else {
+                a
+            };
+        }
+        // Optimality without the bias (Keerthi et al. 2001; Lin 2001): with G_i = y_i − w·x_i, α is
+        // optimal when no G of the samples whose α may rise for y = +1 or fall for y = −1 (`up`)
+        // exceeds a G of those whose α may fall for y = +1 or rise for y = −1 (`low`): any bias
+        // between the two then satisfies every margin condition.
+        let g: Vec<f64> = (0..n).map(|i| sign(labels[i]) - svm.decision(&samples[i]) + svm.bias).collect();
+        let up = |i: usize| if labels[i] { alpha[i] < costs[i] } else { alpha[i] > 0.0 };
+        let low = |i: usize| if labels[i] { alpha[i] > 0.0 } else { alpha[i] < costs[i] };
+        let highest_up = (0..n).filter(|&i| up(i)).map(|i| g[i]).fold(f64::NEG_INFINITY, f64::max);
+        let lowest_low = (0..n).filter(|&i| low(i)).map(|i| g[i]).fold(f64::INFINITY, f64::min);
+        let free: Vec<usize> = work.iter().copied().filter(|&i| alpha[i] > 0.0 && alpha[i] < costs[i]).collect();
+        log::trace!(
+            "SVM working set round {round}: {} samples, {} free, gap {:.3e}",
+            work.len(),
+            free.len(),
+            highest_up - lowest_low
+        );
+        if highest_up - lowest_low <= KKT_TOLERANCE {
+            return Ok(SvmSolution { svm, alpha, rounds: round + 1 });
+        }
+        if solved > ROUNDS_BUDGET * n {
+            log::debug!("SVM working sets: {round} rounds without convergence; solving the whole QP");
+            return solve_whole(samples, labels, costs, round + 1);
+        }
+        // The most violating of each side (SVMlight's choice of a working set, Joachims 1999): `up`
+        // samples by G descending above the lowest `low` G, `low` samples by G ascending below the
+        // highest `up` G, half the additions each, and the free samples.
+        let additions = WORKING_SET_ADDITIONS.max(free.len());
+        let mut ups: Vec<usize> = (0..n).filter(|&i| up(i) && g[i] > lowest_low + KKT_TOLERANCE).collect();
+        let mut lows: Vec<usize> = (0..n).filter(|&i| low(i) && g[i] < highest_up - KKT_TOLERANCE).collect();
+        ups.sort_by(|&a, &b| g[b].total_cmp(&g[a]).then(a.cmp(&b)));
+        lows.sort_by(|&a, &b| g[a].total_cmp(&g[b]).then(a.cmp(&b)));
+        let take_ups = (additions / 2).max(additions.saturating_sub(lows.len())).min(ups.len());
+        let take_lows = (additions - take_ups).min(lows.len());
+        let mut next: Vec<usize> =
+            free.into_iter().chain(ups[..take_ups].iter().copied()).chain(lows[..take_lows].iter().copied()).collect();
+        next.sort_unstable();
+        next.dedup();
+        if next.iter().all(|&i| in_work[i]) {
+            // Every violation left is inside the working set just solved: what is left of the gap
+            // comes from α snapped to a bound and the solver's own tolerance.
+            return Ok(SvmSolution { svm, alpha, rounds: round + 1 });
+        }
+        work = next;
+    }
+    unreachable!("the loop returns")
 }
 
 #[cfg(test)]
