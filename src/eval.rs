@@ -48,11 +48,17 @@ pub struct Detection {
     /// is the calibrated `raw_score + context_score`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub context_score: Option<f32>,
-    /// For a model with latent support surfaces ([`crate::features::surface`]): the height (upright z,
-    /// metres, the frame's coordinates like `centre`) of the inferred support surface — the centre of the
-    /// best-scoring of the cuboid's seven horizontal slices.
+    /// The height (upright z, metres, the frame's coordinates like `centre`) of the detection's support
+    /// surface, for a category with one ([`crate::category::SURFACE_CATEGORIES`]) or a model with latent
+    /// surfaces: the surface measured from the points in the box
+    /// ([`crate::features::surface::measured_surface_height`]), else — for a model with latent surfaces —
+    /// the one measured in its chosen slice ([`Detection::latent_slice`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub surface_z: Option<f32>,
+    /// For a model with latent support surfaces ([`crate::features::surface`]): the best-scoring of the
+    /// cuboid's seven horizontal slices, `h` = 0 (bottom) … 6, the latent variable of its score.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub latent_slice: Option<u8>,
 }
 
 impl Detection {
@@ -71,6 +77,7 @@ impl Detection {
             first_stage_score: None,
             context_score: None,
             surface_z: None,
+            latent_slice: None,
         }
     }
 }
@@ -501,7 +508,7 @@ pub fn precision_recall_plot(pr: &PrecisionRecall, title: &str, colour: crate::d
 // ---------------------------------------------------------------------------------------------------------
 // Support surfaces
 
-/// How close the support surfaces inferred by a model with latent surfaces ([`Detection::surface_z`]) lie
+/// How close the detections' support surfaces ([`Detection::surface_z`]) lie
 /// to the true ones, over the true positives of one category (the benchmark's matching at the given IoU).
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct SurfaceAccuracy {

@@ -14,7 +14,7 @@ use cog_gpu::model::{read_models_dir, FeaturePath};
 const MODELS: &str = "assets/models";
 const SAMPLE: &str = "assets/sample/synth-bedroom-s52";
 
-/// All 19 categories ship: the ten large ones and door, counter, garbage bin with the floor window and the
+/// All 19 categories ship: the ten large ones (the table with latent support surfaces) and door, counter, garbage bin with the floor window and the
 /// full 5×5×5 (expanded) layout, box with the floor window and 3×3×3; monitor and sink searched on support
 /// surfaces, TV with the free window, pillow and lamp with its resting boxes, with the paper's smaller grids
 /// (README, "Small objects on support surfaces", "The free window").
@@ -54,6 +54,8 @@ fn the_nineteen_shipped_models_load_with_this_builds_layout() {
         let norm: f32 = model.weights.iter().map(|w| w * w).sum::<f32>().sqrt();
         assert!(norm > 0.1, "{}: |w| = {norm}", model.category);
         assert!(model.training.get("converged").is_some(), "{}: training provenance missing", model.category);
+        // The table alone ships with latent support surfaces (README, "The table's latent surfaces, shipped").
+        assert_eq!(model.surface.is_some(), model.category == "table", "{}: latent surfaces", model.category);
     }
     assert!(LARGE_CATEGORIES.iter().all(|c| categories.contains(c)));
 }

@@ -2,6 +2,7 @@
 //! that holds its height and nowhere else; slice scores equal the dot products of the slice features;
 //! the centre-slice initialisation copies the right weights; the surface measured from the points alone.
 
+use cog_gpu::eval::Detection;
 use cog_gpu::features::fast::FastOptions;
 use cog_gpu::features::feature_layout::{FeatureLayout, Groups, DENSITY, NORMALS, PER_VOXEL};
 use cog_gpu::features::preprocess::{normal_bin, Preprocessed};
@@ -156,18 +157,21 @@ fn centre_slice_weights_copy_the_middle_layer_of_the_base_grid() {
     assert!(SurfaceWeights::new(vec![f32::NAN; SLICE_DIM], [0.0; SLICES]).is_err());
 }
 
-/// `detect` with a model that has latent surfaces, on the constructed table: cuboid weights 0 and surface
-/// weights that reward upward normals, so a hypothesis scores its best slice's upward-normal density plus
-/// that slice's bias. Every detection's score is that independent maximum and its `surface_z` the centre
-/// of the chosen slice; the best detection's surface lies within 5 cm of the table top.
-#[test]
-fn detection_reports_the_inferred_surface_of_a_constructed_table() {
+/// `detect` on the constructed table with a model of `category` that has latent surfaces: cuboid weights
+/// 0 and surface weights that reward upward normals, so a hypothesis scores its best slice's upward-normal
+/// density plus that slice's bias (`indicator`). Returns the detections, each with its independently computed best slice
+/// and that slice's hypothesis, after checking every score against that independent maximum and every
+/// `latent_slice` against the best slice.
+fn detect_constructed_table(
+    category: &str,
+    top: f32,
+    indicator: [f32; SLICES],
+) -> (FeatureScene, Vec<(Detection, usize, Hypothesis)>) {
     use cog_gpu::backend::Backend;
     use cog_gpu::detect::{detect_preprocessed, DetectOptions};
     use cog_gpu::features::LatticePhase;
     use cog_gpu::features::{SizeQuantiles, YawAnchor};
     use cog_gpu::model::{FeaturePath, FeatureSettings, Model, WindowSettings};
-    let top = 0.55f32;
     let scene = table_scene(top);
     let layout = FeatureLayout::new([5, 5, 5], false, Groups::ALL).unwrap();
     let sizes = SizeQuantiles { widths: vec![0.8; 5], depths: vec![0.8; 3], heights: vec![0.7; 3] };
@@ -185,9 +189,8 @@ fn detection_reports_the_inferred_surface_of_a_constructed_table() {
     for v in 0..SLICE_VOXELS {
         slice[v * PER_VOXEL + up] = 1.0;
     }
-    let indicator = [0.0, 0.01, 0.02, 0.03, 0.04, 0.05, 0.06];
     let surface = SurfaceWeights::new(slice, indicator).unwrap();
-    let model = Model::new("table", layout, sizes, window, features, vec![0.0; layout.dim()], serde_json::json!({}))
+    let model = Model::new(category, layout, sizes, window, features, vec![0.0; layout.dim()], serde_json::json!({}))
         .unwrap()
         .with_surface(surface.clone())
         .unwrap();
@@ -198,27 +201,66 @@ fn detection_reports_the_inferred_surface_of_a_constructed_table() {
     let yaws = cog_gpu::features::hypotheses::default_yaws();
     let detect_scene = FeatureScene::new(scene.pre.clone(), &yaws, 0.1);
     let engine = SurfaceEngine::new(&detect_scene, Groups::ALL, FastOptions::default());
-    for d in &found.detections {
-        let z = d.surface_z.expect("a surface model's detections carry their surface");
-        let yaw = cog_gpu::features::hypotheses::nearest_yaw_index(&yaws, d.yaw);
-        let hyp = Hypothesis::from_cuboid(&detect_scene, yaw, &d.cuboid());
-        let (h, best) = best_slice(&engine.slice_scores(std::slice::from_ref(&hyp), &surface)[0]);
-        assert!((d.score - best).abs() <= 1e-4 * (1.0 + best.abs()), "score {} vs {best}", d.score);
-        // The surface measured in the chosen slice: the median height of its upward points (all of the
-        // table's top lie at one height), else the slice's centre.
-        let measured = refined_surface_height(&scene.pre, &d.cuboid(), h);
-        assert_eq!(z, measured, "surface_z vs slice {h}");
-        let slice_bottom = hyp.bottom + h as f32 * hyp.size.z / SLICES as f32;
+    let checked = found
+        .detections
+        .into_iter()
+        .map(|d| {
+            let yaw = cog_gpu::features::hypotheses::nearest_yaw_index(&yaws, d.yaw);
+            let hyp = Hypothesis::from_cuboid(&detect_scene, yaw, &d.cuboid());
+            let (h, best) = best_slice(&engine.slice_scores(std::slice::from_ref(&hyp), &surface)[0]);
+            assert!((d.score - best).abs() <= 1e-4 * (1.0 + best.abs()), "score {} vs {best}", d.score);
+            assert_eq!(d.latent_slice, Some(h as u8), "the chosen slice is the best one");
+            (d, h, hyp)
+        })
+        .collect();
+    (scene, checked)
+}
+
+/// A latent-surface model of a category without support surfaces (the bookshelf) reports the surface
+/// measured in its chosen slice: the median height of the slice's upward points (all of the table's top lie
+/// at one height), else the slice's centre; the best detection's surface is the table top.
+#[test]
+fn detection_reports_the_surface_of_its_latent_slice() {
+    let top = 0.55f32;
+    let (scene, found) = detect_constructed_table("bookshelf", top, [0.0, 0.01, 0.02, 0.03, 0.04, 0.05, 0.06]);
+    for (d, h, hyp) in &found {
+        let z = d.surface_z.expect("a latent model's detections carry their surface");
+        assert_eq!(z, refined_surface_height(&scene.pre, &d.cuboid(), *h), "surface_z vs slice {h}");
+        let slice_bottom = hyp.bottom + *h as f32 * hyp.size.z / SLICES as f32;
         let top_in_slice =
             (slice_bottom..=slice_bottom + hyp.size.z / SLICES as f32).contains(&(top + scene.pre.floor));
         if top_in_slice && d.cuboid().contains(Vec3::new(0.0, 3.0, top + scene.pre.floor)) {
             assert!((z - (top + scene.pre.floor)).abs() < 1e-5, "{z}");
         } else if !top_in_slice {
-            assert!((z - surface_height(&hyp, h)).abs() < 1e-5, "no upward point: the slice centre");
+            assert!((z - surface_height(hyp, *h)).abs() < 1e-5, "no upward point: the slice centre");
         }
     }
-    let best = &found.detections[0];
-    let height = best.surface_z.unwrap() - scene.pre.floor;
+    let height = found[0].0.surface_z.unwrap() - scene.pre.floor;
+    assert!((height - top).abs() < 1e-5, "the best box's surface at {height} m, the top at {top} m");
+}
+
+/// A latent-surface model of a support-surface category (the table) reports the surface measured from the
+/// points in the box wherever its latent slice is — here a bias of 10 puts it in slice 2, 0.2–0.3 m up the
+/// 0.7 m boxes, below the top at 0.55 m — and the slice's surface only where the points show none.
+#[test]
+fn a_surface_category_reports_the_measured_surface_whatever_its_latent_slice() {
+    use cog_gpu::features::surface::measured_surface_height;
+    let top = 0.55f32;
+    let (scene, found) = detect_constructed_table("table", top, [0.0, 0.0, 10.0, 0.0, 0.0, 0.0, 0.0]);
+    let mut on_top = 0;
+    for (d, h, _) in &found {
+        assert_eq!(*h, 2, "the indicator's slice");
+        let z = d.surface_z.expect("a latent model's detections carry their surface");
+        match measured_surface_height(&scene.pre, &d.cuboid()) {
+            Some(measured) => {
+                assert_eq!(z, measured);
+                on_top += usize::from((z - (top + scene.pre.floor)).abs() < 1e-5);
+            }
+            None => assert_eq!(z, refined_surface_height(&scene.pre, &d.cuboid(), *h), "no measured surface"),
+        }
+    }
+    assert!(on_top > 0, "some detection measures the table top");
+    let height = found[0].0.surface_z.unwrap() - scene.pre.floor;
     assert!((height - top).abs() < 1e-5, "the best box's surface at {height} m, the top at {top} m");
 }
 

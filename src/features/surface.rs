@@ -19,10 +19,11 @@
 //! * within the slice the order is the layout's voxel order, `(j·5 + i)·35 + entry` (`i` along the width
 //!   from the left, `j` along the depth from the front);
 //! * the height of slice `h` is its centre, `bottom + (h + ½)·height/7` ([`surface_height`]): within
-//!   `height/14` of a surface inside the slice (at most 5.4 cm for a 0.75 m table); detection reports the
-//!   surface measured in the chosen slice, [`refined_surface_height`]; a model without latent surfaces of
-//!   a category with support surfaces ([`crate::category::SURFACE_CATEGORIES`]) reports the surface
-//!   measured from the points alone, [`measured_surface_height`];
+//!   `height/14` of a surface inside the slice (at most 5.4 cm for a 0.75 m table); detection reports, for
+//!   a category with support surfaces ([`crate::category::SURFACE_CATEGORIES`]), with latent surfaces or
+//!   without, the surface measured from the points alone, [`measured_surface_height`] (a latent slice
+//!   need not be the top, only help the score), and otherwise — or when that finds none — the surface
+//!   measured in the chosen slice, [`refined_surface_height`];
 //! * ties between slices go to the lowest `h`, as in [`crate::learn::latent::impute`];
 //! * the paper initialises the surface weights from "the center slice of pre-trained cuboid descriptors":
 //!   [`centre_slice_weights`] copies the cuboid model's weights of the middle layer of its base grid.
