@@ -49,10 +49,9 @@ pub struct Detection {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub context_score: Option<f32>,
     /// The height (upright z, metres, the frame's coordinates like `centre`) of the detection's support
-    /// surface, for a category with one ([`crate::category::SURFACE_CATEGORIES`]) or a model with latent
-    /// surfaces: the surface measured from the points in the box
-    /// ([`crate::features::surface::measured_surface_height`]), else — for a model with latent surfaces —
-    /// the one measured in its chosen slice ([`Detection::latent_slice`]).
+    /// surface: for a category with one ([`crate::category::SURFACE_CATEGORIES`]) measured from the points
+    /// in the box ([`crate::features::surface::measured_surface_height`]); where that finds none, and for
+    /// the other models with latent surfaces, measured in the chosen slice ([`Detection::latent_slice`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub surface_z: Option<f32>,
     /// For a model with latent support surfaces ([`crate::features::surface`]): the best-scoring of the
@@ -508,8 +507,8 @@ pub fn precision_recall_plot(pr: &PrecisionRecall, title: &str, colour: crate::d
 // ---------------------------------------------------------------------------------------------------------
 // Support surfaces
 
-/// How close the detections' support surfaces ([`Detection::surface_z`]) lie
-/// to the true ones, over the true positives of one category (the benchmark's matching at the given IoU).
+/// How close the detections' support surfaces ([`Detection::surface_z`]) lie to the true ones, over the
+/// true positives of one category (the benchmark's matching at the given IoU).
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct SurfaceAccuracy {
     pub category: String,

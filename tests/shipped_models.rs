@@ -14,10 +14,11 @@ use cog_gpu::model::{read_models_dir, FeaturePath};
 const MODELS: &str = "assets/models";
 const SAMPLE: &str = "assets/sample/synth-bedroom-s52";
 
-/// All 19 categories ship: the ten large ones (the table with latent support surfaces) and door, counter, garbage bin with the floor window and the
-/// full 5×5×5 (expanded) layout, box with the floor window and 3×3×3; monitor and sink searched on support
-/// surfaces, TV with the free window, pillow and lamp with its resting boxes, with the paper's smaller grids
-/// (README, "Small objects on support surfaces", "The free window").
+/// All 19 categories ship: the ten large ones (the table with latent support surfaces) and door, counter,
+/// garbage bin with the floor window and the full 5×5×5 (expanded) layout, box with the floor window and
+/// 3×3×3; monitor and sink searched on support surfaces, TV with the free window, pillow and lamp with its
+/// resting boxes, with the paper's smaller grids (README, "Small objects on support surfaces", "The free
+/// window").
 #[test]
 fn the_nineteen_shipped_models_load_with_this_builds_layout() {
     use cog_gpu::category::CATEGORIES;

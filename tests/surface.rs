@@ -159,9 +159,9 @@ fn centre_slice_weights_copy_the_middle_layer_of_the_base_grid() {
 
 /// `detect` on the constructed table with a model of `category` that has latent surfaces: cuboid weights
 /// 0 and surface weights that reward upward normals, so a hypothesis scores its best slice's upward-normal
-/// density plus that slice's bias (`indicator`). Returns the detections, each with its independently computed best slice
-/// and that slice's hypothesis, after checking every score against that independent maximum and every
-/// `latent_slice` against the best slice.
+/// density plus that slice's bias (`indicator`). Returns the detections, each with its independently
+/// computed best slice and that slice's hypothesis, after checking every score against that independent
+/// maximum and every `latent_slice` against the best slice.
 fn detect_constructed_table(
     category: &str,
     top: f32,

@@ -74,8 +74,9 @@ pub struct Args {
     #[arg(long)]
     pub diagnose: bool,
     /// Also report how close the detections' support surfaces (`surface_z`: measured from the points for
-    /// the surface categories, in the latent slice for other models with latent surfaces) lie to the true ones of synthetic frames (their `synth_support.json`): per category,
-    /// of the true positives, the share within 5 cm of the nearest and of the main (top) true surface.
+    /// the surface categories, in the latent slice for other models with latent surfaces) lie to the true
+    /// ones of synthetic frames (their `synth_support.json`): per category, of the true positives, the
+    /// share within 5 cm of the nearest and of the main (top) true surface.
     #[arg(long, conflicts_with_all = ["diagnose", "layout"])]
     pub surfaces: bool,
     /// With --diagnose: models directory (`<category>.json`) whose sliding windows give the window recall
