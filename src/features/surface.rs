@@ -253,12 +253,6 @@ pub fn annotated_surfaces_by_category<'o>(
         .collect()
 }
 
-/// The slice of `cuboid` whose centre is `z` (the inverse of [`surface_height`], clamped to `0..SLICES`).
-pub fn slice_at(cuboid: &Cuboid, z: f32) -> usize {
-    let slice = ((z - cuboid.bottom()) / (cuboid.size.z / SLICES as f32) - 0.5).round();
-    (slice.max(0.0) as usize).min(SLICES - 1)
-}
-
 /// The paper's initialisation of `w_slice`: the cuboid model's weights of the middle voxel layer of its
 /// base grid (layer `⌊nz/2⌋` of the 5×5×5 base; of an expanded grid, the same layer shifted by one), voxel
 /// (i, j) of the slice taking the base grid's voxel (i, j). The base grid must be 5×5 across.
