@@ -42,15 +42,17 @@ pub const MEMORY_BUDGET_BYTES: u64 = 3 << 30;
 /// what to change when it does not. `count` is a float so that no product of input-driven sizes can
 /// overflow before the comparison.
 pub fn check_memory(what: &str, count: f64, bytes_each: f64, hint: &str) -> Result<()> {
+    check_memory_within(what, count, bytes_each, MEMORY_BUDGET_BYTES as f64, hint)
+}
+
+/// [`check_memory`] against another budget of `budget_bytes` (`train --cache-gib`: a training run may
+/// be given more memory than one per-frame structure).
+pub fn check_memory_within(what: &str, count: f64, bytes_each: f64, budget_bytes: f64, hint: &str) -> Result<()> {
     let bytes = count * bytes_each;
-    if bytes.is_finite() && bytes <= MEMORY_BUDGET_BYTES as f64 {
+    if bytes.is_finite() && bytes <= budget_bytes {
         return Ok(());
     }
-    Err(Error::Input(format!(
-        "{what} would need {} (limit {}); {hint}",
-        human_bytes(bytes),
-        human_bytes(MEMORY_BUDGET_BYTES as f64)
-    )))
+    Err(Error::Input(format!("{what} would need {} (limit {}); {hint}", human_bytes(bytes), human_bytes(budget_bytes))))
 }
 
 /// `bytes` as "12.3 GiB" (or "inf").

@@ -315,6 +315,9 @@ fn numeric_options_are_range_checked_naming_flag_value_and_range() {
         (vec!["train", "--data", f, "--category", "bed", "--max-iterations", "0"], vec!["--max-iterations", "'0'"]),
         (vec!["train", "--data", f, "--category", "bed", "--positives", "0"], vec!["--positives", "'0'"]),
         (vec!["train", "--data", f, "--category", "bed", "--candidates", "0"], vec!["--candidates", "'0'"]),
+        (vec!["train", "--data", f, "--category", "bed", "--cache-gib", "0"], vec!["--cache-gib", "0 GiB", "above 0"]),
+        (vec!["train", "--data", f, "--category", "bed", "--cache-gib", "NaN"], vec!["--cache-gib", "NaN"]),
+        (vec!["train", "--data", f, "--category", "bed", "--cache-gib", "2000"], vec!["--cache-gib", "at most 1024"]),
         (vec!["train", "--data", f, "--category", "bed", "--step", "0"], vec!["--step", "'0'"]),
         (vec!["train", "--data", f, "--category", "bed", "--detect-step", "5"], vec!["--detect-step", "'5'"]),
         (vec!["train", "--data", f, "--category", "bed", "--c", "0"], vec!["--c", "'0'", "> 0"]),
@@ -510,6 +513,38 @@ fn training_skips_positives_without_points_and_reports_them() {
     assert!(err.contains("1 positive examples have no point inside their box"), "{err}");
     let written: Value = serde_json::from_str(&std::fs::read_to_string(&model).unwrap()).unwrap();
     assert_eq!(written["training"]["positives"], 1);
+}
+
+/// The candidate cache is sized before any window is built and refused above `--cache-gib`, naming the
+/// cache, its size and the flag; the same run fits under the default limit.
+#[test]
+fn a_candidate_cache_above_its_limit_is_refused_naming_the_flag() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tmp.path().join("data");
+    write_frame(&data, &good_frame("seen"));
+    let model = tmp.path().join("bed.json");
+    let args = |limit: &'static str| -> Vec<String> {
+        let mut args: Vec<String> = ["train", "--data", text(&data), "--category", "bed", "--out", text(&model)]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+        args.extend(
+            ["--max-iterations", "1", "--min-points", "1", "--candidates", "5", "--max-full-passes", "1"]
+                .map(String::from),
+        );
+        args.extend(["--cache-gib", limit].map(String::from));
+        args
+    };
+    // One example's 5 candidates (and its nearest boxes) of a 5×5×5 expanded layout are far above 1 KiB.
+    let small = args("0.000001");
+    let err = assert_rejected(
+        &small.iter().map(String::as_str).collect::<Vec<_>>(),
+        &["the candidate cache", "limit 1.0 KiB", "--cache-gib"],
+    );
+    assert!(!model.exists(), "a model was written past a refused cache: {err}");
+    let default = args("3");
+    assert_accepted(&default.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(model.exists());
 }
 
 /// `cog-gpu ... | head`: output into a pipe whose reader has gone ends the process quietly (SIGPIPE's

@@ -9,6 +9,8 @@ use cog_gpu::limits::{check_step, MAX_SUBDIVISIONS};
 pub const MAX_CANDIDATES: u64 = 10_000;
 /// Largest `--max-iterations`, `--full-every`, `--max-full-passes` and `--prune-after`.
 pub const MAX_ITERATIONS: u64 = 100_000;
+/// Largest `train --cache-gib` (a machine's memory, not a frame's structure, bounds the cache).
+pub const MAX_CACHE_GIB: f64 = 1024.0;
 /// Largest `--positives` and `--negatives`.
 pub const MAX_EXAMPLES: u64 = 1_000_000;
 
@@ -93,6 +95,15 @@ pub fn subdivisions(text: &str) -> Result<u32, String> {
 /// `--candidates`: 1..=[`MAX_CANDIDATES`].
 pub fn candidates(text: &str) -> Result<usize, String> {
     Ok(count(text, 1, MAX_CANDIDATES)? as usize)
+}
+
+/// `--cache-gib`: a finite number of GiB above 0 and at most [`MAX_CACHE_GIB`].
+pub fn cache_gib(text: &str) -> Result<f64, String> {
+    let value: f64 = text.trim().parse().map_err(|_| format!("'{text}' is not a number of GiB"))?;
+    if !(value > 0.0 && value <= MAX_CACHE_GIB) {
+        return Err(format!("{text} GiB: the candidate cache's limit must be above 0 and at most {MAX_CACHE_GIB}"));
+    }
+    Ok(value)
 }
 
 /// `--max-iterations`, `--max-full-passes`: 1..=[`MAX_ITERATIONS`].

@@ -43,6 +43,9 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::time::Instant;
 
+/// Bytes in a GiB (`--cache-gib`).
+const GIB: f64 = (1u64 << 30) as f64;
+
 use anyhow::{bail, Context};
 use cog_gpu::category::{normalise_name, CATEGORIES};
 use cog_gpu::features::fast::{FastOptions, DEFAULT_SUBDIVISIONS};
@@ -161,6 +164,11 @@ pub struct Args {
     /// Candidates (with their feature vectors) cached per example by a full pass.
     #[arg(long, default_value_t = 100)]
     pub candidates: usize,
+    #[arg(value_parser = options::cache_gib)]
+    /// Memory limit of the candidate cache, in GiB (the cache is sized before training starts and
+    /// refused above this; every example's `--candidates` feature vectors).
+    #[arg(long, default_value_t = 3.0)]
+    pub cache_gib: f64,
     /// Drop constraints whose α stayed 0 for this many solves.
     #[arg(long, default_value_t = 10)]
     pub prune_after: u32,
@@ -352,6 +360,7 @@ fn check_examples(
     examples: &mut Vec<TrainingExample>,
     settings: &TrainingSettings,
     candidates: usize,
+    cache_gib: f64,
 ) -> anyhow::Result<()> {
     let before = examples.len();
     examples.retain(|ex| ex.truth.is_none_or(|truth| ex.pre.points.iter().any(|p| truth.contains(*p))));
@@ -372,13 +381,21 @@ fn check_examples(
     }
     // Each example caches its candidates' feature vectors (plus the boxes nearest a positive's truth).
     let vectors = examples.len() as f64 * cached_rows_per_example(candidates) as f64;
-    cog_gpu::limits::check_memory(
+    // with surfaces, each candidate also keeps its seven slices
+    let row_bytes = (settings.layout.dim() + if settings.surfaces { SLICES * SLICE_DIM } else { 0 }) as f64 * 4.0;
+    cog_gpu::limits::check_memory_within(
         "the candidate cache",
         vectors,
-        // with surfaces, each candidate also keeps its seven slices
-        (settings.layout.dim() + if settings.surfaces { SLICES * SLICE_DIM } else { 0 }) as f64 * 4.0,
-        "lower --candidates, --positives or --negatives",
+        row_bytes,
+        cache_gib * GIB,
+        "lower --candidates, --positives or --negatives, or raise --cache-gib",
     )?;
+    log::info!(
+        "the candidate cache: {} for {} examples (limit {}, --cache-gib)",
+        cog_gpu::limits::human_bytes(vectors * row_bytes),
+        examples.len(),
+        cog_gpu::limits::human_bytes(cache_gib * GIB)
+    );
     Ok(())
 }
 
@@ -535,7 +552,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     let collected = collect_examples(&dataset.frames, &category, limits)?;
     let supporters = collected.supporters;
     let mut examples = collected.examples;
-    check_examples(&mut examples, &settings, args.candidates)?;
+    check_examples(&mut examples, &settings, args.candidates, args.cache_gib)?;
     let positives = examples.iter().filter(|e| e.truth.is_some()).count();
     log::info!(
         "{category}: {positives} positive and {} negative examples, prepared in {:.1} s",
