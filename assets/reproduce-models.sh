@@ -228,41 +228,27 @@ case "$mode" in
             "$BIN" detect "$WORK/test" --models "$dir/models" --out "$dir/detections" --min-score -3 \
                 --no-overlay --no-cascade > /dev/null
         fi
-        synth_set "$WORK/cascade-set/mixed" "$all_rooms" 80 1700 cmixed
-        synth_set "$WORK/cascade-set/bathroom" bathroom 40 1701 cbath
-        synth_set "$WORK/cascade-set/bedroom" bedroom 40 1702 cbed
-        synth_set "$WORK/cascade-set/living_room" living_room 40 1703 cliving
-        # 300 more frames, composed the same way (the 200-frame set starved the second stage).
-        synth_set "$WORK/cascade-set/mixed-2" "$all_rooms" 120 1704 cmixed2
-        synth_set "$WORK/cascade-set/bathroom-2" bathroom 60 1705 cbath2
-        synth_set "$WORK/cascade-set/bedroom-2" bedroom 60 1706 cbed2
-        synth_set "$WORK/cascade-set/living_room-2" living_room 60 1707 cliving2
-        # 500 more, the same mix again (README "Context cascade": the 1 000-frame set).
-        synth_set "$WORK/cascade-set/mixed-3" "$all_rooms" 80 1708 dmixed
-        synth_set "$WORK/cascade-set/bathroom-3" bathroom 40 1709 dbath
-        synth_set "$WORK/cascade-set/bedroom-3" bedroom 40 1710 dbed
-        synth_set "$WORK/cascade-set/living_room-3" living_room 40 1711 dliving
-        synth_set "$WORK/cascade-set/mixed-4" "$all_rooms" 120 1712 dmixed2
-        synth_set "$WORK/cascade-set/bathroom-4" bathroom 60 1713 dbath2
-        synth_set "$WORK/cascade-set/bedroom-4" bedroom 60 1714 dbed2
-        synth_set "$WORK/cascade-set/living_room-4" living_room 60 1715 dliving2
-        # 1 000 more, the same mix twice again (README "Context cascade": the 2 000-frame set).
-        synth_set "$WORK/cascade-set/mixed-5" "$all_rooms" 80 1716 emixed
-        synth_set "$WORK/cascade-set/bathroom-5" bathroom 40 1717 ebath
-        synth_set "$WORK/cascade-set/bedroom-5" bedroom 40 1718 ebed
-        synth_set "$WORK/cascade-set/living_room-5" living_room 40 1719 eliving
-        synth_set "$WORK/cascade-set/mixed-6" "$all_rooms" 120 1720 emixed2
-        synth_set "$WORK/cascade-set/bathroom-6" bathroom 60 1721 ebath2
-        synth_set "$WORK/cascade-set/bedroom-6" bedroom 60 1722 ebed2
-        synth_set "$WORK/cascade-set/living_room-6" living_room 60 1723 eliving2
-        synth_set "$WORK/cascade-set/mixed-7" "$all_rooms" 80 1724 fmixed
-        synth_set "$WORK/cascade-set/bathroom-7" bathroom 40 1725 fbath
-        synth_set "$WORK/cascade-set/bedroom-7" bedroom 40 1726 fbed
-        synth_set "$WORK/cascade-set/living_room-7" living_room 40 1727 fliving
-        synth_set "$WORK/cascade-set/mixed-8" "$all_rooms" 120 1728 fmixed2
-        synth_set "$WORK/cascade-set/bathroom-8" bathroom 60 1729 fbath2
-        synth_set "$WORK/cascade-set/bedroom-8" bedroom 60 1730 fbed2
-        synth_set "$WORK/cascade-set/living_room-8" living_room 60 1731 fliving2
+        # Four blocks of 500 frames composed the same way (80 of the default mix, 40 bathrooms, 40 bedrooms, 40
+        # living rooms, then 120, 60, 60, 60; the 200-frame set starved the second stage, and each doubling
+        # since helped: README "Context cascade"), block b's eight sets seeded 1700 + 8b, in order, frames
+        # prefixed by the block's letter (c, d, e, f), directories suffixed "" and -2, -3 and -4, ...
+        block=0
+        for letter in c d e f; do
+            seed=$((1700 + 8 * block))
+            first=$([ $block = 0 ] && echo "" || echo "-$((2 * block + 1))")
+            second="-$((2 * block + 2))"
+            index=0
+            for spec in mixed:mixed:80:"$first": bathroom:bath:40:"$first": bedroom:bed:40:"$first": \
+                living_room:living:40:"$first": mixed:mixed:120:"$second":2 bathroom:bath:60:"$second":2 \
+                bedroom:bed:60:"$second":2 living_room:living:60:"$second":2; do
+                IFS=: read -r rooms short frames suffix tag <<< "$spec"
+                room_arg=$rooms
+                [ "$rooms" = mixed ] && room_arg=$all_rooms
+                synth_set "$WORK/cascade-set/$rooms$suffix" "$room_arg" "$frames" $((seed + index)) "$letter$short$tag"
+                index=$((index + 1))
+            done
+            block=$((block + 1))
+        done
         started=$SECONDS
         # The marker holds the number of frames detected, so that a set that grew is detected again.
         cascade_frames=$(find "$WORK/cascade-set" -mindepth 2 -maxdepth 2 -type d | wc -l)
