@@ -9,7 +9,7 @@ mod common;
 
 use cog_gpu::cascade::{
     feature_dim, frame_context_features, stage_checkpoint_path, train_cascade, train_cascade_resumable, wall_context,
-    Cascade, CascadeFrame, CascadeTraining, FeatureSet, Room, FEATURES, GEOMETRY_FEATURES, LAYOUT_FEATURES,
+    Cascade, CascadeFrame, CascadeTraining, FeatureSet, Room, StageRule, FEATURES, GEOMETRY_FEATURES, LAYOUT_FEATURES,
     NEIGHBOURHOOD_MARGIN, PREVIOUS_FEATURES, RBF_CENTRES, RBF_WIDTHS, V4_FEATURES, V5_FEATURES, V6_FEATURES,
 };
 use cog_gpu::eval::{average_precision, Detection, FrameDetections, ScoredBox};
@@ -351,6 +351,17 @@ fn cascade_files_round_trip_and_are_checked() {
     write_unchecked(&broken, &path);
     let err = Cascade::read(&path).unwrap_err().to_string();
     assert!(err.contains("cascade.json") && err.contains("weights"), "{err}");
+    // The gain's interval out of order: refused, the stage named; absent (older files): read.
+    let mut reversed = cascade.clone();
+    reversed.stages.get_mut("table").unwrap().cv_gain_interval = Some([0.2, 0.1]);
+    write_unchecked(&reversed, &path);
+    let err = Cascade::read(&path).unwrap_err().to_string();
+    assert!(err.contains("cascade.json") && err.contains("'table'") && err.contains("cv_gain_interval"), "{err}");
+    let mut older = cascade.clone();
+    older.stages.get_mut("table").unwrap().cv_gain_interval = None;
+    write_unchecked(&older, &path);
+    assert_eq!(Cascade::read(&path).unwrap(), older);
+    assert!(!std::fs::read_to_string(&path).unwrap().contains("cv_gain_interval"));
     // Uncalibrated detections (no raw score) are refused.
     let mut raw_only = vec![Detection::new("table", &Cuboid::new(Vec3::ZERO, Vec3::ONE, 0.0), 0.3)];
     assert!(cascade.rescore(&mut raw_only, None).unwrap_err().to_string().contains("calibrated"));
@@ -1028,7 +1039,16 @@ fn cascade_training_resumes_from_its_stage_checkpoints() {
     let sets = [FeatureSet::V4, FeatureSet::V5];
     let dir = tempfile::tempdir().unwrap();
     let run = |frames: &[CascadeFrame], sets: &[FeatureSet]| {
-        train_cascade_resumable(frames, &categories, 0.25, CascadeTraining::default(), sets, Some(dir.path())).unwrap()
+        train_cascade_resumable(
+            frames,
+            &categories,
+            0.25,
+            CascadeTraining::default(),
+            sets,
+            Some(dir.path()),
+            StageRule::AnyGain,
+        )
+        .unwrap()
     };
     let (fresh, _, resumed) = run(&frames, &sets);
     assert_eq!(resumed, 0);
@@ -1072,6 +1092,78 @@ fn cascade_training_resumes_from_its_stage_checkpoints() {
     std::fs::write(stage_checkpoint_path(dir.path(), "bed", FeatureSet::V4), "{ not json").unwrap();
     let (_, _, resumed) = run(&other, &sets);
     assert_eq!(resumed, 3);
+    // A stage checkpoint without the gain's interval (written before it was recorded) is trained again.
+    let path = stage_checkpoint_path(dir.path(), "table", FeatureSet::V5);
+    let mut stored: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    assert!(stored["stage"]["cv_gain_interval"].is_array(), "{stored}");
+    stored["stage"].as_object_mut().unwrap().remove("cv_gain_interval");
+    std::fs::write(&path, stored.to_string()).unwrap();
+    let (_, _, resumed) = run(&other, &sets);
+    assert_eq!(resumed, 3);
+}
+
+/// `StageRule::SignificantGain` keeps the stage whose cross-validated gain is far beyond the noise (the
+/// table on the bed: every piece of a bed falls below every real table) and refuses one whose gain is
+/// only noise: a category whose context says nothing (each frame's true chair and false chair have the
+/// same neighbours, their first-stage scores ranked by chance). The checkpoints hold the stages as trained,
+/// so a run with the other rule reads them all.
+#[test]
+fn the_significant_gain_rule_keeps_real_gains_and_drops_noise() {
+    let table_frames: Vec<_> = (0..40).map(frame).collect();
+    let categories = names(&["bed", "table"]);
+    let dir = tempfile::tempdir().unwrap();
+    let run = |frames: &[CascadeFrame], categories: &[String], rule| {
+        train_cascade_resumable(
+            frames,
+            categories,
+            0.25,
+            CascadeTraining::default(),
+            &[FeatureSet::V4],
+            Some(dir.path()),
+            rule,
+        )
+        .unwrap()
+    };
+    let (any, _, _) = run(&table_frames, &categories, StageRule::AnyGain);
+    let (significant, outcomes, resumed) = run(&table_frames, &categories, StageRule::SignificantGain);
+    assert_eq!(resumed, 2, "both outcomes read from the checkpoints");
+    assert_eq!(significant, any, "the table's gain is beyond the noise: the same cascade");
+    let table = &significant.stages["table"];
+    let [low, high] = table.cv_gain_interval.unwrap();
+    let gain = table.cv_ap_cascade - table.cv_ap_first_stage;
+    assert!(0.1 < low && low <= gain && gain <= high, "{low} {gain} {high}");
+    assert!(outcomes["bed"].chosen().is_err());
+
+    // Chairs: in each frame a true chair and a false one 2 m away, both alone, with scores of the same
+    // distribution; the context features of the two are the same up to their own score.
+    let chair_frames: Vec<CascadeFrame> = (0..60)
+        .map(|f| {
+            let place = |x: f32| Cuboid::new(Vec3::new(x, 1.0, 0.45), Vec3::new(0.5, 0.5, 0.9), 0.0);
+            let truth = vec![Object { category: "chair".into(), label: None, cuboid: place(0.0) }];
+            // Both scores drawn independently from one distribution (a hash of the frame): nothing tells them
+            // apart.
+            let draw = |k: usize| ((k as f32 * 12.9898).sin() * 43_758.547).rem_euclid(1.0) * 2.0 - 1.0;
+            let (raw_true, raw_false) = (draw(2 * f + 15), draw(2 * f + 16));
+            let sigmoid = |s: f32| 1.0 / (1.0 + (-s).exp());
+            let detections = vec![
+                detection("chair", [0.0, 1.0, 0.45], [0.5, 0.5, 0.9], sigmoid(raw_true), raw_true),
+                detection("chair", [2.0, 1.0, 0.45], [0.5, 0.5, 0.9], sigmoid(raw_false), raw_false),
+            ];
+            CascadeFrame { truth, detections, room: None }
+        })
+        .collect();
+    let chair = names(&["chair"]);
+    let (_, outcomes, _) = run(&chair_frames, &chair, StageRule::AnyGain);
+    let (kept, refused, _) = run(&chair_frames, &chair, StageRule::SignificantGain);
+    assert!(kept.stages.is_empty(), "{:?}", kept.stages);
+    let reason = refused["chair"].chosen().unwrap_err();
+    // These draws give the chairs' stage a cross-validated gain by chance (+4.5 AP points; other draws give
+    // none, and about one in twenty a significant one, as a 95 % bound should): any-gain keeps it, the
+    // rule does not.
+    let stage = outcomes["chair"].chosen().unwrap();
+    let [low, high] = stage.cv_gain_interval.unwrap();
+    assert!(stage.cv_ap_cascade > stage.cv_ap_first_stage + 0.03 && low <= 0.0 && high > 0.03, "{stage:?}");
+    assert!(reason.contains("within the noise"), "{reason}");
 }
 
 /// Writes `cascade` as `Cascade::write` does but without its check: the damaged files the readers must

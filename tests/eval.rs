@@ -188,6 +188,52 @@ fn identical_frames_give_a_point_interval_and_paired_differences_cancel() {
     assert!(lo < full && full < hi, "{lo} < {full} < {hi}");
 }
 
+/// `MatchedDetections::resampled_ap` is `average_precision` of the data set made of the drawn frames (each
+/// as often as drawn), with no matching redone: frames with several boxes, duplicates, misses, a frame
+/// without ground truth, every score distinct.
+#[test]
+fn a_resampled_ap_is_the_ap_of_the_drawn_frames() {
+    use cog_gpu::eval::MatchedDetections;
+    let truth: Vec<Vec<Cuboid>> = (0..7).map(|f| (0..f % 3).map(|b| unit_box(4.0 * b as f32, 0.0)).collect()).collect();
+    let mut detections = Vec::new();
+    for (f, boxes) in truth.iter().enumerate() {
+        for d in 0..3 {
+            // On box d when the frame has it (detection 2 duplicates box 0), on empty floor otherwise.
+            let x = if d < boxes.len() {
+                4.0 * d as f32
+            } else if d == 2 {
+                0.0
+            } else {
+                30.0 + f as f32
+            };
+            detections.push(det(
+                f,
+                ((f * 5 + d * 11) % 23) as f32 / 23.0 + 0.001 * (3 * f + d) as f32,
+                unit_box(x, 0.0),
+            ));
+        }
+    }
+    let matched = MatchedDetections::new(&detections, &truth, 0.25);
+    assert_eq!(matched.resampled_ap(&[1; 7]), average_precision(&detections, &truth, 0.25).ap);
+    let mut distinct = std::collections::BTreeSet::new();
+    for draw in bootstrap_frames(7, Bootstrap { resamples: 60, seed: 11 }) {
+        let mut counts = [0u32; 7];
+        let mut drawn_truth = Vec::new();
+        let mut drawn = Vec::new();
+        for (image, &f) in draw.iter().enumerate() {
+            counts[f] += 1;
+            drawn_truth.push(truth[f].clone());
+            drawn.extend(detections.iter().filter(|d| d.image == f).map(|d| ScoredBox { image, ..*d }));
+        }
+        let want = average_precision(&drawn, &drawn_truth, 0.25).ap;
+        assert_eq!(matched.resampled_ap(&counts), want, "{draw:?}");
+        distinct.extend(want.map(f32::to_bits));
+    }
+    assert!(distinct.len() > 5, "the resamples should differ: {distinct:?}");
+    // Only frames without ground truth: no AP.
+    assert_eq!(matched.resampled_ap(&[2, 0, 0, 1, 0, 0, 0]), None);
+}
+
 /// The support-surface report: true positives only (the benchmark's matching), the distance to the nearest
 /// and to the main true surface, and the median, on a hand-made case.
 #[test]

@@ -1,5 +1,6 @@
 //! `cog-gpu cascade --data DIR --detections DIR [--models assets/models] [--out FILE] [--iou 0.25]
-//! [--categories a,b,...] [--features v4|v5|v6|best] [--checkpoints DIR] [--keep-checkpoints]`: trains the context cascade ([`cog_gpu::cascade`]) on the first-stage detections
+//! [--categories a,b,...] [--features v4|v5|v6|best] [--keep any-gain|significant-gain] [--checkpoints DIR]
+//! [--keep-checkpoints]`: trains the context cascade ([`cog_gpu::cascade`]) on the first-stage detections
 //! of held-out frames and writes it as `<models>/cascade.json`, which `detect` then applies.
 //!
 //! The detections are those of `cog-gpu detect --no-cascade --min-score -3` with the calibrated models the
@@ -15,7 +16,7 @@ use std::path::PathBuf;
 use anyhow::{bail, Context};
 use cog_gpu::cascade::{
     stage_checkpoint_path, train_cascade_resumable, Cascade, CascadeFrame, CascadeTraining, FeatureSet, StageOutcome,
-    FILE_NAME,
+    StageRule, FILE_NAME, GAIN_LEVEL,
 };
 
 use super::calibrate::{read_labelled_detections, HeldOutArgs, LabelledDetections};
@@ -34,6 +35,11 @@ pub struct Args {
     /// frames; trains all three); README, "Context cascade".
     #[arg(long, value_enum, default_value = "v4")]
     pub features: FeaturesArg,
+    /// Which trained stages the cascade keeps: any-gain (every stage whose cross-validated AP is above the
+    /// first stage's; every shipped cascade's rule) or significant-gain (only those whose gain's 90 %
+    /// bootstrap interval over the frames lies above 0); README, "Which stages to keep".
+    #[arg(long, value_enum, default_value = "any-gain")]
+    pub keep: KeepArg,
     /// Directory of the per-stage checkpoints (default: the output path with `.stages` appended): each
     /// category's training with each feature set is written there when done, and a rerun of an
     /// interrupted training on the same detections reads them instead of training again.
@@ -43,6 +49,22 @@ pub struct Args {
     /// train another `--features` choice on the same detections reusing the stages already trained.
     #[arg(long)]
     pub keep_checkpoints: bool,
+}
+
+/// `--keep`.
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum KeepArg {
+    AnyGain,
+    SignificantGain,
+}
+
+impl From<KeepArg> for StageRule {
+    fn from(keep: KeepArg) -> Self {
+        match keep {
+            KeepArg::AnyGain => StageRule::AnyGain,
+            KeepArg::SignificantGain => StageRule::SignificantGain,
+        }
+    }
 }
 
 /// `--features`.
@@ -113,8 +135,15 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         checkpoints.display()
     );
     let sets = args.features.sets();
-    let (cascade, results, resumed) =
-        train_cascade_resumable(&inputs, &categories, held_out.iou, training, &sets, Some(&checkpoints))?;
+    let (cascade, results, resumed) = train_cascade_resumable(
+        &inputs,
+        &categories,
+        held_out.iou,
+        training,
+        &sets,
+        Some(&checkpoints),
+        args.keep.into(),
+    )?;
     if resumed > 0 {
         println!(
             "resumed {resumed} of {} stage trainings from the checkpoints in {}",
@@ -144,13 +173,21 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The stages' table: per category the chosen stage (its feature set, detections, true positives, C and
-/// cross-validated APs) or why it has none; with several candidate sets, each one's cross-validated AP.
+/// The stages' table: per category the chosen stage (its feature set, detections, true positives, C,
+/// cross-validated APs and the gain's interval) or why it has none; with several candidate sets, each
+/// one's cross-validated AP ("none" for a set without a stage, or whose stage `--keep` refused).
 fn print_stages(cascade: &Cascade, results: &BTreeMap<String, StageOutcome>, sets: &[FeatureSet]) {
     let several = sets.len() > 1;
     let mut header = format!(
-        "{:<12} {:>8} {:>10} {:>6} {:>7} {:>12} {:>13}",
-        "category", "features", "detections", "TP", "C", "CV AP first", "CV AP cascade"
+        "{:<12} {:>8} {:>10} {:>6} {:>7} {:>12} {:>13} {:>16}",
+        "category",
+        "features",
+        "detections",
+        "TP",
+        "C",
+        "CV AP first",
+        "CV AP cascade",
+        format!("gain {:.0} % int.", 100.0 * GAIN_LEVEL)
     );
     if several {
         for set in sets {
@@ -162,14 +199,19 @@ fn print_stages(cascade: &Cascade, results: &BTreeMap<String, StageOutcome>, set
         let chosen = outcome.chosen();
         let mut line = match &chosen {
             Ok(stage) => format!(
-                "{:<12} {:>8} {:>10} {:>6} {:>7} {:>12.1} {:>13.1}",
+                "{:<12} {:>8} {:>10} {:>6} {:>7} {:>12.1} {:>13.1} {:>16}",
                 category,
                 cascade.stage_feature_set(stage).map_or("?", FeatureSet::short_name),
                 stage.calibration.detections,
                 stage.calibration.true_positives,
                 stage.c,
                 100.0 * stage.cv_ap_first_stage,
-                100.0 * stage.cv_ap_cascade
+                100.0 * stage.cv_ap_cascade,
+                stage.cv_gain_interval.map_or("-".to_string(), |[low, high]| format!(
+                    "[{:+.1}, {:+.1}]",
+                    100.0 * low,
+                    100.0 * high
+                ))
             ),
             Err(reason) => format!("{category:<12} no second stage (keeps its first-stage scores): {reason}"),
         };
