@@ -333,8 +333,8 @@ pub struct SecondStage {
     pub cv_ap_first_stage: f32,
     pub cv_ap_cascade: f32,
     /// The central 90 % ([`GAIN_LEVEL`]) bootstrap interval of the cross-validated gain `cv_ap_cascade −
-    /// cv_ap_first_stage` ([`cv_gain_interval`]'s); absent in files written before it was recorded
-    /// (2026-12-04).
+    /// cv_ap_first_stage` (a paired bootstrap over the cascade set's frames; see [`StageRule`]); absent in
+    /// files written before it was recorded (2026-12-04).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cv_gain_interval: Option<[f32; 2]>,
     /// Maps the combined score `z + z'` to a probability.
