@@ -45,7 +45,7 @@ use crate::features::{FeatureScene, Hypothesis, Preprocessed};
 use crate::frame::Frame;
 use crate::geometry::Camera;
 use crate::model::{window_scenes, FeaturePath, Model, SceneKey};
-use crate::nms::{suppress_in_order, NmsOptions, DEFAULT_NMS_IOU};
+use crate::nms::{suppress_in_order, vote, NmsOptions, VoteOptions, DEFAULT_NMS_IOU, DEFAULT_VOTE_IOU};
 
 /// Settings of [`detect_frame`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -71,6 +71,10 @@ pub struct DetectOptions {
     /// How the points' normals find their plane-fit neighbours ([`NormalSearch`]; the shipped models were
     /// trained with the default, [`NormalSearch::KdTree`]).
     pub normals: NormalSearch,
+    /// Box voting after the NMS ([`crate::nms::vote`]): each kept box becomes the weighted mean of the
+    /// candidates whose 3D IoU with it is at least this; `None`: the kept hypotheses' own boxes (the only
+    /// behaviour before 2026-12-04). Default [`DEFAULT_VOTE_IOU`].
+    pub box_voting: Option<f32>,
 }
 
 impl Default for DetectOptions {
@@ -83,6 +87,7 @@ impl Default for DetectOptions {
             min_probability: None,
             support_min_score: DEFAULT_SUPPORT_MIN_SCORE,
             normals: NormalSearch::default(),
+            box_voting: Some(DEFAULT_VOTE_IOU),
         }
     }
 }
@@ -100,6 +105,9 @@ impl DetectOptions {
                 "the support surfaces' minimum score must be a probability in [0, 1], got {}",
                 self.support_min_score
             )));
+        }
+        if self.box_voting.is_some_and(|iou| !(iou > 0.0 && iou <= 1.0)) {
+            return Err(Error::Input(format!("the box voting IoU must be in (0, 1], got {:?}", self.box_voting)));
         }
         if self.min_score.is_some_and(|s| s.is_nan()) {
             return Err(Error::Input("the minimum score is not a number".into()));
@@ -135,6 +143,10 @@ impl DetectOptions {
         }
     }
 }
+
+/// Voters of [`crate::nms::vote`] whose weight (odds ratio against the kept box) is below this are not
+/// visited: a thousand times less likely right than the box they would move.
+const VOTE_MIN_WEIGHT: f32 = 1e-3;
 
 /// The default cut of a calibrated model's detections ([`DetectOptions::threshold`]): a calibrated
 /// probability of 10⁻³, the same meaning for every model.
@@ -691,8 +703,24 @@ fn model_detections(
         NmsOptions { iou_threshold: options.nms_iou, max_detections: Some(options.max_per_category), top_k: None };
     // The hypothesis's cuboid is the detection's (`Detection::cuboid` stores and returns its fields), the box
     // `nms_detections` compares; no detection is made for a candidate the NMS drops.
-    let kept = suppress_in_order(order, |n| hypotheses[n].cuboid(scene), &nms);
-    Ok(kept.into_iter().map(detection).collect())
+    let kept = suppress_in_order(order.iter().copied(), |n| hypotheses[n].cuboid(scene), &nms);
+    let mut detections: Vec<Detection> = kept.iter().map(|&n| detection(n)).collect();
+    if let (Some(iou), false) = (options.box_voting, kept.is_empty()) {
+        let slope = model.calibration.as_ref().map_or(1.0, |c| c.a as f32);
+        let vote_options = VoteOptions { iou, slope, min_weight: VOTE_MIN_WEIGHT };
+        // The voters are every hypothesis heavy enough for some kept box, whatever the cut: a kept box is
+        // then the same under every cut that keeps it (the cut property of `DetectOptions::threshold`).
+        let lowest = kept.iter().map(|&n| scores[n]).fold(f32::INFINITY, f32::min);
+        let floor = lowest + VOTE_MIN_WEIGHT.ln() / slope;
+        // In hypothesis order, the order of the sums: no sort.
+        let voters: Vec<usize> = (0..hypotheses.len()).filter(|&n| scores[n] >= floor).collect();
+        let voted = vote(&kept, &voters, |n| hypotheses[n].cuboid(scene), |n| scores[n], &vote_options);
+        for (d, cuboid) in detections.iter_mut().zip(voted) {
+            d.centre = cuboid.centre.to_array();
+            d.size = cuboid.size.to_array();
+        }
+    }
+    Ok(detections)
 }
 
 /// Replaces each detection's raw score by its model's calibrated probability (keeping the raw score in

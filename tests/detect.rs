@@ -50,7 +50,8 @@ fn density_model(path: FeaturePath, step: f32) -> Model {
 fn exact_scores_are_point_densities_and_detections_obey_nms() {
     let frame = Frame::read(SAMPLE, DepthSource::Raw).unwrap();
     let model = density_model(FeaturePath::Exact, 0.3);
-    let options = DetectOptions { max_per_category: 5, ..DetectOptions::default() };
+    // Without box voting: each detection is a scored hypothesis (voting moves boxes off the ones scored).
+    let options = DetectOptions { max_per_category: 5, box_voting: None, ..DetectOptions::default() };
     let result = detect_frame(&frame, std::slice::from_ref(&model), Backend::Cpu, &options).unwrap();
     let detections = &result.detections;
     assert!(!detections.is_empty() && detections.len() <= 5, "{} detections", detections.len());
@@ -636,4 +637,29 @@ fn path_comparison_allows_reordered_near_ties_and_alternate_sizes_only() {
         assert!(!agreement.same, "{changed:?}");
         assert_eq!(agreement.frames_different, 1, "{changed:?}");
     }
+}
+
+#[test]
+fn box_voting_moves_the_kept_boxes_only() {
+    // Voting keeps the NMS's choice (categories, scores, yaws, order) and changes centres and sizes; at
+    // IoU 1 only a box itself (and exact duplicates) votes, so nothing moves.
+    let frame = Frame::read(SAMPLE, DepthSource::Raw).unwrap();
+    let model = density_model(FeaturePath::Fast, 0.2);
+    let plain = DetectOptions { max_per_category: 8, box_voting: None, ..DetectOptions::default() };
+    let detect = |options: &DetectOptions| detect_frame(&frame, std::slice::from_ref(&model), Backend::Cpu, options);
+    let unvoted = detect(&plain).unwrap().detections;
+    assert!(unvoted.len() >= 3, "{} detections", unvoted.len());
+    let same = detect(&DetectOptions { box_voting: Some(1.0), ..plain }).unwrap().detections;
+    assert_eq!(same, unvoted);
+    let voted = detect(&DetectOptions { box_voting: Some(0.5), ..plain }).unwrap().detections;
+    assert_eq!(voted.len(), unvoted.len());
+    let mut moved = 0;
+    for (v, u) in voted.iter().zip(&unvoted) {
+        assert_eq!((&v.category, v.score, v.yaw), (&u.category, u.score, u.yaw));
+        // A weighted mean of boxes that each overlap the kept box by IoU ≥ 0.5 stays near it.
+        assert!(iou_3d(&v.cuboid(), &u.cuboid()) >= 0.5, "{v:?} against {u:?}");
+        moved += usize::from(v.centre != u.centre || v.size != u.size);
+    }
+    assert!(moved > 0, "no box moved");
+    assert!(DetectOptions { box_voting: Some(0.0), ..plain }.validate().is_err());
 }

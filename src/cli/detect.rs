@@ -30,7 +30,7 @@ use cog_gpu::frame::RoomLayout;
 use cog_gpu::frame::{is_frame_dir, DepthSource, Frame};
 use cog_gpu::gpu::fast::use_kernel_on;
 use cog_gpu::model::{common_normal_search, read_models_dir, Model};
-use cog_gpu::nms::DEFAULT_NMS_IOU;
+use cog_gpu::nms::{DEFAULT_NMS_IOU, DEFAULT_VOTE_IOU};
 use cog_gpu::room_layout::output::LayoutRecord;
 use cog_gpu::room_layout::PredictedLayout;
 use image::RgbImage;
@@ -58,6 +58,11 @@ pub struct Args {
     /// IoU above which 3D NMS suppresses a lower-scoring box of the same category.
     #[arg(long, default_value_t = DEFAULT_NMS_IOU)]
     pub nms_iou: f32,
+    /// Box voting after the NMS: each kept box becomes the weighted mean of the window's boxes whose 3D IoU
+    /// with it is at least this IoU (in (0, 1]; weights: each box's odds of being right against the kept
+    /// box's), or `off`: the kept boxes as the window made them. README, "Box voting"
+    #[arg(long, default_value_t = options::BoxVoting(Some(DEFAULT_VOTE_IOU)), value_parser = options::box_voting)]
+    pub box_voting: options::BoxVoting,
     /// Detections kept per category and frame.
     #[arg(long, default_value_t = 20, value_parser = options::at_least_one)]
     pub max_per_category: usize,
@@ -248,6 +253,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         min_score: args.min_score,
         min_probability: args.min_probability,
         support_min_score: args.support_min_score,
+        box_voting: args.box_voting.0,
         ..DetectOptions::default()
     };
     detect_options.validate()?;
@@ -450,10 +456,14 @@ fn run_fingerprint(
     parts.push(layout_model.map(serde_json::to_string).transpose()?.unwrap_or_default());
     // The options as they printed before `normals` existed (the default search adds nothing); another
     // search is a part of its own.
-    let without_normals = format!("{:?}", DetectOptions { normals: NormalSearch::KdTree, ..*options });
-    parts.push(without_normals.replace(", normals: KdTree", ""));
+    // So is box voting.
+    let earlier = format!("{:?}", DetectOptions { normals: NormalSearch::KdTree, box_voting: None, ..*options });
+    parts.push(earlier.replace(", normals: KdTree", "").replace(", box_voting: None", ""));
     if options.normals != NormalSearch::KdTree {
         parts.push(format!("normals: {}", options.normals.name()));
+    }
+    if let Some(iou) = options.box_voting {
+        parts.push(format!("box voting: {iou}"));
     }
     let hash = parts.iter().fold(cog_gpu::learn::checkpoint::FNV_OFFSET, |hash, part| {
         // Each part's length first, so that no two different lists of parts hash the same bytes.

@@ -47,6 +47,27 @@ pub fn iou(text: &str) -> Result<f32, String> {
     }
 }
 
+/// `detect --box-voting`: an IoU in (0, 1] ([`iou`]), or `off` (`None`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BoxVoting(pub Option<f32>);
+
+impl std::fmt::Display for BoxVoting {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.0 {
+            Some(iou) => write!(f, "{iou}"),
+            None => f.write_str("off"),
+        }
+    }
+}
+
+pub fn box_voting(text: &str) -> Result<BoxVoting, String> {
+    if text == "off" {
+        Ok(BoxVoting(None))
+    } else {
+        iou(text).map(|iou| BoxVoting(Some(iou))).map_err(|e| format!("{e}; give an IoU or `off`"))
+    }
+}
+
 /// `detect --support-min-score`: a probability in [0, 1].
 pub fn probability(text: &str) -> Result<f32, String> {
     let value = number(text)?;
