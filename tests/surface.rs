@@ -194,7 +194,8 @@ fn detect_constructed_table(
         .unwrap()
         .with_surface(surface.clone())
         .unwrap();
-    let options = DetectOptions { min_score: Some(-1.0), ..DetectOptions::default() };
+    // Without box voting: each detection's box is the hypothesis scored, rebuilt below from the box.
+    let options = DetectOptions { min_score: Some(-1.0), box_voting: None, ..DetectOptions::default() };
     let found = detect_preprocessed("table", scene.pre.clone(), &[model], Backend::Cpu, &options).unwrap();
     assert!(!found.detections.is_empty());
     // The scene detection scored on: the camera's 16 yaws, the model's step.
