@@ -708,13 +708,11 @@ fn model_detections(
     if let (Some(iou), false) = (options.box_voting, kept.is_empty()) {
         let slope = model.calibration.as_ref().map_or(1.0, |c| c.a as f32);
         let vote_options = VoteOptions { iou, slope, min_weight: VOTE_MIN_WEIGHT };
-        // The voters are every hypothesis heavy enough for some kept box, whatever the cut: a kept box is
-        // then the same under every cut that keeps it (the cut property of `DetectOptions::threshold`).
-        let lowest = kept.iter().map(|&n| scores[n]).fold(f32::INFINITY, f32::min);
-        let floor = lowest + VOTE_MIN_WEIGHT.ln() / slope;
-        // In hypothesis order, the order of the sums: no sort.
-        let voters: Vec<usize> = (0..hypotheses.len()).filter(|&n| scores[n] >= floor).collect();
-        let voted = vote(&kept, &voters, |n| hypotheses[n].cuboid(scene), |n| scores[n], &vote_options);
+        // Every hypothesis may vote, whatever the cut (`vote` skips those too light for every kept box): a
+        // kept box is then the same under every cut that keeps it (the cut property of
+        // `DetectOptions::threshold`). In hypothesis order, the order of the sums: no sort.
+        let voters = 0..hypotheses.len();
+        let voted = vote(&kept, voters, |n| hypotheses[n].cuboid(scene), |n| scores[n], &vote_options);
         for (d, cuboid) in detections.iter_mut().zip(voted) {
             d.centre = cuboid.centre.to_array();
             d.size = cuboid.size.to_array();

@@ -236,7 +236,7 @@ pub const DEFAULT_VOTE_IOU: f32 = 0.3;
 /// score and every other field of a kept detection stay its own.
 pub fn vote(
     kept: &[usize],
-    candidates: &[usize],
+    candidates: impl IntoIterator<Item = usize>,
     cuboid_of: impl Fn(usize) -> Cuboid,
     score_of: impl Fn(usize) -> f32,
     options: &VoteOptions,
@@ -252,7 +252,7 @@ pub fn vote(
     let mut sums = vec![([0.0f64; 6], 0.0f64); kept.len()];
     let lowest = kept_boxes.iter().map(|(_, _, s)| *s).fold(f32::INFINITY, f32::min);
     let floor = lowest + options.min_weight.ln() / options.slope;
-    for &v in candidates {
+    for v in candidates {
         let score = score_of(v);
         if score < floor {
             continue;
@@ -260,16 +260,17 @@ pub fn vote(
         let cuboid = cuboid_of(v);
         let bounds = Bounds::of(&cuboid);
         for ((kc, kb, ks), (sum, weights)) in kept_boxes.iter().zip(sums.iter_mut()) {
-            let weight = (f64::from(options.slope) * f64::from(score - ks)).exp();
-            if weight < f64::from(options.min_weight) {
-                continue;
-            }
+            // The cheap geometric tests first: the exponential only for a box that overlaps.
             let Some(swapped) = quarter_turns_apart(kc.yaw, cuboid.yaw) else { continue };
             if bounds.cannot_exceed(kb, options.iou.next_down()) {
                 continue;
             }
             let size = if swapped { Vec3::new(cuboid.size.y, cuboid.size.x, cuboid.size.z) } else { cuboid.size };
             if aligned_iou(kc, cuboid.centre, size) < options.iou {
+                continue;
+            }
+            let weight = (f64::from(options.slope) * f64::from(score - ks)).exp();
+            if weight < f64::from(options.min_weight) {
                 continue;
             }
             let values = [cuboid.centre.x, cuboid.centre.y, cuboid.centre.z, size.x, size.y, size.z];

@@ -136,13 +136,13 @@ fn voting_averages_the_voters_by_their_odds_ratio() {
     // W at x = 0.6 (IoU 0.4 / 1.6 = 0.25 < 0.5: no vote). Mean x = (0 · 1 + 0.2 · 1/3) / (4/3) = 0.05.
     let boxes = [unit_box(0.0, 0.0), unit_box(0.2, 0.0), unit_box(0.6, 0.0)];
     let scores = [2.0, 2.0 - 3.0f32.ln(), 1.0];
-    let voted = vote(&[0], &[0, 1, 2], |i| boxes[i], |i| scores[i], &vote_options(1.0));
+    let voted = vote(&[0], [0, 1, 2], |i| boxes[i], |i| scores[i], &vote_options(1.0));
     assert_eq!(voted.len(), 1);
     assert!((voted[0].centre.x - 0.05).abs() < 1e-6, "{:?}", voted[0]);
     assert!((voted[0].centre.y).abs() < 1e-6 && (voted[0].centre.z - 0.5).abs() < 1e-6);
     assert!((voted[0].size - Vec3::ONE).abs().max_element() < 1e-6);
     // The slope scales the weights: with slope 2 the weight is 1/9, the mean x 0.2 · (1/9) / (10/9) = 0.02.
-    let voted = vote(&[0], &[0, 1, 2], |i| boxes[i], |i| scores[i], &vote_options(2.0));
+    let voted = vote(&[0], [0, 1, 2], |i| boxes[i], |i| scores[i], &vote_options(2.0));
     assert!((voted[0].centre.x - 0.02).abs() < 1e-6, "{:?}", voted[0]);
 }
 
@@ -156,13 +156,13 @@ fn voting_maps_a_quarter_turn_into_the_kept_axes_and_skips_other_yaws() {
     let u = Cuboid::new(Vec3::new(0.0, 0.0, 0.5), Vec3::new(2.0, 1.0, 1.0), 0.1);
     assert!(iou_3d(&k, &v) >= 0.5 && iou_3d(&k, &u) >= 0.5);
     let boxes = [k, v, u];
-    let voted = vote(&[0], &[0, 1, 2], |i| boxes[i], |_| 1.0, &vote_options(1.0));
+    let voted = vote(&[0], [0, 1, 2], |i| boxes[i], |_| 1.0, &vote_options(1.0));
     assert!((voted[0].size - Vec3::new(2.2, 1.0, 1.0)).abs().max_element() < 1e-6, "{:?}", voted[0]);
     assert_eq!(voted[0].yaw, 0.0);
     // A half turn is the same box's axes: sizes are not swapped.
     let h = Cuboid::new(Vec3::new(0.0, 0.0, 0.5), Vec3::new(2.4, 1.0, 1.0), std::f32::consts::PI);
     let boxes = [k, h];
-    let voted = vote(&[0], &[0, 1], |i| boxes[i], |_| 1.0, &vote_options(1.0));
+    let voted = vote(&[0], [0, 1], |i| boxes[i], |_| 1.0, &vote_options(1.0));
     assert!((voted[0].size - Vec3::new(2.2, 1.0, 1.0)).abs().max_element() < 1e-6, "{:?}", voted[0]);
 }
 
@@ -172,10 +172,10 @@ fn voting_stops_below_the_weight_floor_and_each_kept_box_gets_its_own_voters() {
     // so low (weight e^−10 < 10⁻³) that it is not counted. A voter of both? None here: they are 5 m apart.
     let boxes = [unit_box(0.0, 0.0), unit_box(5.0, 0.0), unit_box(0.2, 0.0), unit_box(5.2, 0.0), unit_box(-0.2, 0.0)];
     let scores = [3.0, 2.0, 3.0, 2.0, -7.0];
-    let voted = vote(&[0, 1], &[0, 2, 1, 3, 4], |i| boxes[i], |i| scores[i], &vote_options(1.0));
+    let voted = vote(&[0, 1], [0, 2, 1, 3, 4], |i| boxes[i], |i| scores[i], &vote_options(1.0));
     assert!((voted[0].centre.x - 0.1).abs() < 1e-6, "{:?}", voted[0]);
     assert!((voted[1].centre.x - 5.1).abs() < 1e-6, "{:?}", voted[1]);
     // The low box alone would pull the first to −0.1 if it counted with weight 1.
-    let voted = vote(&[0], &[0, 4], |i| boxes[i], |i| scores[i], &vote_options(1.0));
+    let voted = vote(&[0], [0, 4], |i| boxes[i], |i| scores[i], &vote_options(1.0));
     assert_eq!(voted[0], boxes[0]);
 }
