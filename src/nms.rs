@@ -213,7 +213,7 @@ pub struct VoteOptions {
     pub min_weight: f32,
 }
 
-/// Default IoU of a voter with the box it votes for, `detect`'s default. Chosen on held-out frames (204 of
+/// Default IoU of a voter with the box it votes for, `detect`'s default. Chosen on held-out frames (200 of
 /// the cascade set, seeds 1700–1703 — no test frame —, the ten large categories' first-stage detections of
 /// the shipped models): Gidaris & Komodakis's 0.5 gained ten-large mAP@0.25 +0.5 [0.1, 1.0] over no voting,
 /// and 0.3 another +0.5 [0.1, 1.1] over 0.5 (on 159 of those frames; README, "Box voting").
@@ -233,7 +233,9 @@ pub const DEFAULT_VOTE_IOU: f32 = 0.3;
 /// skipped, so the yaw is the kept box's and the mean is of centres and sizes only). `candidates` may
 /// come in any order — it is the order of the sums, so a fixed order gives the same boxes bit for bit —
 /// and should include `kept` (a kept box votes for itself, with weight 1, only through `candidates`). The
-/// score and every other field of a kept detection stay its own.
+/// score and every other field of a kept detection stay its own. A weak kept box beside a strong one can
+/// be voted onto it (the strong one's boxes vote for it with weights above 1), so the voted boxes need
+/// not keep the NMS's promise: `detect` runs the NMS over them again (`crate::detect`, `model_detections`).
 pub fn vote(
     kept: &[usize],
     candidates: impl IntoIterator<Item = usize>,

@@ -559,6 +559,13 @@ fn bench_detect_times_the_detection_the_cli_makes() {
     assert_eq!(pass["vs_one_at_a_time"]["frames_compared"], 2);
     let wall = pass["wall_s"].as_f64().unwrap();
     assert!(wall > 0.0 && (pass["s_per_frame"].as_f64().unwrap() - wall / 2.0).abs() <= 1e-12 * wall, "{pass}");
+    // `detect`'s default box voting, reported as written; `--box-voting off` reaches the detections' options.
+    assert_eq!(report["box_voting"], "0.3", "the default is detect's");
+    let off =
+        run(&["--cpu", "bench", "--detect", SAMPLE, "--models", m, "--json", "--warmup", "0", "--box-voting", "off"]);
+    assert!(off.status.success(), "{}", String::from_utf8_lossy(&off.stderr));
+    let off: serde_json::Value = serde_json::from_slice(&off.stdout).unwrap();
+    assert_eq!(off["box_voting"], serde_json::Value::Null);
 }
 
 /// The GPU path (the fast kernel forced on, lavapipe included) detects the same boxes with the same scores
@@ -641,8 +648,9 @@ fn path_comparison_allows_reordered_near_ties_and_alternate_sizes_only() {
 
 #[test]
 fn box_voting_moves_the_kept_boxes_only() {
-    // Voting keeps the NMS's choice (categories, scores, yaws, order) and changes centres and sizes; at
-    // IoU 1 only a box itself (and exact duplicates) votes, so nothing moves.
+    // Voting keeps the NMS's choice (categories, scores, yaws, order) and changes centres and sizes, then
+    // drops the voted boxes that the NMS, run again, suppresses; at IoU 1 only a box itself (and exact
+    // duplicates) votes, so nothing moves.
     let frame = Frame::read(SAMPLE, DepthSource::Raw).unwrap();
     let model = density_model(FeaturePath::Fast, 0.2);
     let plain = DetectOptions { max_per_category: 8, box_voting: None, ..DetectOptions::default() };
@@ -651,15 +659,24 @@ fn box_voting_moves_the_kept_boxes_only() {
     assert!(unvoted.len() >= 3, "{} detections", unvoted.len());
     let same = detect(&DetectOptions { box_voting: Some(1.0), ..plain }).unwrap().detections;
     assert_eq!(same, unvoted);
+    assert!(unvoted.windows(2).all(|w| w[0].score > w[1].score), "distinct scores, best first");
     let voted = detect(&DetectOptions { box_voting: Some(0.5), ..plain }).unwrap().detections;
-    assert_eq!(voted.len(), unvoted.len());
+    // The voted detections are the unvoted ones in the same order, some left out: each one's twin is the
+    // next unvoted detection with its score and yaw (the scores of this frame's kept boxes are distinct).
+    let mut twins = unvoted.iter();
     let mut moved = 0;
-    for (v, u) in voted.iter().zip(&unvoted) {
-        assert_eq!((&v.category, v.score, v.yaw), (&u.category, u.score, u.yaw));
+    for v in &voted {
+        let u = twins.find(|u| (&u.category, u.score, u.yaw) == (&v.category, v.score, v.yaw)).expect("a twin");
         // A weighted mean of boxes that each overlap the kept box by IoU ≥ 0.5 stays near it.
         assert!(iou_3d(&v.cuboid(), &u.cuboid()) >= 0.5, "{v:?} against {u:?}");
         moved += usize::from(v.centre != u.centre || v.size != u.size);
     }
     assert!(moved > 0, "no box moved");
+    // The NMS's promise holds for the voted boxes: no two of a category above its IoU.
+    for (i, a) in voted.iter().enumerate() {
+        for b in &voted[i + 1..] {
+            assert!(a.category != b.category || iou_3d(&a.cuboid(), &b.cuboid()) <= plain.nms_iou, "{a:?} {b:?}");
+        }
+    }
     assert!(DetectOptions { box_voting: Some(0.0), ..plain }.validate().is_err());
 }

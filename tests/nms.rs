@@ -179,3 +179,27 @@ fn voting_stops_below_the_weight_floor_and_each_kept_box_gets_its_own_voters() {
     let voted = vote(&[0], [0, 4], |i| boxes[i], |i| scores[i], &vote_options(1.0));
     assert_eq!(voted[0], boxes[0]);
 }
+
+#[test]
+fn voting_can_move_a_weak_kept_box_onto_a_strong_one_which_the_nms_run_again_drops() {
+    // A (x = 0, score 5) and B (x = 0.8, score 0) are both kept by the NMS at 0.15 (IoU 0.2 / 1.8 = 0.11);
+    // C (x = 0.4, score 5 − 10⁻³, so that A is kept first) is suppressed by A (IoU 0.6 / 1.4 = 0.43). At
+    // voting IoU 0.3, C votes for both (IoU 0.43 with each): for A with weight e^−0.001 ≈ 1 (A moves to
+    // x ≈ 0.2), for B with weight e^4.999 ≈ 148 against B's own 1, so B moves to x ≈ 0.403 — onto A's
+    // object: IoU ≈ 0.80 / 1.20 with the voted A. The NMS run again over the voted boxes (as `detect`
+    // does) keeps A alone.
+    let boxes = [unit_box(0.0, 0.0), unit_box(0.8, 0.0), unit_box(0.4, 0.0)];
+    let scores = [5.0, 0.0, 5.0 - 1e-3];
+    let kept = suppress(&boxes, &scores, &options(DEFAULT_NMS_IOU));
+    assert_eq!(kept, vec![0, 1]);
+    let voting = VoteOptions { iou: 0.3, slope: 1.0, min_weight: 1e-3 };
+    let voted = vote(&kept, [0, 1, 2], |i| boxes[i], |i| scores[i], &voting);
+    let (wa, wb) = ((-1e-3f32).exp(), (5.0f32 - 1e-3).exp());
+    assert!((voted[0].centre.x - 0.4 * wa / (1.0 + wa)).abs() < 1e-5, "{:?}", voted[0]);
+    assert!((voted[1].centre.x - (0.8 + 0.4 * wb) / (1.0 + wb)).abs() < 1e-5, "{:?}", voted[1]);
+    assert!(iou_3d(&voted[0], &voted[1]) > 0.6, "{}", iou_3d(&voted[0], &voted[1]));
+    let detections: Vec<Detection> =
+        voted.iter().zip(&kept).map(|(c, &k)| Detection::new("bed", c, scores[k])).collect();
+    let again = nms_detections(&detections, &options(DEFAULT_NMS_IOU));
+    assert_eq!(again, vec![detections[0].clone()]);
+}

@@ -28,6 +28,7 @@ use cog_gpu::features::preprocess::NormalSearch;
 use cog_gpu::features::window::{category_sizes, DEFAULT_SIZE_STATS};
 use cog_gpu::features::{budget, cpu, FeatureLayout, Hypothesis, PreparedWindow};
 use cog_gpu::frame::{DepthSource, Frame};
+use cog_gpu::nms::DEFAULT_VOTE_IOU;
 
 /// The real frame benchmarked when no `--frame` is given (until the synthetic standard frame exists).
 pub const DEFAULT_FRAME: &str = "../shared/data/sunrgbd/kv1-b3dodata-img_0063";
@@ -88,6 +89,9 @@ pub struct Args {
     /// With --detect: how the normals find their neighbours (as `detect --normals`; default: the models').
     #[arg(long, value_parser = options::normal_search, requires = "detect")]
     pub normals: Option<NormalSearch>,
+    /// With --detect: box voting after the NMS (as `detect --box-voting`: an IoU in (0, 1], or `off`).
+    #[arg(long, default_value_t = options::BoxVoting(Some(DEFAULT_VOTE_IOU)), value_parser = options::box_voting, requires = "detect")]
+    pub box_voting: options::BoxVoting,
     /// With --detect: timed detections of each frame.
     #[arg(long, default_value_t = 1, value_parser = options::at_least_one)]
     pub repeat: usize,

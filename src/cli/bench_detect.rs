@@ -106,7 +106,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         backends.push(Backend::Cpu);
     }
     let normals = super::detect::normal_search_for(&models_dir, &models, args.normals)?;
-    let detect_options = DetectOptions { normals, ..DetectOptions::default() };
+    let detect_options = DetectOptions { normals, box_voting: args.box_voting.0, ..DetectOptions::default() };
     let bench = Bench { models: &models, cascade: cascade.as_ref(), layout_model: layout_model.as_ref() };
     let mut paths = serde_json::Map::new();
     let mut detections_per_path = Vec::new();
@@ -172,6 +172,8 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         "models": models.iter().map(|m| m.category.as_str()).collect::<Vec<_>>(),
         "steps": models.iter().map(|m| m.window.step).collect::<Vec<_>>(),
         "normals": detect_options.normals.name(),
+        // The IoU as the option is written ("0.3", not the f32's 0.30000001192092896), null when off.
+        "box_voting": detect_options.box_voting.map(|iou| iou.to_string()),
         "layout_model": layout_model.is_some(),
         "cascade": cascade.is_some(),
         "paths": paths,
@@ -314,7 +316,7 @@ fn mean_times(times: &[FrameTimes]) -> serde_json::Value {
 /// The text report: one row of mean stage seconds per path, and the GPU/CPU ratio.
 fn print_report(report: &serde_json::Value) {
     println!(
-        "{} frame(s) × {} repeat(s) after {} warm-up detection(s); models: {}; layout model: {}; cascade: {}",
+        "{} frame(s) × {} repeat(s) after {} warm-up detection(s); models: {}; layout model: {}; cascade: {}; box voting: {}",
         report["frames"],
         report["repeat"],
         report["warmup"],
@@ -323,7 +325,8 @@ fn print_report(report: &serde_json::Value) {
             .map(|m| m.iter().filter_map(|c| c.as_str()).collect::<Vec<_>>().join(","))
             .unwrap_or_default(),
         report["layout_model"],
-        report["cascade"]
+        report["cascade"],
+        report["box_voting"].as_str().map_or("off".to_string(), |iou| format!("IoU {iou}"))
     );
     let columns = [
         "read_s",

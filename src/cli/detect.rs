@@ -60,7 +60,8 @@ pub struct Args {
     pub nms_iou: f32,
     /// Box voting after the NMS: each kept box becomes the weighted mean of the window's boxes whose 3D IoU
     /// with it is at least this IoU (in (0, 1]; weights: each box's odds of being right against the kept
-    /// box's), or `off`: the kept boxes as the window made them. README, "Box voting"
+    /// box's), then the NMS again over the voted boxes (one that moved onto a better one is dropped), or
+    /// `off`: the kept boxes as the window made them. README, "Box voting"
     #[arg(long, default_value_t = options::BoxVoting(Some(DEFAULT_VOTE_IOU)), value_parser = options::box_voting)]
     pub box_voting: options::BoxVoting,
     /// Detections kept per category and frame.
@@ -462,8 +463,10 @@ fn run_fingerprint(
     if options.normals != NormalSearch::KdTree {
         parts.push(format!("normals: {}", options.normals.name()));
     }
+    // Since 2026-12-05 the voted boxes go through the NMS again: files voted before then (a part without
+    // it) do not resume.
     if let Some(iou) = options.box_voting {
-        parts.push(format!("box voting: {iou}"));
+        parts.push(format!("box voting: {iou}, then NMS"));
     }
     let hash = parts.iter().fold(cog_gpu::learn::checkpoint::FNV_OFFSET, |hash, part| {
         // Each part's length first, so that no two different lists of parts hash the same bytes.
