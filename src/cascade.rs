@@ -68,6 +68,22 @@
 //! test set's highest-scoring false positives of the bathtub, door, lamp, sink and TV are mostly in frames
 //! without the category at all (README, "Diagnosis"). A maximum, not a sum, so that the many weak
 //! detections every model leaves in every frame do not add up to a room. `dim = V5's + K`.
+//! Then (feature set v7, [`V7_FEATURES`], `cascade --features v7`; our addition) the **cross scores**:
+//!
+//! ```text
+//!   ++ for each c of CROSS_SCORE_CATEGORIES: clamp(x_c, −5, 5)
+//! ```
+//!
+//! `x_c` is the raw score of category `c`'s first-stage model on `i`'s own box
+//! ([`Detection::cross_scores`], computed by `detect`, [`crate::detect::cross_scores`]), for a detection of
+//! one of the eleven [`CROSS_SCORE_CATEGORIES`] (the ten large and the counter); zeros for the others. The
+//! diagnosis puts most of the large categories' highest-scoring false positives on objects of another of
+//! them (tables on desks, dressers on counters, sofas on beds), and the overlap part sees the other
+//! category only where its model kept a box of its own sizes there; the cross part asks every model about
+//! this very box. Clamped to ±5 (raw scores of the shipped models lie within about ±3 on their
+//! detections) so that a box no model was made for cannot dominate ψ. `dim = V6's + 11`. A detection of
+//! those categories without all eleven scores is an error for a v7 stage (files written before the cross
+//! scores existed, or with a subset of the models): detect them again.
 //! `D` ([`wall_context`]) is the smallest distance from a corner of the cuboid's footprint to a wall
 //! segment of the polygon, negative when the cuboid's centre lies outside the polygon; the closest wall
 //! is the segment that gives it. `A` is the angle between the cuboid's width axis and that wall, folded
@@ -114,7 +130,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::calibration::{fit_logistic, Calibration};
-use crate::category::{category_index, LARGE_CATEGORIES};
+use crate::category::{category_index, CROSS_SCORE_CATEGORIES, LARGE_CATEGORIES};
 use crate::error::{Error, Result};
 use crate::eval::{
     average_precision, bootstrap_frames, percentile_interval, true_positives_in_input_order, Bootstrap, Detection,
@@ -135,6 +151,10 @@ pub const VERSION: u32 = 1;
 pub const V5_FEATURES: &str = "object-overlap-layout-geometry-v5";
 /// Name of the feature set that adds the scene part to v5 (module doc; `cascade --features v6`).
 pub const V6_FEATURES: &str = "object-overlap-layout-geometry-scene-v6";
+/// Name of the feature set that adds the cross scores to v6 (module doc; `cascade --features v7`).
+pub const V7_FEATURES: &str = "object-overlap-layout-geometry-scene-cross-v7";
+/// The largest magnitude of a cross score in ψ (module doc).
+pub const CROSS_SCORE_CLAMP: f32 = 5.0;
 /// The feature set without them: ψ's first part, a prefix of [`V5_FEATURES`]'s (the shipped cascade's).
 pub const V4_FEATURES: &str = "object-overlap-layout-v4";
 /// The feature set `cascade` trains by default ([`FeatureSet::DEFAULT`]): v4 until v5 has been measured
@@ -179,6 +199,8 @@ pub enum FeatureSet {
     V5,
     /// Also the scene part ([`V6_FEATURES`]).
     V6,
+    /// Also the cross scores ([`V7_FEATURES`]).
+    V7,
 }
 
 impl FeatureSet {
@@ -191,6 +213,7 @@ impl FeatureSet {
             FeatureSet::V4 => V4_FEATURES,
             FeatureSet::V5 => V5_FEATURES,
             FeatureSet::V6 => V6_FEATURES,
+            FeatureSet::V7 => V7_FEATURES,
         }
     }
 
@@ -204,6 +227,7 @@ impl FeatureSet {
     /// build cannot compute it.
     pub fn named(name: &str, all_large: bool) -> Option<FeatureSet> {
         match name {
+            V7_FEATURES => Some(FeatureSet::V7),
             V6_FEATURES => Some(FeatureSet::V6),
             V5_FEATURES => Some(FeatureSet::V5),
             V4_FEATURES => Some(FeatureSet::V4),
@@ -212,12 +236,13 @@ impl FeatureSet {
         }
     }
 
-    /// The short name `cascade --features` takes: `v4`, `v5` or `v6`.
+    /// The short name `cascade --features` takes: `v4`, `v5`, `v6` or `v7`.
     pub fn short_name(self) -> &'static str {
         match self {
             FeatureSet::V4 => "v4",
             FeatureSet::V5 => "v5",
             FeatureSet::V6 => "v6",
+            FeatureSet::V7 => "v7",
         }
     }
 
@@ -229,6 +254,7 @@ impl FeatureSet {
             FeatureSet::V4 => v4,
             FeatureSet::V5 => v5,
             FeatureSet::V6 => v5 + context_categories,
+            FeatureSet::V7 => v5 + context_categories + CROSS_SCORE_CATEGORIES.len(),
         }
     }
 }
@@ -595,6 +621,11 @@ impl Cascade {
         Ok(merged)
     }
 
+    /// Whether a stage reads the cross scores (feature set v7): `detect` computes them then.
+    pub fn reads_cross_scores(&self) -> bool {
+        self.stages.values().any(|stage| self.stage_feature_set(stage).is_some_and(|set| set >= FeatureSet::V7))
+    }
+
     /// Whether every context category is large (the earlier feature sets are read only then).
     fn all_large(&self) -> bool {
         self.categories.iter().all(|c| is_large(c))
@@ -614,6 +645,9 @@ impl Cascade {
                 Error::Input(format!("unknown feature set '{}'", stage.features.as_deref().unwrap_or(&self.features)))
             })?;
             widest = widest.max(set);
+        }
+        if widest >= FeatureSet::V7 {
+            check_cross_scores(detections)?;
         }
         let features = frame_context_features(detections, &self.categories, room, widest);
         let rescored: Vec<Option<(f32, f32)>> = (0..detections.len())
@@ -766,7 +800,53 @@ fn context_features(frame: &FrameContext, i: usize, room: Option<&Room>, set: Fe
             *value = scene_confidence(top, i);
         }
     }
+    if set >= FeatureSet::V7 {
+        let start = FeatureSet::V6.dim(categories.len());
+        psi[start..start + CROSS_SCORE_CATEGORIES.len()].copy_from_slice(&cross_features(&detections[i]));
+    }
     psi
+}
+
+/// The cross part of ψ for `detection` (module doc): its [`Detection::cross_scores`] in
+/// [`CROSS_SCORE_CATEGORIES`]' order, clamped to ±[`CROSS_SCORE_CLAMP`]; zeros for a detection of another
+/// category. A missing score reads 0 here: [`check_cross_scores`] refuses such detections before.
+fn cross_features(detection: &Detection) -> [f64; CROSS_SCORE_CATEGORIES.len()] {
+    let mut out = [0.0; CROSS_SCORE_CATEGORIES.len()];
+    if !CROSS_SCORE_CATEGORIES.contains(&detection.category.as_str()) {
+        return out;
+    }
+    if let Some(scores) = &detection.cross_scores {
+        for (value, category) in out.iter_mut().zip(CROSS_SCORE_CATEGORIES) {
+            if let Some(&raw) = scores.get(category) {
+                *value = f64::from(raw.clamp(-CROSS_SCORE_CLAMP, CROSS_SCORE_CLAMP));
+            }
+        }
+    }
+    out
+}
+
+/// Errors unless every detection of [`CROSS_SCORE_CATEGORIES`] carries a finite cross score of each of
+/// them (what a v7 stage reads); the message names the first that does not and how to get them.
+pub fn check_cross_scores(detections: &[Detection]) -> Result<()> {
+    for d in detections.iter().filter(|d| CROSS_SCORE_CATEGORIES.contains(&d.category.as_str())) {
+        let missing = match &d.cross_scores {
+            None => Some("has no cross_scores".to_string()),
+            Some(scores) => CROSS_SCORE_CATEGORIES.iter().find_map(|c| match scores.get(*c) {
+                None => Some(format!("has no cross score of the '{c}' model")),
+                Some(x) if !x.is_finite() => Some(format!("has a cross score of the '{c}' model that is not finite")),
+                Some(_) => None,
+            }),
+        };
+        if let Some(problem) = missing {
+            return Err(Error::Input(format!(
+                "a '{}' detection {problem}: feature set v7 reads the scores of the {} models {} on every                  detection of theirs; detect with all of them and this build (detect --no-cascade writes them)",
+                d.category,
+                CROSS_SCORE_CATEGORIES.len(),
+                CROSS_SCORE_CATEGORIES.join(", ")
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// A category's two most confident detections in a frame, `(confidence, index)`, best first (ties: the

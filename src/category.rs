@@ -27,6 +27,15 @@ pub const CATEGORIES: [&str; 19] = [
 /// The ten large categories of the SUN RGB-D 3D detection benchmark: the first ten of [`CATEGORIES`].
 pub const LARGE_CATEGORIES: &[&str] = CATEGORIES.split_at(10).0;
 
+/// The categories whose models score each other's detections for the context cascade's cross part
+/// (`crate::detect::cross_scores`, `crate::cascade`'s feature set v7; our addition, not in the paper): the
+/// ten large categories and the counter — the furniture that stands on the floor, whose detections the
+/// diagnosis finds taken for one another most often (tables for desks, dressers for counters, sofas for
+/// beds). Chosen as the set of the categories confused with each other, before any measurement of the
+/// cross part; kept fixed so that ψ has the same length for every cascade.
+pub const CROSS_SCORE_CATEGORIES: [&str; 11] =
+    ["bed", "chair", "sofa", "table", "desk", "toilet", "bathtub", "dresser", "nightstand", "bookshelf", "counter"];
+
 /// The categories whose objects carry a support surface that other objects stand on (paper §4: "beds,
 /// tables, desks, dressers, nightstands and the like"; the like, here: a sofa's seat, which carries
 /// cushions and pillows, and a counter's top, which carries sinks): detections of these report a surface

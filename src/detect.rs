@@ -27,7 +27,7 @@ use image::RgbImage;
 use rayon::prelude::*;
 
 use crate::backend::{Backend, FastJob};
-use crate::category::{SurfaceCategories, SURFACE_CATEGORIES};
+use crate::category::{SurfaceCategories, CROSS_SCORE_CATEGORIES, SURFACE_CATEGORIES};
 use crate::draw::{
     category_colour, contrasting, draw_cuboid_with, draw_label, label_size, place_labels, shade_convex_polygon, Colour,
     LabelBox,
@@ -35,15 +35,18 @@ use crate::draw::{
 use crate::error::{Error, Result};
 use crate::eval::{Detection, FrameDetections};
 use crate::features::budget;
+use crate::features::cpu;
 use crate::features::fast::FastEngine;
 use crate::features::hypotheses::{
     free_bottoms, windows, FrameYaws, HypothesisSet, Support, SupportSurface, WindowOptions, WindowRequest,
+    DEFAULT_STEP,
 };
 use crate::features::preprocess::NormalSearch;
+use crate::features::scene::rotate;
 use crate::features::surface::{best_slice, measured_surface_height, refined_surface_height, SurfaceEngine};
 use crate::features::{FeatureScene, Hypothesis, Preprocessed};
 use crate::frame::Frame;
-use crate::geometry::Camera;
+use crate::geometry::{Camera, Cuboid};
 use crate::model::{window_scenes, FeaturePath, Model, SceneKey};
 use crate::nms::{nms_detections, suppress_in_order, vote, NmsOptions, VoteOptions, DEFAULT_NMS_IOU, DEFAULT_VOTE_IOU};
 
@@ -76,6 +79,11 @@ pub struct DetectOptions {
     /// `nms_iou`, since 2026-12-05: a voted box that moved onto a better one is dropped); `None`: the kept
     /// hypotheses' own boxes (the only behaviour before 2026-12-04). Default [`DEFAULT_VOTE_IOU`].
     pub box_voting: Option<f32>,
+    /// Whether every detection of [`CROSS_SCORE_CATEGORIES`] gets the raw scores of those categories'
+    /// models on its box ([`cross_scores`]; what the context cascade's feature set v7 reads). Default
+    /// `false`: the CLI turns it on for first-stage files (`detect --no-cascade`, on which a cascade may be
+    /// trained) and when the cascade it applies reads them.
+    pub cross_scores: bool,
 }
 
 impl Default for DetectOptions {
@@ -89,6 +97,7 @@ impl Default for DetectOptions {
             support_min_score: DEFAULT_SUPPORT_MIN_SCORE,
             normals: NormalSearch::default(),
             box_voting: Some(DEFAULT_VOTE_IOU),
+            cross_scores: false,
         }
     }
 }
@@ -392,6 +401,8 @@ pub struct DetectStages {
     pub select_s: f64,
     /// 3D NMS and the calibration of the survivors.
     pub nms_s: f64,
+    /// The detections' [`cross_scores`] (0 unless [`DetectOptions::cross_scores`]).
+    pub cross_scores_s: f64,
     /// Hypotheses scored, over all models.
     pub hypotheses: usize,
     /// Process CPU seconds (user + system, summed over all threads, the GPU driver's included) during each
@@ -404,6 +415,7 @@ pub struct DetectStages {
     pub score_cpu_s: f64,
     pub select_cpu_s: f64,
     pub nms_cpu_s: f64,
+    pub cross_scores_cpu_s: f64,
 }
 
 /// A stage of [`DetectStages`].
@@ -415,12 +427,19 @@ pub enum Stage {
     Score,
     Select,
     Nms,
+    CrossScores,
 }
 
 impl DetectStages {
     /// The sum of the wall-clock stages (`tables_thread_s` is inside `score_s`).
     pub fn total_s(&self) -> f64 {
-        self.yaw_grids_s + self.window_s + self.lattices_s + self.score_s + self.select_s + self.nms_s
+        self.yaw_grids_s
+            + self.window_s
+            + self.lattices_s
+            + self.score_s
+            + self.select_s
+            + self.nms_s
+            + self.cross_scores_s
     }
 
     /// Adds `lap` to `stage`'s wall-clock and CPU seconds.
@@ -432,6 +451,7 @@ impl DetectStages {
             Stage::Score => (&mut self.score_s, &mut self.score_cpu_s),
             Stage::Select => (&mut self.select_s, &mut self.select_cpu_s),
             Stage::Nms => (&mut self.nms_s, &mut self.nms_cpu_s),
+            Stage::CrossScores => (&mut self.cross_scores_s, &mut self.cross_scores_cpu_s),
         };
         *wall += lap.wall_s;
         *cpu += lap.cpu_s;
@@ -572,7 +592,77 @@ pub fn detect_preprocessed_timed(
     backend.end_frame();
     calibrate(&mut detections, models);
     stages.add(Stage::Nms, lap());
+    if options.cross_scores {
+        cross_scores(&pre, models, &mut detections);
+        stages.add(Stage::CrossScores, lap());
+    }
     Ok(FrameDetections { frame: name.to_string(), detections })
+}
+
+/// Sets the [`Detection::cross_scores`] of every detection of [`CROSS_SCORE_CATEGORIES`]: the raw score
+/// `w·φ + bias` of each of `models` of those categories on the detection's own box (our addition, read by
+/// the context cascade's feature set v7, `crate::cascade`): whether the box looks more like a table or
+/// like a desk to the two models — the first stage's diagnosis finds most of the high-scoring false
+/// positives of the large categories on objects of another one, and each model only ever scores boxes of
+/// its own sizes. Choices:
+/// * The **exact** feature path ([`crate::features::cpu`]) on the CPU, whatever the model's own path and
+///   the backend: a detection's box — voted, so neither on a model's lattice nor of its sizes — is no
+///   hypothesis of the fast path's tables, and a frame has only a few hundred such boxes (about 0.8 s of
+///   the 2 cores for a 320×240 frame's ~170 boxes and eleven models). The box's own model scores it too
+///   (its exact-path score, next to the fast-path `raw_score`).
+/// * The **cuboid** weights alone: a model with latent support surfaces (the table) is scored without its
+///   surface part.
+/// * Models of other categories are not used; a category of [`CROSS_SCORE_CATEGORIES`] without a model in
+///   `models` is missing from the maps (the cascade's v7 refuses such detections).
+///
+/// Each box's score is computed on its own, so the scores are the same on any number of threads.
+pub fn cross_scores(pre: &Preprocessed, models: &[Model], detections: &mut [Detection]) {
+    let scorers: Vec<&Model> =
+        models.iter().filter(|m| CROSS_SCORE_CATEGORIES.contains(&m.category.as_str())).collect();
+    let chosen: Vec<usize> =
+        (0..detections.len()).filter(|&i| CROSS_SCORE_CATEGORIES.contains(&detections[i].category.as_str())).collect();
+    if scorers.is_empty() || chosen.is_empty() {
+        return;
+    }
+    // One yaw grid per distinct yaw of the chosen boxes, in ascending order.
+    let mut yaws: Vec<f32> = chosen.iter().map(|&i| detections[i].yaw).collect();
+    yaws.sort_by(f32::total_cmp);
+    yaws.dedup_by(|a, b| a.to_bits() == b.to_bits());
+    let scene = FeatureScene::new(pre.clone(), &yaws, DEFAULT_STEP);
+    let hypotheses: Vec<Hypothesis> = chosen
+        .iter()
+        .map(|&i| {
+            let d = &detections[i];
+            let yaw_index = yaws.binary_search_by(|y| y.total_cmp(&d.yaw)).expect("every chosen yaw has a grid");
+            box_hypothesis(&scene, yaw_index, &d.cuboid())
+        })
+        .collect();
+    let per_model: Vec<Vec<f32>> = scorers
+        .iter()
+        .map(|model| {
+            let (scores, _) = cpu::scores(&scene, &model.layout, &hypotheses, std::slice::from_ref(&model.weights));
+            scores.into_iter().map(|s| s + model.bias).collect()
+        })
+        .collect();
+    for (h, &i) in chosen.iter().enumerate() {
+        let map = scorers.iter().zip(&per_model).map(|(m, scores)| (m.category.clone(), scores[h])).collect();
+        detections[i].cross_scores = Some(map);
+    }
+}
+
+/// The cuboid `c` as a hypothesis of `scene`'s yaw grid `yaw_index` (whose yaw must be `c`'s): its centre
+/// rotated into the grid's (s, t) frame, its bottom, its size ([`Hypothesis::cuboid`] inverted).
+pub fn box_hypothesis(scene: &FeatureScene, yaw_index: usize, c: &Cuboid) -> Hypothesis {
+    let grid = &scene.yaws[yaw_index];
+    let [s, t] = rotate(&c.centre, grid.sin, grid.cos);
+    Hypothesis {
+        yaw_index: yaw_index as u16,
+        size_index: 0,
+        centre: glam::Vec2::new(s, t),
+        bottom: c.centre.z - 0.5 * c.size.z,
+        size: c.size,
+        points_inside: 0,
+    }
 }
 
 /// Default of [`DetectOptions::support_min_score`].
@@ -781,6 +871,12 @@ pub fn replacement_problem(categories: &[String], models: &[Model]) -> Option<St
 /// set and merging it gives, detection for detection, what detecting the whole set again would give
 /// (`tests/merge_detections.rs` checks it against a full detection), at the cost of one model's detection.
 /// It requires [`replacement_problem`] to be `None`.
+///
+/// The [`Detection::cross_scores`] hold every cross-category model's score of each box, so replacing a
+/// model of [`CROSS_SCORE_CATEGORIES`] makes those of the kept detections stale (the old model's), and
+/// those of the update may miss the models it was not run with: then the merged detections carry none
+/// (a cascade with a cross stage refuses them; detect the frames again for one). Replacing only other
+/// categories keeps them, as detecting everything again would give them.
 pub fn replace_categories(
     base: &[Detection],
     update: &[Detection],
@@ -800,6 +896,11 @@ pub fn replace_categories(
             .then(b.raw_score.unwrap_or(b.score).total_cmp(&a.raw_score.unwrap_or(a.score)))
             .then(a.category.cmp(&b.category))
     });
+    if categories.iter().any(|c| CROSS_SCORE_CATEGORIES.contains(&c.as_str())) {
+        for d in &mut merged {
+            d.cross_scores = None;
+        }
+    }
     merged
 }
 

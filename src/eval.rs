@@ -14,6 +14,7 @@
 //!
 //! A category with no ground truth in the evaluated images has no AP (`None`) and is left out of the mAP.
 
+use std::collections::BTreeMap;
 use std::path::Path;
 
 use glam::Vec3;
@@ -58,6 +59,12 @@ pub struct Detection {
     /// cuboid's seven horizontal slices, `h` = 0 (bottom) … 6, the latent variable of its score.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub latent_slice: Option<u8>,
+    /// For a detection of one of [`crate::category::CROSS_SCORE_CATEGORIES`], when `detect` computed them
+    /// ([`crate::detect::cross_scores`]): the raw score (`w·φ + bias`, exact path, cuboid weights) of each
+    /// of those categories' models on this detection's box, by category — what the context cascade's
+    /// feature set v7 reads.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cross_scores: Option<BTreeMap<String, f32>>,
 }
 
 impl Detection {
@@ -77,6 +84,7 @@ impl Detection {
             context_score: None,
             surface_z: None,
             latent_slice: None,
+            cross_scores: None,
         }
     }
 }

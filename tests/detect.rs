@@ -462,7 +462,15 @@ fn timed_detection_is_detection_and_accumulates_its_stages() {
             detect_preprocessed_timed(&frame.name, pre.clone(), &models, Backend::Cpu, &options, &mut stages).unwrap();
         assert_eq!(timed, plain, "{path:?}");
         let once = stages;
-        let parts = [once.yaw_grids_s, once.window_s, once.lattices_s, once.score_s, once.select_s, once.nms_s];
+        let parts = [
+            once.yaw_grids_s,
+            once.window_s,
+            once.lattices_s,
+            once.score_s,
+            once.select_s,
+            once.nms_s,
+            once.cross_scores_s,
+        ];
         assert!(parts.iter().all(|&s| s >= 0.0) && once.score_s > 0.0, "{once:?}");
         assert!((once.total_s() - parts.iter().sum::<f64>()).abs() < 1e-12);
         assert!(once.hypotheses > 0);
@@ -520,6 +528,7 @@ fn bench_detect_times_the_detection_the_cli_makes() {
             "score_s",
             "select_s",
             "nms_s",
+            "cross_scores_s",
             "cascade_s",
             "layout_s",
             "output_s",
@@ -537,6 +546,7 @@ fn bench_detect_times_the_detection_the_cli_makes() {
             "score_cpu_s",
             "select_cpu_s",
             "nms_cpu_s",
+            "cross_scores_cpu_s",
             "layout_cpu_s",
         ];
         let cpu_parts: f64 = cpu_keys.iter().map(|k| stage(k)).sum();
@@ -680,4 +690,68 @@ fn box_voting_moves_the_kept_boxes_only() {
         }
     }
     assert!(DetectOptions { box_voting: Some(0.0), ..plain }.validate().is_err());
+}
+
+/// `cross_scores`: every detection of a cross category gets each cross-category model's exact-path score
+/// of its own box — checked against the independent density (points inside over the projected hull's area)
+/// for a density model and an affine copy of it, on voted boxes and on a box at a yaw of no grid —; other
+/// categories' detections and models take no part.
+#[test]
+fn cross_scores_are_each_models_score_of_the_box() {
+    let frame = Frame::read(SAMPLE, DepthSource::Raw).unwrap();
+    let bed = density_model(FeaturePath::Exact, 0.3);
+    let mut table = density_model(FeaturePath::Exact, 0.3);
+    table.category = "table".into();
+    table.weights[0] = 2.0;
+    table.bias = 0.5;
+    let mut lamp = density_model(FeaturePath::Exact, 0.3);
+    lamp.category = "lamp".into();
+    let options = DetectOptions { max_per_category: 4, ..DetectOptions::default() };
+    let mut detections = detect_frame(&frame, std::slice::from_ref(&bed), Backend::Cpu, &options).unwrap().detections;
+    assert!(!detections.is_empty());
+    let first = detections[0].cuboid();
+    let turned = cog_gpu::geometry::Cuboid::new(first.centre, first.size, first.yaw + 0.3);
+    detections.push(cog_gpu::eval::Detection::new("table", &turned, 0.1));
+    detections.push(cog_gpu::eval::Detection::new("lamp", &first, 0.1));
+    let pre = Preprocessed::from_frame(&frame).unwrap();
+    cog_gpu::detect::cross_scores(&pre, &[bed, lamp, table], &mut detections);
+    let camera = Camera::new(frame.intrinsics(), frame.rtilt());
+    for d in &detections {
+        if d.category == "lamp" {
+            assert!(d.cross_scores.is_none(), "a lamp is no cross category");
+            continue;
+        }
+        let scores = d.cross_scores.as_ref().expect("cross scores");
+        assert_eq!(scores.keys().collect::<Vec<_>>(), ["bed", "table"], "the lamp model takes no part");
+        let cuboid = d.cuboid();
+        let inside = pre.points.iter().filter(|p| cuboid.contains(**p)).count() as f32;
+        let area = projected_hull_area(&camera, &cuboid.corners()).unwrap();
+        let density = inside / area.max(1.0);
+        // Points exactly on a face may go either way between fixed-point and float membership.
+        let tolerance = 0.005 * density + 2.0 / area;
+        assert!((scores["bed"] - density).abs() <= tolerance, "{} vs {density}", scores["bed"]);
+        assert!((scores["table"] - (2.0 * density + 0.5)).abs() <= 2.0 * tolerance, "{} vs {density}", scores["table"]);
+    }
+}
+
+/// `detect --no-cascade` (first-stage files, on which a cascade may train) writes the cross scores; a run
+/// that applies no cascade reading them does not.
+#[test]
+fn first_stage_files_carry_the_cross_scores() {
+    let dir = tempfile::tempdir().unwrap();
+    let models = models_dir(dir.path());
+    for (extra, expected) in [(&["--no-cascade"][..], true), (&[][..], false)] {
+        let out = dir.path().join(format!("out-{expected}"));
+        let output = detect_samples(&models, &out, extra);
+        assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+        let text = std::fs::read_to_string(out.join("synth-bedroom-s52.json")).unwrap();
+        let file: FrameDetections = serde_json::from_str(&text).unwrap();
+        assert!(!file.detections.is_empty());
+        for d in &file.detections {
+            assert_eq!(d.cross_scores.is_some(), expected, "{extra:?}: {d:?}");
+            if let Some(scores) = &d.cross_scores {
+                assert_eq!(scores.keys().collect::<Vec<_>>(), ["bed"]);
+            }
+        }
+    }
 }

@@ -11,7 +11,7 @@
 //! |---|---|
 //! | `read_s` | reading the frame's files (`Frame::read`) |
 //! | `preprocess_s` | upright points, gradients, normals, floor (`Preprocessed::from_frame`) |
-//! | `yaw_grids_s`, `window_s`, `lattices_s`, `score_s`, `select_s`, `nms_s` | [`DetectStages`] |
+//! | `yaw_grids_s`, `window_s`, `lattices_s`, `score_s`, `select_s`, `nms_s`, `cross_scores_s` | [`DetectStages`] (`cross_scores_s`: 0 unless the cascade reads them) |
 //! | `cascade_s` | the context cascade's rescoring (0 without `cascade.json`) |
 //! | `layout_s` | the room layout (0 without `layout.json`) |
 //! | `output_s` | the detections file's JSON text and the overlay drawn in memory (no PNG encoding, no disk) |
@@ -23,7 +23,8 @@
 //!
 //! Beside each stage's wall-clock seconds, the process's CPU seconds over the same interval (user + system,
 //! all threads, `detect::process_cpu_seconds`): `preprocess_cpu_s` (reading included), `yaw_grids_cpu_s`,
-//! `window_cpu_s`, `lattices_cpu_s`, `score_cpu_s`, `select_cpu_s`, `nms_cpu_s`, `layout_cpu_s`, and `cpu_s`
+//! `window_cpu_s`, `lattices_cpu_s`, `score_cpu_s`, `select_cpu_s`, `nms_cpu_s`, `cross_scores_cpu_s`,
+//! `layout_cpu_s`, and `cpu_s`
 //! for the whole frame: how much of the machine a stage uses (on the GPU path, the CPU work beside the
 //! GPU's, which bounds how many frames per second the machine can detect with frames in flight).
 //!
@@ -106,7 +107,12 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         backends.push(Backend::Cpu);
     }
     let normals = super::detect::normal_search_for(&models_dir, &models, args.normals)?;
-    let detect_options = DetectOptions { normals, box_voting: args.box_voting.0, ..DetectOptions::default() };
+    let detect_options = DetectOptions {
+        normals,
+        box_voting: args.box_voting.0,
+        cross_scores: cascade.as_ref().is_some_and(cog_gpu::cascade::Cascade::reads_cross_scores),
+        ..DetectOptions::default()
+    };
     let bench = Bench { models: &models, cascade: cascade.as_ref(), layout_model: layout_model.as_ref() };
     let mut paths = serde_json::Map::new();
     let mut detections_per_path = Vec::new();
@@ -337,6 +343,7 @@ fn print_report(report: &serde_json::Value) {
         "score_s",
         "select_s",
         "nms_s",
+        "cross_scores_s",
         "cascade_s",
         "layout_s",
         "output_s",

@@ -165,12 +165,14 @@ pub fn read_labelled_detections(
             dataset.len()
         );
     }
-    Ok(LabelledDetections { frames: dataset.len(), truth, detections, rooms })
+    Ok(LabelledDetections { frames: dataset.len(), names, truth, detections, rooms })
 }
 
 /// Held-out frames' annotations and detections, frame by frame.
 pub struct LabelledDetections {
     pub frames: usize,
+    /// Each frame's name (its detections file is `<name>.json`).
+    pub names: Vec<String>,
     pub truth: Vec<Vec<Object>>,
     /// The predicted room of each frame's detections file (`"layout"`), when it has one.
     pub rooms: Vec<Option<cog_gpu::cascade::Room>>,

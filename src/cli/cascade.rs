@@ -1,5 +1,5 @@
 //! `cog-gpu cascade --data DIR --detections DIR [--models assets/models] [--out FILE] [--iou 0.25]
-//! [--categories a,b,...] [--features v4|v5|v6|best] [--keep any-gain|significant-gain] [--checkpoints DIR]
+//! [--categories a,b,...] [--features v4|v5|v6|v7|best|best-cross] [--keep any-gain|significant-gain] [--checkpoints DIR]
 //! [--keep-checkpoints]`: trains the context cascade ([`cog_gpu::cascade`]) on the first-stage detections
 //! of held-out frames and writes it as `<models>/cascade.json`, which `detect` then applies.
 //!
@@ -15,8 +15,8 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Context};
 use cog_gpu::cascade::{
-    stage_checkpoint_path, train_cascade_resumable, Cascade, CascadeFrame, CascadeTraining, FeatureSet, StageOutcome,
-    StageRule, FILE_NAME, GAIN_LEVEL,
+    check_cross_scores, stage_checkpoint_path, train_cascade_resumable, Cascade, CascadeFrame, CascadeTraining,
+    FeatureSet, StageOutcome, StageRule, FILE_NAME, GAIN_LEVEL,
 };
 
 use super::calibrate::{read_labelled_detections, HeldOutArgs, LabelledDetections};
@@ -31,8 +31,11 @@ pub struct Args {
     pub out: Option<PathBuf>,
     /// The feature set: v4 (the paper's overlap and layout features), v5 (also each detection's
     /// neighbourhood and its box's geometry), v6 (also the scene: each category's best detection in the
-    /// frame) or best (per category the one of the three with the highest cross-validated AP on these
-    /// frames; trains all three); README, "Context cascade".
+    /// frame), v7 (also the cross scores: every large category's and the counter's model scoring the
+    /// detection's own box; needs detections files that carry them, `detect --no-cascade` writes them),
+    /// best (per category the one of v4, v5 and v6 with the highest cross-validated AP on these frames;
+    /// trains all three; the shipped cascade's recipe) or best-cross (the same among v4 to v7); README,
+    /// "Context cascade".
     #[arg(long, value_enum, default_value = "v4")]
     pub features: FeaturesArg,
     /// Which trained stages the cascade keeps: any-gain (every stage whose cross-validated AP is above the
@@ -73,7 +76,9 @@ pub enum FeaturesArg {
     V4,
     V5,
     V6,
+    V7,
     Best,
+    BestCross,
 }
 
 impl FeaturesArg {
@@ -83,7 +88,9 @@ impl FeaturesArg {
             FeaturesArg::V4 => vec![FeatureSet::V4],
             FeaturesArg::V5 => vec![FeatureSet::V5],
             FeaturesArg::V6 => vec![FeatureSet::V6],
+            FeaturesArg::V7 => vec![FeatureSet::V7],
             FeaturesArg::Best => vec![FeatureSet::V4, FeatureSet::V5, FeatureSet::V6],
+            FeaturesArg::BestCross => vec![FeatureSet::V4, FeatureSet::V5, FeatureSet::V6, FeatureSet::V7],
         }
     }
 }
@@ -99,7 +106,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         );
     }
     let categories: Vec<String> = models.iter().map(|m| m.category.clone()).collect();
-    let LabelledDetections { frames, truth, detections, rooms } =
+    let LabelledDetections { frames, names, truth, detections, rooms } =
         read_labelled_detections(&held_out.data, &held_out.detections)?;
     let with_room = rooms.iter().filter(|r| r.is_some()).count();
     if with_room < frames {
@@ -135,6 +142,15 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         checkpoints.display()
     );
     let sets = args.features.sets();
+    if sets.contains(&FeatureSet::V7) {
+        // The cross part needs every cross-category detection's cross scores (`detect --no-cascade` writes
+        // them since 2026-12-05).
+        for (name, input) in names.iter().zip(&inputs) {
+            if let Err(problem) = check_cross_scores(&input.detections) {
+                bail!("{}: {problem}", held_out.detections.join(format!("{name}.json")).display());
+            }
+        }
+    }
     let (cascade, results, resumed) = train_cascade_resumable(
         &inputs,
         &categories,

@@ -110,7 +110,8 @@ pub struct Args {
     #[arg(long)]
     pub json: bool,
     /// Do not apply the context cascade (`<models>/cascade.json`) even when the models directory has one:
-    /// report the first-stage detections (as `cog-gpu cascade` needs for training).
+    /// report the first-stage detections (as `cog-gpu cascade` needs for training), each of the ten large
+    /// categories and the counter with its cross scores (`cog_gpu::detect::cross_scores`).
     #[arg(long)]
     pub no_cascade: bool,
     /// Also write `<frame>.ply`: the coloured upright point cloud with the overlay's cuboids (and the room,
@@ -295,6 +296,11 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
             .with_context(|| models_dir.join(format!("{}.json", model.category)).display().to_string())?;
     }
     let cascade = cascade_for(&models_dir, &models, args.no_cascade)?;
+    // First-stage files may train a cascade; a cascade with a cross stage reads them.
+    let detect_options = DetectOptions {
+        cross_scores: args.no_cascade || cascade.as_ref().is_some_and(Cascade::reads_cross_scores),
+        ..detect_options
+    };
     // The room layout comes with the detections when the models directory holds a layout model.
     let layout_model = super::layout::model_in_dir(&models_dir)?;
     let frames = frame_dirs(&args.frames)?;
@@ -458,8 +464,13 @@ fn run_fingerprint(
     // The options as they printed before `normals` existed (the default search adds nothing); another
     // search is a part of its own.
     // So is box voting.
-    let earlier = format!("{:?}", DetectOptions { normals: NormalSearch::KdTree, box_voting: None, ..*options });
-    parts.push(earlier.replace(", normals: KdTree", "").replace(", box_voting: None", ""));
+    let earlier = format!(
+        "{:?}",
+        DetectOptions { normals: NormalSearch::KdTree, box_voting: None, cross_scores: false, ..*options }
+    );
+    parts.push(
+        earlier.replace(", normals: KdTree", "").replace(", box_voting: None", "").replace(", cross_scores: false", ""),
+    );
     if options.normals != NormalSearch::KdTree {
         parts.push(format!("normals: {}", options.normals.name()));
     }
@@ -467,6 +478,10 @@ fn run_fingerprint(
     // it) do not resume.
     if let Some(iou) = options.box_voting {
         parts.push(format!("box voting: {iou}, then NMS"));
+    }
+    // Since 2026-12-05 first-stage files carry the cross scores: those written before do not resume.
+    if options.cross_scores {
+        parts.push("cross scores".to_string());
     }
     let hash = parts.iter().fold(cog_gpu::learn::checkpoint::FNV_OFFSET, |hash, part| {
         // Each part's length first, so that no two different lists of parts hash the same bytes.

@@ -121,6 +121,14 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
             categories.join(",")
         );
     }
+    if let Some(category) = categories.iter().find(|c| cog_gpu::category::CROSS_SCORE_CATEGORIES.contains(&c.as_str()))
+    {
+        log::warn!(
+            "the merged detections carry no cross scores: '{category}' is one of the categories whose models score \
+             each other's boxes, so the kept boxes' cross scores would be the old model's (a cascade with a v7 \
+             stage refuses them; detect the frames again for one)"
+        );
+    }
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     for (name, file) in &merged_files {
         let out = args.out.join(name);
