@@ -107,7 +107,8 @@
 //! [`crate::learn::binary_svm::train_linear_svm_from`]). A category whose cross-validated AP with
 //! the context is not above its first stage's gets no second stage (its scores are left alone rather
 //! than made worse). **Per-category feature sets** (`cascade --features best`; our addition): each
-//! category's stage is trained with v4, v5 and v6 and keeps the set whose cross-validated AP is highest
+//! category's stage is trained with v4, v5 and v6 (`--features best-cross`: and v7) and keeps the set whose
+//! cross-validated AP is highest
 //! (ties: the smaller set); the same folds and the same first-stage AP for all, so the choice is made on
 //! the cascade's own held-out frames, never on a test set. The file's `features` is then v4 and a stage of
 //! another set names its own ([`SecondStage::features`]); since each set's ψ is a prefix of the next one's,
