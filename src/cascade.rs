@@ -131,7 +131,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::calibration::{fit_logistic, Calibration};
-use crate::category::{category_index, CROSS_SCORE_CATEGORIES, LARGE_CATEGORIES};
+use crate::category::{category_index, is_cross_score_category, CROSS_SCORE_CATEGORIES, LARGE_CATEGORIES};
 use crate::error::{Error, Result};
 use crate::eval::{
     average_precision, bootstrap_frames, percentile_interval, true_positives_in_input_order, Bootstrap, Detection,
@@ -813,7 +813,7 @@ fn context_features(frame: &FrameContext, i: usize, room: Option<&Room>, set: Fe
 /// category. A missing score reads 0 here: [`check_cross_scores`] refuses such detections before.
 fn cross_features(detection: &Detection) -> [f64; CROSS_SCORE_CATEGORIES.len()] {
     let mut out = [0.0; CROSS_SCORE_CATEGORIES.len()];
-    if !CROSS_SCORE_CATEGORIES.contains(&detection.category.as_str()) {
+    if !is_cross_score_category(&detection.category) {
         return out;
     }
     if let Some(scores) = &detection.cross_scores {
@@ -829,7 +829,7 @@ fn cross_features(detection: &Detection) -> [f64; CROSS_SCORE_CATEGORIES.len()] 
 /// Errors unless every detection of [`CROSS_SCORE_CATEGORIES`] carries a finite cross score of each of
 /// them (what a v7 stage reads); the message names the first that does not and how to get them.
 pub fn check_cross_scores(detections: &[Detection]) -> Result<()> {
-    for d in detections.iter().filter(|d| CROSS_SCORE_CATEGORIES.contains(&d.category.as_str())) {
+    for d in detections.iter().filter(|d| is_cross_score_category(&d.category)) {
         let missing = match &d.cross_scores {
             None => Some("has no cross_scores".to_string()),
             Some(scores) => CROSS_SCORE_CATEGORIES.iter().find_map(|c| match scores.get(*c) {
@@ -840,7 +840,8 @@ pub fn check_cross_scores(detections: &[Detection]) -> Result<()> {
         };
         if let Some(problem) = missing {
             return Err(Error::Input(format!(
-                "a '{}' detection {problem}: feature set v7 reads the scores of the {} models {} on every                  detection of theirs; detect with all of them and this build (detect --no-cascade writes them)",
+                "a '{}' detection {problem}: feature set v7 reads the scores of the {} models {} on every \
+                 detection of theirs; detect with all of them and this build (detect --no-cascade writes them)",
                 d.category,
                 CROSS_SCORE_CATEGORIES.len(),
                 CROSS_SCORE_CATEGORIES.join(", ")

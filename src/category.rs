@@ -36,6 +36,11 @@ pub const LARGE_CATEGORIES: &[&str] = CATEGORIES.split_at(10).0;
 pub const CROSS_SCORE_CATEGORIES: [&str; 11] =
     ["bed", "chair", "sofa", "table", "desk", "toilet", "bathtub", "dresser", "nightstand", "bookshelf", "counter"];
 
+/// Whether `category` is one of [`CROSS_SCORE_CATEGORIES`].
+pub fn is_cross_score_category(category: &str) -> bool {
+    CROSS_SCORE_CATEGORIES.contains(&category)
+}
+
 /// The categories whose objects carry a support surface that other objects stand on (paper §4: "beds,
 /// tables, desks, dressers, nightstands and the like"; the like, here: a sofa's seat, which carries
 /// cushions and pillows, and a counter's top, which carries sinks): detections of these report a surface

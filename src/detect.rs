@@ -27,7 +27,7 @@ use image::RgbImage;
 use rayon::prelude::*;
 
 use crate::backend::{Backend, FastJob};
-use crate::category::{SurfaceCategories, CROSS_SCORE_CATEGORIES, SURFACE_CATEGORIES};
+use crate::category::{is_cross_score_category, SurfaceCategories, SURFACE_CATEGORIES};
 use crate::draw::{
     category_colour, contrasting, draw_cuboid_with, draw_label, label_size, place_labels, shade_convex_polygon, Colour,
     LabelBox,
@@ -79,7 +79,7 @@ pub struct DetectOptions {
     /// `nms_iou`, since 2026-12-05: a voted box that moved onto a better one is dropped); `None`: the kept
     /// hypotheses' own boxes (the only behaviour before 2026-12-04). Default [`DEFAULT_VOTE_IOU`].
     pub box_voting: Option<f32>,
-    /// Whether every detection of [`CROSS_SCORE_CATEGORIES`] gets the raw scores of those categories'
+    /// Whether every detection of [`CROSS_SCORE_CATEGORIES`](crate::category::CROSS_SCORE_CATEGORIES) gets the raw scores of those categories'
     /// models on its box ([`cross_scores`]; what the context cascade's feature set v7 reads). Default
     /// `false`: the CLI turns it on for first-stage files (`detect --no-cascade`, on which a cascade may be
     /// trained) and when the cascade it applies reads them.
@@ -599,7 +599,7 @@ pub fn detect_preprocessed_timed(
     Ok(FrameDetections { frame: name.to_string(), detections })
 }
 
-/// Sets the [`Detection::cross_scores`] of every detection of [`CROSS_SCORE_CATEGORIES`]: the raw score
+/// Sets the [`Detection::cross_scores`] of every detection of [`CROSS_SCORE_CATEGORIES`](crate::category::CROSS_SCORE_CATEGORIES): the raw score
 /// `w·φ + bias` of each of `models` of those categories on the detection's own box (our addition, read by
 /// the context cascade's feature set v7, `crate::cascade`): whether the box looks more like a table or
 /// like a desk to the two models — the first stage's diagnosis finds most of the high-scoring false
@@ -607,20 +607,18 @@ pub fn detect_preprocessed_timed(
 /// its own sizes. Choices:
 /// * The **exact** feature path ([`crate::features::cpu`]) on the CPU, whatever the model's own path and
 ///   the backend: a detection's box — voted, so neither on a model's lattice nor of its sizes — is no
-///   hypothesis of the fast path's tables, and a frame has only a few hundred such boxes (about 0.8 s of
-///   the 2 cores for a 320×240 frame's ~170 boxes and eleven models). The box's own model scores it too
+///   hypothesis of the fast path's tables, and a frame has only a few hundred such boxes. The box's own model scores it too
 ///   (its exact-path score, next to the fast-path `raw_score`).
 /// * The **cuboid** weights alone: a model with latent support surfaces (the table) is scored without its
 ///   surface part.
-/// * Models of other categories are not used; a category of [`CROSS_SCORE_CATEGORIES`] without a model in
+/// * Models of other categories are not used; a category of [`CROSS_SCORE_CATEGORIES`](crate::category::CROSS_SCORE_CATEGORIES) without a model in
 ///   `models` is missing from the maps (the cascade's v7 refuses such detections).
 ///
 /// Each box's score is computed on its own, so the scores are the same on any number of threads.
 pub fn cross_scores(pre: &Preprocessed, models: &[Model], detections: &mut [Detection]) {
-    let scorers: Vec<&Model> =
-        models.iter().filter(|m| CROSS_SCORE_CATEGORIES.contains(&m.category.as_str())).collect();
+    let scorers: Vec<&Model> = models.iter().filter(|m| is_cross_score_category(&m.category)).collect();
     let chosen: Vec<usize> =
-        (0..detections.len()).filter(|&i| CROSS_SCORE_CATEGORIES.contains(&detections[i].category.as_str())).collect();
+        (0..detections.len()).filter(|&i| is_cross_score_category(&detections[i].category)).collect();
     if scorers.is_empty() || chosen.is_empty() {
         return;
     }
@@ -637,13 +635,23 @@ pub fn cross_scores(pre: &Preprocessed, models: &[Model], detections: &mut [Dete
             box_hypothesis(&scene, yaw_index, &d.cuboid())
         })
         .collect();
-    let per_model: Vec<Vec<f32>> = scorers
-        .iter()
-        .map(|model| {
-            let (scores, _) = cpu::scores(&scene, &model.layout, &hypotheses, std::slice::from_ref(&model.weights));
-            scores.into_iter().map(|s| s + model.bias).collect()
-        })
-        .collect();
+    // Models that share a feature layout are scored in one pass: each box's features are computed once and
+    // dotted with every weight vector (the shipped eleven share one layout).
+    let mut per_model: Vec<Vec<f32>> = vec![Vec::new(); scorers.len()];
+    let mut done = vec![false; scorers.len()];
+    for first in 0..scorers.len() {
+        if done[first] {
+            continue;
+        }
+        let group: Vec<usize> =
+            (first..scorers.len()).filter(|&m| scorers[m].layout == scorers[first].layout).collect();
+        let weights: Vec<Vec<f32>> = group.iter().map(|&m| scorers[m].weights.clone()).collect();
+        let (scores, _) = cpu::scores(&scene, &scorers[first].layout, &hypotheses, &weights);
+        for (w, &m) in group.iter().enumerate() {
+            per_model[m] = (0..hypotheses.len()).map(|h| scores[h * group.len() + w] + scorers[m].bias).collect();
+            done[m] = true;
+        }
+    }
     for (h, &i) in chosen.iter().enumerate() {
         let map = scorers.iter().zip(&per_model).map(|(m, scores)| (m.category.clone(), scores[h])).collect();
         detections[i].cross_scores = Some(map);
@@ -873,7 +881,7 @@ pub fn replacement_problem(categories: &[String], models: &[Model]) -> Option<St
 /// It requires [`replacement_problem`] to be `None`.
 ///
 /// The [`Detection::cross_scores`] hold every cross-category model's score of each box, so replacing a
-/// model of [`CROSS_SCORE_CATEGORIES`] makes those of the kept detections stale (the old model's), and
+/// model of [`CROSS_SCORE_CATEGORIES`](crate::category::CROSS_SCORE_CATEGORIES) makes those of the kept detections stale (the old model's), and
 /// those of the update may miss the models it was not run with: then the merged detections carry none
 /// (a cascade with a cross stage refuses them; detect the frames again for one). Replacing only other
 /// categories keeps them, as detecting everything again would give them.
@@ -896,7 +904,7 @@ pub fn replace_categories(
             .then(b.raw_score.unwrap_or(b.score).total_cmp(&a.raw_score.unwrap_or(a.score)))
             .then(a.category.cmp(&b.category))
     });
-    if categories.iter().any(|c| CROSS_SCORE_CATEGORIES.contains(&c.as_str())) {
+    if categories.iter().any(|c| is_cross_score_category(c)) {
         for d in &mut merged {
             d.cross_scores = None;
         }

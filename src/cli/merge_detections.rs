@@ -121,8 +121,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
             categories.join(",")
         );
     }
-    if let Some(category) = categories.iter().find(|c| cog_gpu::category::CROSS_SCORE_CATEGORIES.contains(&c.as_str()))
-    {
+    if let Some(category) = categories.iter().find(|c| cog_gpu::category::is_cross_score_category(c)) {
         log::warn!(
             "the merged detections carry no cross scores: '{category}' is one of the categories whose models score \
              each other's boxes, so the kept boxes' cross scores would be the old model's (a cascade with a v7 \
