@@ -107,7 +107,9 @@
 //! [`crate::learn::binary_svm::train_linear_svm_from`]). A category whose cross-validated AP with
 //! the context is not above its first stage's gets no second stage (its scores are left alone rather
 //! than made worse). **Per-category feature sets** (`cascade --features best`; our addition): each
-//! category's stage is trained with v4, v5 and v6 (`--features best-cross`: and v7) and keeps the set whose
+//! category's stage is trained with v4, v5 and v6 (`--features best-cross`: and v7, for the categories of
+//! [`CROSS_SCORE_CATEGORIES`] only — another category's detections read zeros in v7's cross part, so its
+//! v7 stage would be its v6 one with unused weights: [`v7_adds_nothing`]) and keeps the set whose
 //! cross-validated AP is highest
 //! (ties: the smaller set); the same folds and the same first-stage AP for all, so the choice is made on
 //! the cascade's own held-out frames, never on a test set. The file's `features` is then v4 and a stage of
@@ -1185,6 +1187,11 @@ pub fn train_cascade_resumable(
         .map(|category| -> Result<(String, StageOutcome)> {
             let mut candidates: Vec<(FeatureSet, StageResult)> = Vec::with_capacity(sets.len());
             for &set in sets {
+                if v7_adds_nothing(set, category, sets) {
+                    let reason = format!("not trained: a {category} detection has no cross scores, v6 is the same");
+                    candidates.push((set, Err(reason)));
+                    continue;
+                }
                 let key = StageKey { category, set, categories, iou: iou_threshold, fingerprint: &fingerprint };
                 let stored = checkpoints.and_then(|dir| key.read(dir));
                 let result = match stored {
@@ -1224,6 +1231,15 @@ pub fn train_cascade_resumable(
     Ok((cascade, results.into_iter().collect(), resumed.into_inner()))
 }
 
+/// Whether training `category`'s stage with `set` among `sets` is skipped ([`train_cascade_resumable`]): v7
+/// beside v6 for a category outside [`CROSS_SCORE_CATEGORIES`]. Such a category's detections carry no
+/// cross scores (their cross part of ψ is zeros), so its v7 training is v6's with columns of zeros: the same
+/// stage up to the solver's rounding, which the choice would keep v6 over (ties go to the earlier set). On
+/// the shipped 19 categories that skips eight of the 19 v7 trainings.
+pub fn v7_adds_nothing(set: FeatureSet, category: &str, sets: &[FeatureSet]) -> bool {
+    set == FeatureSet::V7 && !is_cross_score_category(category) && sets.contains(&FeatureSet::V6)
+}
+
 /// The `format` of a stage checkpoint file ([`train_cascade_resumable`]).
 pub const STAGE_CHECKPOINT_FORMAT: &str = "cog-gpu-cascade-stage";
 
@@ -1234,7 +1250,8 @@ pub fn stage_checkpoint_path(dir: &Path, category: &str, set: FeatureSet) -> std
 }
 
 /// A 64-bit FNV-1a fingerprint of a cascade's training inputs: every frame's ground truth (categories and
-/// boxes), first-stage detections (categories, boxes, scores, raw scores) and room, in order, as raw bits.
+/// boxes), first-stage detections (categories, boxes, scores, raw scores, cross scores where present) and
+/// room, in order, as raw bits.
 /// Two runs on the same detections files give the same fingerprint; a re-detection that changes any score
 /// or box changes it (up to hash collisions), so a checkpoint of other detections is not resumed.
 pub fn frames_fingerprint(frames: &[CascadeFrame]) -> u64 {
@@ -1255,6 +1272,14 @@ pub fn frames_fingerprint(frames: &[CascadeFrame]) -> u64 {
             hash = floats(text(hash, &d.category), &d.centre);
             hash = floats(hash, &d.size);
             hash = floats(hash, &[d.yaw, d.score, d.raw_score.unwrap_or(f32::NAN)]);
+            // The cross scores (v7 reads them) only where present, so files without them keep the
+            // fingerprint they had before there were cross scores.
+            if let Some(scores) = &d.cross_scores {
+                hash = fnv1a(hash, &(scores.len() as u64).to_le_bytes());
+                for (category, score) in scores {
+                    hash = floats(text(hash, category), &[*score]);
+                }
+            }
         }
         match &frame.room {
             None => hash = fnv1a(hash, &[0]),

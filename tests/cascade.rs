@@ -1268,6 +1268,73 @@ fn a_cross_stage_refuses_detections_without_cross_scores() {
     assert!(check_cross_scores(&make(3).detections).is_ok());
 }
 
+/// The stage checkpoints know the cross scores: a v7 training on detections whose cross scores changed (one
+/// score of one detection) is not resumed from the checkpoints of the old ones — its stage would read
+/// other features — while a rerun on the same detections is.
+#[test]
+fn a_cross_stage_checkpoint_is_not_resumed_for_other_cross_scores() {
+    let frames: Vec<_> = (0..40).map(|f| cross_frame(f, f % 4 < 2)).collect();
+    let categories = names(&["desk", "table"]);
+    let dir = tempfile::tempdir().unwrap();
+    let run = |frames: &[CascadeFrame]| {
+        train_cascade_resumable(
+            frames,
+            &categories,
+            0.25,
+            CascadeTraining::default(),
+            &[FeatureSet::V7],
+            Some(dir.path()),
+            StageRule::AnyGain,
+        )
+        .unwrap()
+    };
+    let (fresh, _, resumed) = run(&frames);
+    assert_eq!(resumed, 0);
+    let (again, _, resumed) = run(&frames);
+    assert_eq!((resumed, &again), (2, &fresh));
+    let mut other = frames.clone();
+    let scores = other[5].detections[0].cross_scores.as_mut().unwrap();
+    *scores.get_mut("desk").unwrap() += 0.5;
+    let (retrained, _, resumed) = run(&other);
+    assert_eq!(resumed, 0, "a checkpoint of other cross scores is trained over");
+    let direct = train_cascade(&other, &categories, 0.25, CascadeTraining::default(), &[FeatureSet::V7]).unwrap().0;
+    assert_eq!(retrained, direct);
+}
+
+/// `--features best-cross` trains v7 only for the categories with cross scores: beside v6, a pillow's v7
+/// stage is not trained (no checkpoint written; its reason says so) while the table's is; with v7 alone the
+/// pillow is trained as any category is.
+#[test]
+fn v7_is_trained_beside_v6_only_for_the_cross_categories() {
+    let frames: Vec<_> = (0..40).map(|f| cross_frame(f, f % 4 < 2)).collect();
+    let categories = names(&["pillow", "table"]);
+    let dir = tempfile::tempdir().unwrap();
+    let sets = [FeatureSet::V6, FeatureSet::V7];
+    let (_, outcomes, _) = train_cascade_resumable(
+        &frames,
+        &categories,
+        0.25,
+        CascadeTraining::default(),
+        &sets,
+        Some(dir.path()),
+        StageRule::AnyGain,
+    )
+    .unwrap();
+    let pillow = &outcomes["pillow"].candidates;
+    let skipped = pillow[1].1.as_ref().unwrap_err();
+    assert!(skipped.contains("not trained") && skipped.contains("v6 is the same"), "{skipped}");
+    assert!(!pillow[0].1.as_ref().unwrap_err().contains("not trained"), "v6 is trained: {pillow:?}");
+    assert!(!stage_checkpoint_path(dir.path(), "pillow", FeatureSet::V7).exists());
+    assert!(stage_checkpoint_path(dir.path(), "pillow", FeatureSet::V6).is_file());
+    assert!(outcomes["table"].candidates[1].1.is_ok(), "the table's v7 stage is trained");
+    assert!(cog_gpu::cascade::v7_adds_nothing(FeatureSet::V7, "pillow", &sets));
+    assert!(!cog_gpu::cascade::v7_adds_nothing(FeatureSet::V7, "counter", &sets));
+    assert!(!cog_gpu::cascade::v7_adds_nothing(FeatureSet::V7, "pillow", &[FeatureSet::V7]));
+    let (_, alone) = train_cascade(&frames, &categories, 0.25, CascadeTraining::default(), &[FeatureSet::V7]).unwrap();
+    let reason = alone["pillow"].candidates[0].1.as_ref().unwrap_err();
+    assert!(!reason.contains("not trained"), "v7 alone trains every category: {reason}");
+}
+
 /// A frame of the cross test: one table detection (true when `truth_here`) alone in its frame, whose raw
 /// score comes from the same distribution either way; the desk model's score on its box is low on a true
 /// table and high on a false one (a desk taken for a table), with noise.
