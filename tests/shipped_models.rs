@@ -169,7 +169,8 @@ fn the_shipped_layout_model_lays_out_the_real_frame() {
 }
 
 /// The shipped context cascade (`assets/models/cascade.json`) has this build's feature set, a context
-/// category for each of the 19 shipped models and a second stage for at least one small category; through
+/// category for each of the 19 shipped models, a second stage for at least one small category and v7
+/// stages, whose cross scores `detect` then writes on exactly the cross categories' detections; through
 /// the README's main command (`detect`, which applies it with the room of the shipped layout model) the
 /// sample bedroom's detections are rescored and its two best detections are still correct, the bed one of
 /// them.
@@ -198,6 +199,13 @@ fn the_shipped_cascade_rescores_the_sample_and_keeps_its_best_two_correct() {
     let staged = detections.iter().filter(|d| cascade.stages.contains_key(&d.category)).count();
     assert_eq!(rescored, staged, "every detection of a category with a second stage is rescored");
     assert!(rescored > 0);
+    // Its v7 stages (shipped 2026-12-05) read the cross scores, so `detect`'s default computes them: on every
+    // detection of the ten large categories and the counter, on no other.
+    assert!(cascade.reads_cross_scores(), "the shipped cascade has v7 stages");
+    for d in &detections {
+        assert_eq!(d.cross_scores.is_some(), cog_gpu::category::is_cross_score_category(&d.category), "{d:?}");
+    }
+    assert!(detections.iter().any(|d| d.cross_scores.is_some()));
     // The two best detections are correct (3D IoU ≥ 0.25 with an annotated object of their category),
     // on two different objects, one of them the bed. (The cascade puts the sample's nightstand, found by
     // the nightstand model's 0.1 m window, above the bed: 1.00 and 0.99 with the cascade shipped on

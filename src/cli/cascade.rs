@@ -34,8 +34,8 @@ pub struct Args {
     /// frame), v7 (also the cross scores: every large category's and the counter's model scoring the
     /// detection's own box; needs detections files that carry them, `detect --no-cascade` writes them),
     /// best (per category the one of v4, v5 and v6 with the highest cross-validated AP on these frames;
-    /// trains all three; the shipped cascade's recipe) or best-cross (the same among v4 to v7, v7 only for
-    /// the categories with cross scores); README, "Context cascade".
+    /// trains all three) or best-cross (the same among v4 to v7, v7 only for the categories with cross
+    /// scores; the shipped cascade's recipe since 2026-12-05); README, "Context cascade".
     #[arg(long, value_enum, default_value = "v4")]
     pub features: FeaturesArg,
     /// Which trained stages the cascade keeps: any-gain (every stage whose cross-validated AP is above the
