@@ -225,8 +225,8 @@ case "$mode" in
         # The context cascade (paper section 6) over the 19 models of `models` and `small` (run those
         # first): first-stage detections of the cascade set, the cascade trained on them (`--features
         # best-cross`: per category the best of v4, v5, v6 and v7 by cross-validation; on the 2 000 frames
-        # about 3 h 40 min of detection and, measured one set at a time, 42 min for v4-v6 and 11 min for v7
-        # of training on the 2-core machine;
+        # about 3 h 40 min of detection and 54 min of training on the 2-core machine (3 226 s, partly beside
+        # a CI run);
         # interrupted, a rerun resumes from the stage checkpoints in WORK/small/cascade.json.stages)
         # (WORK/small/cascade.json; copy it to assets/models/ to ship it), the test set's first-stage
         # detections of the 19 (from `small`) rescored, and both evaluated.
