@@ -116,7 +116,10 @@
 //! another set names its own ([`SecondStage::features`]); since each set's ψ is a prefix of the next one's,
 //! rescoring computes the widest ψ once and a stage reads its prefix. A stage's training reads only its
 //! own set, so cascades of different sets trained on the same detections can be merged afterwards with
-//! the same rule ([`Cascade::merged_with`], `cog-gpu merge-cascades`).
+//! the same rule ([`Cascade::merged_with`], `cog-gpu merge-cascades`). Which of the chosen stages a
+//! cascade keeps is [`StageRule`]'s (`cascade --keep`): every one that beats the first stage, or only
+//! those beyond the noise, or only those of a category whose training gains in a nested cross-validation
+//! ([`nested`]).
 //!
 //! # Prediction (paper §6.3)
 //! The second-stage score is `z'_i = w·ψ_i + b` and the combined score `z_i + z'_i`, with `z_i` the first
@@ -145,6 +148,9 @@ use crate::learn::binary_svm::{balanced_costs, train_linear_svm_from, SvmSolutio
 use crate::learn::checkpoint::{fnv1a, FNV_OFFSET};
 use crate::model::{check_weight_magnitudes, Model};
 use glam::{Vec2, Vec3};
+
+pub mod nested;
+pub use nested::NestedFolds;
 
 /// The `format` field of a cascade file.
 pub const FORMAT: &str = "cog-gpu-cascade";
@@ -366,6 +372,11 @@ pub struct SecondStage {
     /// files written before it was recorded (2026-12-04).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cv_gain_interval: Option<[f32; 2]>,
+    /// The nested cross-validated gain of the training procedure that chose this stage ([`nested`]: `C` and
+    /// the feature set chosen inside each fold), recorded when the cascade was trained with
+    /// [`StageRule::NestedGain`]; absent otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cv_gain_nested: Option<f32>,
     /// Maps the combined score `z + z'` to a probability.
     pub calibration: Calibration,
 }
@@ -384,6 +395,11 @@ impl SecondStage {
         if let Some([low, high]) = self.cv_gain_interval {
             if !(low.is_finite() && high.is_finite() && low <= high) {
                 return Err(format!("cv_gain_interval [{low}, {high}] is not an interval"));
+            }
+        }
+        if let Some(gain) = self.cv_gain_nested {
+            if !(-1.0..=1.0).contains(&gain) {
+                return Err(format!("cv_gain_nested {gain} is not a difference of two APs"));
             }
         }
         self.calibration.validate()
@@ -410,13 +426,18 @@ pub enum StageRule {
     /// Only stages whose gain is beyond the noise of the frames: the lower end of its 90 % interval
     /// ([`SecondStage::cv_gain_interval`]) above 0 — one-sided, the gain is positive at 95 %.
     SignificantGain,
+    /// Only stages of a category whose training procedure gains in a nested cross-validation
+    /// ([`nested`]: `C` and the feature set chosen inside each fold, the gain measured on the other):
+    /// the gain's estimate without the bias of choosing the best of many. Applied to a category's
+    /// candidates together ([`StageOutcome`]), not to one stage.
+    NestedGain,
 }
 
 impl StageRule {
     /// `Ok` when the rule keeps `stage`, or why it does not.
     pub fn admits(self, stage: &SecondStage) -> std::result::Result<(), String> {
         match (self, stage.cv_gain_interval) {
-            (StageRule::AnyGain, _) => Ok(()),
+            (StageRule::AnyGain | StageRule::NestedGain, _) => Ok(()),
             (StageRule::SignificantGain, Some([low, high])) if low <= 0.0 => Err(format!(
                 "the context's cross-validated gain {:+.1} is within the noise (its {:.0} % interval [{:+.1}, {:+.1}] \
                  reaches 0)",
@@ -430,6 +451,13 @@ impl StageRule {
                 Err("no interval of the cross-validated gain recorded (a stage trained before 2026-12-04)".into())
             }
         }
+    }
+}
+
+impl StageRule {
+    /// Whether training must compute the nested cross-validation's numbers ([`NestedFolds`]).
+    pub fn needs_nested(self) -> bool {
+        self == StageRule::NestedGain
     }
 }
 
@@ -1006,6 +1034,8 @@ struct Validated {
     ap_first: f32,
     ap_cascade: f32,
     held_out: Vec<f32>,
+    /// The combined score's AP on each fold's frames (for [`nested`]).
+    fold_cascade: [f32; 2],
 }
 
 /// Cross-validated (two folds: even and odd frames) mean AP of the first-stage and of the combined score
@@ -1014,31 +1044,35 @@ struct Validated {
 /// of the `C`s (feasible with balanced costs): the same optima, reached in fewer working-set rounds.
 fn cross_validate(s: &Samples, iou_threshold: f32) -> Vec<Option<Validated>> {
     let mut results: Vec<Option<Validated>> = (0..C_GRID.len())
-        .map(|_| Some(Validated { ap_first: 0.0, ap_cascade: 0.0, held_out: vec![0.0; s.labels.len()] }))
+        .map(|_| {
+            Some(Validated {
+                ap_first: 0.0,
+                ap_cascade: 0.0,
+                held_out: vec![0.0; s.labels.len()],
+                fold_cascade: [0.0; 2],
+            })
+        })
         .collect();
     for fold in 0..2 {
         let train: Vec<usize> = (0..s.labels.len()).filter(|&n| !in_fold(s.frame[n], fold)).collect();
         let test: Vec<usize> = (0..s.labels.len()).filter(|&n| in_fold(s.frame[n], fold)).collect();
         let base: Vec<f32> = test.iter().map(|&n| s.raw[n]).collect();
         let first = subset_ap(s, &test, &base, iou_threshold);
-        let mut previous: Option<(f64, Vec<f64>)> = None;
-        for (k, &c) in C_GRID.iter().enumerate().rev() {
-            let start = previous.as_ref().map(|(pc, alpha)| alpha.iter().map(|a| a * c / pc).collect::<Vec<f64>>());
-            let Ok(solution) = fit_subset(s, &train, c, start.as_deref()) else {
+        for (k, combined) in combined_scores_per_c(s, &train, &test).into_iter().enumerate() {
+            let Some(combined) = combined else {
                 results[k] = None;
                 continue;
             };
-            let combined: Vec<f32> = test.iter().map(|&n| s.raw[n] + solution.svm.decision(&s.psi[n]) as f32).collect();
             let cascade = subset_ap(s, &test, &combined, iou_threshold);
             if let Some(v) = results[k].as_mut() {
                 // Sums here, halved below (the arithmetic of every cascade trained before).
                 v.ap_first += first;
                 v.ap_cascade += cascade;
+                v.fold_cascade[fold] = cascade;
                 for (&n, &score) in test.iter().zip(&combined) {
                     v.held_out[n] = score;
                 }
             }
-            previous = Some((c, solution.alpha));
         }
     }
     for v in results.iter_mut().flatten() {
@@ -1046,6 +1080,22 @@ fn cross_validate(s: &Samples, iou_threshold: f32) -> Vec<Option<Validated>> {
         v.ap_cascade /= 2.0;
     }
     results
+}
+
+/// The combined scores of the samples `test` given by the SVM trained on the samples `fit` at each `C` of
+/// [`C_GRID`] (in its order; `None` where it could not be fitted). The fits go from the largest `C` down,
+/// each started from the one before with its α scaled by the ratio of the `C`s (feasible with balanced
+/// costs): the same optima, reached in fewer working-set rounds.
+fn combined_scores_per_c(s: &Samples, fit: &[usize], test: &[usize]) -> Vec<Option<Vec<f32>>> {
+    let mut scores = vec![None; C_GRID.len()];
+    let mut previous: Option<(f64, Vec<f64>)> = None;
+    for (k, &c) in C_GRID.iter().enumerate().rev() {
+        let start = previous.as_ref().map(|(pc, alpha)| alpha.iter().map(|a| a * c / pc).collect::<Vec<f64>>());
+        let Ok(solution) = fit_subset(s, fit, c, start.as_deref()) else { continue };
+        scores[k] = Some(test.iter().map(|&n| s.raw[n] + solution.svm.decision(&s.psi[n]) as f32).collect());
+        previous = Some((c, solution.alpha));
+    }
+    scores
 }
 
 /// The central [`GAIN_LEVEL`] interval of the cross-validated gain — the mean over the two folds of
@@ -1107,12 +1157,21 @@ pub type StageResult = std::result::Result<SecondStage, String>;
 #[derive(Clone, Debug)]
 pub struct StageOutcome {
     pub candidates: Vec<(FeatureSet, StageResult)>,
+    /// The nested cross-validated gain of the category's training ([`StageRule::NestedGain`]; `None`
+    /// under another rule or without samples of both labels).
+    pub nested_gain: Option<f32>,
+    /// Why the rule refused the category's chosen stage as a whole (the nested rule), if it did.
+    pub refused: Option<String>,
 }
 
 impl StageOutcome {
     /// The stage with the highest cross-validated AP among the candidates that have one (ties: the
-    /// earlier); without any, the reasons of each, named by set when there are several.
+    /// earlier); without any, the reasons of each, named by set when there are several; the rule's reason
+    /// when it refused the category ([`StageOutcome::refused`]).
     pub fn chosen(&self) -> std::result::Result<&SecondStage, String> {
+        if let Some(reason) = &self.refused {
+            return Err(reason.clone());
+        }
         let mut best: Option<&SecondStage> = None;
         for stage in self.candidates.iter().filter_map(|(_, r)| r.as_ref().ok()) {
             if stage.outranks(best) {
@@ -1186,27 +1245,37 @@ pub fn train_cascade_resumable(
         .par_iter()
         .map(|category| -> Result<(String, StageOutcome)> {
             let mut candidates: Vec<(FeatureSet, StageResult)> = Vec::with_capacity(sets.len());
+            let mut nested_numbers: Vec<NestedFolds> = Vec::new();
             for &set in sets {
                 if v7_adds_nothing(set, category, sets) {
                     let reason = format!("not trained: a {category} detection has no cross scores, v6 is the same");
                     candidates.push((set, Err(reason)));
                     continue;
                 }
-                let key = StageKey { category, set, categories, iou: iou_threshold, fingerprint: &fingerprint };
+                let key = StageKey {
+                    category,
+                    set,
+                    categories,
+                    iou: iou_threshold,
+                    fingerprint: &fingerprint,
+                    nested: rule.needs_nested(),
+                };
                 let stored = checkpoints.and_then(|dir| key.read(dir));
-                let result = match stored {
-                    Some(result) => {
+                let (result, numbers) = match stored {
+                    Some(outcome) => {
                         resumed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                        result
+                        outcome
                     }
                     None => {
-                        let result = train_stage(frames, category, categories, iou_threshold, set);
+                        let outcome =
+                            train_stage(frames, category, categories, iou_threshold, set, rule.needs_nested());
                         if let Some(dir) = checkpoints {
-                            key.write(dir, &result)?;
+                            key.write(dir, &outcome.0, outcome.1.as_ref())?;
                         }
-                        result
+                        outcome
                     }
                 };
+                nested_numbers.extend(numbers);
                 // Named here, for fresh and resumed stages alike (a checkpoint may come from a run whose
                 // file set was another).
                 let result = result
@@ -1214,12 +1283,32 @@ pub fn train_cascade_resumable(
                     .map(|stage| SecondStage { features: set.name_unless(file_set), ..stage });
                 candidates.push((set, result));
             }
+            let mut outcome = StageOutcome { candidates, nested_gain: None, refused: None };
+            if rule.needs_nested() {
+                outcome.nested_gain = nested::nested_gain(&nested_numbers.iter().collect::<Vec<_>>());
+                if let (Ok(stage), Some(gain)) = (outcome.chosen(), outcome.nested_gain) {
+                    if gain <= 0.0 {
+                        outcome.refused = Some(format!(
+                            "the training's nested cross-validated gain, {:+.1}, is not above 0 (the chosen \
+                             stage's own cross-validated gain {:+.1} is the best of {} choices of set and C)",
+                            100.0 * gain,
+                            100.0 * (stage.cv_ap_cascade - stage.cv_ap_first_stage),
+                            nested_numbers.len() * C_GRID.len()
+                        ));
+                    }
+                }
+            }
             let done = finished.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
             log::info!("cascade: '{category}' done ({done} of {})", categories.len());
-            Ok((category.clone(), StageOutcome { candidates }))
+            Ok((category.clone(), outcome))
         })
         .collect::<Result<_>>()?;
-    let stages = results.iter().filter_map(|(c, r)| r.chosen().ok().map(|s| (c.clone(), s.clone()))).collect();
+    let stages = results
+        .iter()
+        .filter_map(|(c, r)| {
+            r.chosen().ok().map(|s| (c.clone(), SecondStage { cv_gain_nested: r.nested_gain, ..s.clone() }))
+        })
+        .collect();
     let cascade = Cascade {
         format: FORMAT.into(),
         version: VERSION,
@@ -1302,6 +1391,8 @@ struct StageKey<'a> {
     categories: &'a [String],
     iou: f32,
     fingerprint: &'a str,
+    /// Whether the nested cross-validation's numbers are needed: a checkpoint without them is trained again.
+    nested: bool,
 }
 
 /// A stage checkpoint file: the outcome of one (category, feature set) training and what it was trained on.
@@ -1320,12 +1411,15 @@ struct StageCheckpoint {
     /// The stage, or why there is none.
     stage: Option<SecondStage>,
     no_stage: Option<String>,
+    /// The nested cross-validation's numbers, when the training computed them (`--keep nested-gain`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    nested: Option<NestedFolds>,
 }
 
 impl StageKey<'_> {
     /// The stored outcome when the checkpoint exists, reads and matches; `None` (train it) otherwise,
     /// with a warning naming the file when one is there but unusable.
-    fn read(&self, dir: &Path) -> Option<StageResult> {
+    fn read(&self, dir: &Path) -> Option<(StageResult, Option<NestedFolds>)> {
         let path = stage_checkpoint_path(dir, self.category, self.set);
         let text = std::fs::read_to_string(&path).ok()?;
         let stored: StageCheckpoint = match serde_json::from_str(&text) {
@@ -1351,26 +1445,39 @@ impl StageKey<'_> {
             );
             return None;
         }
-        match (stored.stage, stored.no_stage) {
+        let nested = match stored.nested {
+            Some(numbers) if numbers.check().is_ok() => Some(numbers),
+            // (A category without samples of both labels has none: trained again, at once.)
+            _ if self.nested => {
+                log::info!(
+                    "{}: a checkpoint without the nested cross-validation's numbers; training the stage again",
+                    path.display()
+                );
+                return None;
+            }
+            _ => None,
+        };
+        let result = match (stored.stage, stored.no_stage) {
             // A stage trained before the gain's interval was recorded is trained again (the rule may need it).
             (Some(stage), None)
                 if stage.weights.len() == self.set.dim(self.categories.len())
                     && stage.check_numbers().is_ok()
                     && stage.cv_gain_interval.is_some() =>
             {
-                Some(Ok(stage))
+                Ok(stage)
             }
-            (None, Some(reason)) => Some(Err(reason)),
+            (None, Some(reason)) => Err(reason),
             _ => {
                 log::warn!("{}: an inconsistent stage checkpoint; training the stage again", path.display());
-                None
+                return None;
             }
-        }
+        };
+        Some((result, nested))
     }
 
     /// Writes `result` as the checkpoint (to a temporary file renamed over it: an interruption mid-write
     /// leaves no half-written checkpoint).
-    fn write(&self, dir: &Path, result: &StageResult) -> Result<()> {
+    fn write(&self, dir: &Path, result: &StageResult, nested: Option<&NestedFolds>) -> Result<()> {
         let path = stage_checkpoint_path(dir, self.category, self.set);
         let checkpoint = StageCheckpoint {
             format: STAGE_CHECKPOINT_FORMAT.to_string(),
@@ -1383,6 +1490,7 @@ impl StageKey<'_> {
             c_grid: C_GRID.to_vec(),
             stage: result.as_ref().ok().cloned(),
             no_stage: result.as_ref().err().cloned(),
+            nested: nested.cloned(),
         };
         let text = serde_json::to_string(&checkpoint).map_err(|e| Error::invalid(&path, e.to_string()))?;
         crate::error::write_replacing(&path, text.as_bytes())
@@ -1390,21 +1498,35 @@ impl StageKey<'_> {
 }
 
 /// One category's stage (module doc): C by cross-validation, then the SVM and calibration on all frames.
-/// Its `features` is left `None`: the caller names the set when it is not the file's.
+/// Its `features` is left `None`: the caller names the set when it is not the file's. With `nested`, also
+/// the numbers of the nested cross-validation ([`nested`]; `None` without, or without samples of both
+/// labels).
 fn train_stage(
     frames: &[CascadeFrame],
     category: &str,
     categories: &[String],
     iou_threshold: f32,
     set: FeatureSet,
-) -> StageResult {
+    nested: bool,
+) -> (StageResult, Option<NestedFolds>) {
     let s = samples_of(frames, category, categories, iou_threshold, set);
     let positives = s.labels.iter().filter(|&&y| y).count();
     if positives == 0 || positives == s.labels.len() {
-        return Err(format!("{positives} true positives among {} detections", s.labels.len()));
+        return (Err(format!("{positives} true positives among {} detections", s.labels.len())), None);
     }
+    let validated = cross_validate(&s, iou_threshold);
+    let numbers = nested.then(|| {
+        let outer = [0, 1].map(|fold| validated.iter().map(|v| v.as_ref().map(|v| v.fold_cascade[fold])).collect());
+        nested::nested_folds(&s, outer, in_fold, iou_threshold)
+    });
+    (stage_of(&s, validated, frames.len(), iou_threshold), numbers)
+}
+
+/// The stage of the samples `s` (of `frames` frames) given their cross-validation at each `C`.
+fn stage_of(s: &Samples, validated: Vec<Option<Validated>>, frames: usize, iou_threshold: f32) -> StageResult {
+    let positives = s.labels.iter().filter(|&&y| y).count();
     let mut best: Option<(f64, Validated)> = None;
-    for (c, validated) in C_GRID.into_iter().zip(cross_validate(&s, iou_threshold)) {
+    for (c, validated) in C_GRID.into_iter().zip(validated) {
         if let Some(v) = validated {
             if best.as_ref().is_none_or(|(_, b)| v.ap_cascade > b.ap_cascade) {
                 best = Some((c, v));
@@ -1422,7 +1544,7 @@ fn train_stage(
         ));
     }
     let all: Vec<usize> = (0..s.labels.len()).collect();
-    let svm = fit_subset(&s, &all, c, None).map_err(|e| e.to_string())?.svm;
+    let svm = fit_subset(s, &all, c, None).map_err(|e| e.to_string())?.svm;
     let scored: Vec<(f32, bool)> =
         all.iter().map(|&n| (s.raw[n] + svm.decision(&s.psi[n]) as f32, s.labels[n])).collect();
     let (a, b) = fit_logistic(&scored).map_err(|e| e.to_string())?;
@@ -1433,7 +1555,8 @@ fn train_stage(
         c,
         cv_ap_first_stage: cv_first,
         cv_ap_cascade: cv_cascade,
-        cv_gain_interval: cv_gain_interval(&s, &validated.held_out, iou_threshold),
+        cv_gain_interval: cv_gain_interval(s, &validated.held_out, iou_threshold),
+        cv_gain_nested: None,
         calibration: Calibration {
             a,
             b,
@@ -1441,7 +1564,7 @@ fn train_stage(
             true_positives: positives,
             iou: iou_threshold,
             data: String::new(),
-            frames: frames.len(),
+            frames,
         },
     })
 }
@@ -1517,6 +1640,7 @@ mod tests {
             cv_ap_first_stage: 0.30,
             cv_ap_cascade: 0.32,
             cv_gain_interval: interval,
+            cv_gain_nested: None,
             calibration: Calibration {
                 a: 1.0,
                 b: 0.0,

@@ -364,6 +364,18 @@ fn cascade_files_round_trip_and_are_checked() {
     write_unchecked(&older, &path);
     assert_eq!(Cascade::read(&path).unwrap(), older);
     assert!(!std::fs::read_to_string(&path).unwrap().contains("cv_gain_interval"));
+    // The nested gain (`--keep nested-gain`): round-trips; outside [−1, 1] (not a difference of two APs),
+    // refused.
+    let mut nested = cascade.clone();
+    nested.stages.get_mut("table").unwrap().cv_gain_nested = Some(0.125);
+    nested.write(&path).unwrap();
+    assert_eq!(Cascade::read(&path).unwrap(), nested);
+    for bad in [1.5, -1.25] {
+        nested.stages.get_mut("table").unwrap().cv_gain_nested = Some(bad);
+        write_unchecked(&nested, &path);
+        let err = Cascade::read(&path).unwrap_err().to_string();
+        assert!(err.contains("'table'") && err.contains("cv_gain_nested"), "{err}");
+    }
     // Uncalibrated detections (no raw score) are refused.
     let mut raw_only = vec![Detection::new("table", &Cuboid::new(Vec3::ZERO, Vec3::ONE, 0.0), 0.3)];
     assert!(cascade.rescore(&mut raw_only, None).unwrap_err().to_string().contains("calibrated"));
@@ -1134,16 +1146,7 @@ fn the_significant_gain_rule_keeps_real_gains_and_drops_noise() {
     let categories = names(&["bed", "table"]);
     let dir = tempfile::tempdir().unwrap();
     let run = |frames: &[CascadeFrame], categories: &[String], rule| {
-        train_cascade_resumable(
-            frames,
-            categories,
-            0.25,
-            CascadeTraining::default(),
-            &[FeatureSet::V4],
-            Some(dir.path()),
-            rule,
-        )
-        .unwrap()
+        train_with_checkpoints(frames, categories, &[FeatureSet::V4], dir.path(), rule)
     };
     let (any, _, _) = run(&table_frames, &categories, StageRule::AnyGain);
     let (significant, outcomes, resumed) = run(&table_frames, &categories, StageRule::SignificantGain);
@@ -1155,9 +1158,37 @@ fn the_significant_gain_rule_keeps_real_gains_and_drops_noise() {
     assert!(0.1 < low && low <= gain && gain <= high, "{low} {gain} {high}");
     assert!(outcomes["bed"].chosen().is_err());
 
-    // Chairs: in each frame a true chair and a false one 2 m away, both alone, with scores of the same
-    // distribution; the context features of the two are the same up to their own score.
-    let chair_frames: Vec<CascadeFrame> = (0..60)
+    let chair_frames = chance_chair_frames();
+    let chair = names(&["chair"]);
+    let (_, outcomes, _) = run(&chair_frames, &chair, StageRule::AnyGain);
+    let (kept, refused, _) = run(&chair_frames, &chair, StageRule::SignificantGain);
+    assert!(kept.stages.is_empty(), "{:?}", kept.stages);
+    let reason = refused["chair"].chosen().unwrap_err();
+    // These draws give the chairs' stage a cross-validated gain by chance (+4.5 AP points; other draws give
+    // none, and about one in twenty a significant one, as a 95 % bound should): any-gain keeps it, the
+    // rule does not.
+    let stage = outcomes["chair"].chosen().unwrap();
+    let [low, high] = stage.cv_gain_interval.unwrap();
+    assert!(stage.cv_ap_cascade > stage.cv_ap_first_stage + 0.03 && low <= 0.0 && high > 0.03, "{stage:?}");
+    assert!(reason.contains("within the noise"), "{reason}");
+}
+
+/// `train_cascade_resumable` at IoU 0.25 with its checkpoints in `dir`.
+fn train_with_checkpoints(
+    frames: &[CascadeFrame],
+    categories: &[String],
+    sets: &[FeatureSet],
+    dir: &Path,
+    rule: StageRule,
+) -> (Cascade, BTreeMap<String, cog_gpu::cascade::StageOutcome>, usize) {
+    train_cascade_resumable(frames, categories, 0.25, CascadeTraining::default(), sets, Some(dir), rule).unwrap()
+}
+
+/// Chairs whose context says nothing: in each of 60 frames a true chair and a false one 2 m away, both
+/// alone, with scores of the same distribution; the context features of the two are the same up to their
+/// own score.
+fn chance_chair_frames() -> Vec<CascadeFrame> {
+    (0..60)
         .map(|f| {
             let place = |x: f32| Cuboid::new(Vec3::new(x, 1.0, 0.45), Vec3::new(0.5, 0.5, 0.9), 0.0);
             let truth = vec![Object { category: "chair".into(), label: None, cuboid: place(0.0) }];
@@ -1172,19 +1203,48 @@ fn the_significant_gain_rule_keeps_real_gains_and_drops_noise() {
             ];
             CascadeFrame { truth, detections, room: None }
         })
-        .collect();
+        .collect()
+}
+
+/// `StageRule::NestedGain` keeps the table's stage (the same stage as any-gain's, with its nested gain
+/// recorded) and refuses the chance chairs' stage, whose cross-validated gain is the best of four `C`s on
+/// noise. Its checkpoints carry the nested numbers: a checkpoint written without them is trained again,
+/// one written with them is read by either rule.
+#[test]
+fn the_nested_gain_rule_keeps_real_gains_and_drops_chance_ones() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |frames: &[CascadeFrame], categories: &[String], rule| {
+        train_with_checkpoints(frames, categories, &[FeatureSet::V4, FeatureSet::V5], dir.path(), rule)
+    };
+    let table_frames: Vec<_> = (0..40).map(frame).collect();
+    let categories = names(&["bed", "table"]);
+    let (any, _, _) = run(&table_frames, &categories, StageRule::AnyGain);
+    let (nested, outcomes, resumed) = run(&table_frames, &categories, StageRule::NestedGain);
+    // The bed's checkpoints (no true and false positives both) and the table's lack the numbers.
+    assert_eq!(resumed, 0, "checkpoints without the nested numbers are trained again");
+    let table = &nested.stages["table"];
+    let gain = table.cv_gain_nested.expect("recorded under the nested rule");
+    assert_eq!(outcomes["table"].nested_gain, Some(gain));
+    assert!(gain > 0.1, "the table on the bed is told apart in every fold: {gain}");
+    assert_eq!(cog_gpu::cascade::SecondStage { cv_gain_nested: None, ..table.clone() }, any.stages["table"]);
+    assert!(any.stages["table"].cv_gain_nested.is_none());
+    let (_, _, resumed) = run(&table_frames, &categories, StageRule::NestedGain);
+    assert_eq!(resumed, 2 * 2 - 2, "the table's two sets read; the bed's (no numbers) trained again");
+    let (again, _, resumed) = run(&table_frames, &categories, StageRule::AnyGain);
+    assert_eq!((resumed, &again), (4, &any), "any-gain reads the checkpoints with the numbers alike");
+
     let chair = names(&["chair"]);
-    let (_, outcomes, _) = run(&chair_frames, &chair, StageRule::AnyGain);
-    let (kept, refused, _) = run(&chair_frames, &chair, StageRule::SignificantGain);
+    let chair_frames = chance_chair_frames();
+    let (kept_any, outcomes_any, _) = run(&chair_frames, &chair, StageRule::AnyGain);
+    let (kept, outcomes, _) = run(&chair_frames, &chair, StageRule::NestedGain);
+    let stage = outcomes_any["chair"].chosen().unwrap();
+    assert!(stage.cv_ap_cascade > stage.cv_ap_first_stage + 0.03, "any-gain keeps a chance gain: {stage:?}");
+    assert!(kept_any.stages.contains_key("chair"));
     assert!(kept.stages.is_empty(), "{:?}", kept.stages);
-    let reason = refused["chair"].chosen().unwrap_err();
-    // These draws give the chairs' stage a cross-validated gain by chance (+4.5 AP points; other draws give
-    // none, and about one in twenty a significant one, as a 95 % bound should): any-gain keeps it, the
-    // rule does not.
-    let stage = outcomes["chair"].chosen().unwrap();
-    let [low, high] = stage.cv_gain_interval.unwrap();
-    assert!(stage.cv_ap_cascade > stage.cv_ap_first_stage + 0.03 && low <= 0.0 && high > 0.03, "{stage:?}");
-    assert!(reason.contains("within the noise"), "{reason}");
+    let gain = outcomes["chair"].nested_gain.unwrap();
+    assert!(gain <= 0.0, "{gain}");
+    let reason = outcomes["chair"].chosen().unwrap_err();
+    assert!(reason.contains("nested cross-validated gain") && reason.contains("of 8 choices"), "{reason}");
 }
 
 /// Writes `cascade` as `Cascade::write` does but without its check: the damaged files the readers must
