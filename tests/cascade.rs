@@ -475,24 +475,25 @@ fn cli_trains_a_cascade_and_rescores_files() {
     stages_dir.push(".stages");
     assert!(!std::path::Path::new(&stages_dir).exists());
     // `--features v7` needs the cross scores, which these files lack: refused, the first file named.
-    let refused = run(&[
-        "cascade",
-        "--data",
-        data.to_str().unwrap(),
-        "--detections",
-        first.to_str().unwrap(),
-        "--models",
-        models,
-        "--categories",
-        "bed,table",
-        "--out",
-        tmp.path().join("v7.json").to_str().unwrap(),
-        "--features",
-        "v7",
-    ]);
+    // `cascade` on the first-stage files with `--out <tmp>/out` and `extra` arguments.
+    let train_with = |out: &str, extra: &[&str]| {
+        let out = tmp.path().join(out);
+        let mut args = vec!["cascade", "--data", data.to_str().unwrap(), "--detections", first.to_str().unwrap()];
+        args.extend(["--models", models, "--categories", "bed,table", "--out", out.to_str().unwrap()]);
+        args.extend(extra);
+        run(&args)
+    };
+    let refused = train_with("v7.json", &["--features", "v7"]);
     let stderr = String::from_utf8_lossy(&refused.stderr);
     assert!(!refused.status.success());
     assert!(stderr.contains("f00.json") && stderr.contains("has no cross_scores"), "{stderr}");
+    // `--keep nested-gain` reports the nested gain and, on these 30 frames, warns that the rule was measured
+    // to help only on 2 000.
+    let nested = train_with("nested.json", &["--keep", "nested-gain"]);
+    let (stdout, stderr) = (String::from_utf8_lossy(&nested.stdout), String::from_utf8_lossy(&nested.stderr));
+    assert!(nested.status.success(), "{stderr}");
+    assert!(stderr.contains("--keep nested-gain on 30 frames"), "{stderr}");
+    assert!(stdout.contains("nested gain") && stdout.lines().any(|l| l.starts_with("table")), "{stdout}");
     // `--features best` trains both sets and reports each one's cross-validated AP beside the choice.
     let best_file = tmp.path().join("best.json");
     let mut args: Vec<String> = ["cascade", "--data", data.to_str().unwrap(), "--detections", first.to_str().unwrap()]
