@@ -434,6 +434,11 @@ pub enum StageRule {
 }
 
 impl StageRule {
+    /// Whether training must compute the nested cross-validation's numbers ([`NestedFolds`]).
+    pub fn needs_nested(self) -> bool {
+        self == StageRule::NestedGain
+    }
+
     /// `Ok` when the rule keeps `stage`, or why it does not.
     pub fn admits(self, stage: &SecondStage) -> std::result::Result<(), String> {
         match (self, stage.cv_gain_interval) {
@@ -451,13 +456,6 @@ impl StageRule {
                 Err("no interval of the cross-validated gain recorded (a stage trained before 2026-12-04)".into())
             }
         }
-    }
-}
-
-impl StageRule {
-    /// Whether training must compute the nested cross-validation's numbers ([`NestedFolds`]).
-    pub fn needs_nested(self) -> bool {
-        self == StageRule::NestedGain
     }
 }
 
