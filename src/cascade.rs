@@ -1032,7 +1032,8 @@ struct Validated {
     ap_first: f32,
     ap_cascade: f32,
     held_out: Vec<f32>,
-    /// The combined score's AP on each fold's frames (for [`nested`]).
+    /// The first-stage and the combined score's AP on each fold's frames (for [`nested`]).
+    fold_first: [f32; 2],
     fold_cascade: [f32; 2],
 }
 
@@ -1047,6 +1048,7 @@ fn cross_validate(s: &Samples, iou_threshold: f32) -> Vec<Option<Validated>> {
                 ap_first: 0.0,
                 ap_cascade: 0.0,
                 held_out: vec![0.0; s.labels.len()],
+                fold_first: [0.0; 2],
                 fold_cascade: [0.0; 2],
             })
         })
@@ -1066,6 +1068,7 @@ fn cross_validate(s: &Samples, iou_threshold: f32) -> Vec<Option<Validated>> {
                 // Sums here, halved below (the arithmetic of every cascade trained before).
                 v.ap_first += first;
                 v.ap_cascade += cascade;
+                v.fold_first[fold] = first;
                 v.fold_cascade[fold] = cascade;
                 for (&n, &score) in test.iter().zip(&combined) {
                     v.held_out[n] = score;
@@ -1189,6 +1192,25 @@ impl StageOutcome {
     }
 }
 
+impl StageOutcome {
+    /// [`StageRule::NestedGain`]: records the nested cross-validated gain of the candidates' `numbers` (in
+    /// the candidates' order) and refuses the chosen stage when it is not above 0.
+    fn judge_nested(&mut self, numbers: &[NestedFolds]) {
+        self.nested_gain = nested::nested_gain(&numbers.iter().collect::<Vec<_>>());
+        if let (Ok(stage), Some(gain)) = (self.chosen(), self.nested_gain) {
+            if gain <= 0.0 {
+                self.refused = Some(format!(
+                    "the training's nested cross-validated gain, {:+.1}, is not above 0 (the chosen stage's own \
+                     cross-validated gain {:+.1} is the best of {} choices of set and C)",
+                    100.0 * gain,
+                    100.0 * (stage.cv_ap_cascade - stage.cv_ap_first_stage),
+                    numbers.len() * C_GRID.len()
+                ));
+            }
+        }
+    }
+}
+
 /// Trains the second stage of each of `categories` on `frames` (annotated objects and first-stage
 /// detections per frame), with `categories` also the context categories. Each category's stage is trained
 /// with every feature set of `sets` (not empty) and keeps the one with the highest cross-validated AP
@@ -1283,18 +1305,7 @@ pub fn train_cascade_resumable(
             }
             let mut outcome = StageOutcome { candidates, nested_gain: None, refused: None };
             if rule.needs_nested() {
-                outcome.nested_gain = nested::nested_gain(&nested_numbers.iter().collect::<Vec<_>>());
-                if let (Ok(stage), Some(gain)) = (outcome.chosen(), outcome.nested_gain) {
-                    if gain <= 0.0 {
-                        outcome.refused = Some(format!(
-                            "the training's nested cross-validated gain, {:+.1}, is not above 0 (the chosen \
-                             stage's own cross-validated gain {:+.1} is the best of {} choices of set and C)",
-                            100.0 * gain,
-                            100.0 * (stage.cv_ap_cascade - stage.cv_ap_first_stage),
-                            nested_numbers.len() * C_GRID.len()
-                        ));
-                    }
-                }
+                outcome.judge_nested(&nested_numbers);
             }
             let done = finished.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
             log::info!("cascade: '{category}' done ({done} of {})", categories.len());
@@ -1513,10 +1524,7 @@ fn train_stage(
         return (Err(format!("{positives} true positives among {} detections", s.labels.len())), None);
     }
     let validated = cross_validate(&s, iou_threshold);
-    let numbers = nested.then(|| {
-        let outer = [0, 1].map(|fold| validated.iter().map(|v| v.as_ref().map(|v| v.fold_cascade[fold])).collect());
-        nested::nested_folds(&s, outer, in_fold, iou_threshold)
-    });
+    let numbers = nested.then(|| nested::nested_folds(&s, &validated, iou_threshold));
     (stage_of(&s, validated, frames.len(), iou_threshold), numbers)
 }
 

@@ -1208,9 +1208,9 @@ fn chance_chair_frames() -> Vec<CascadeFrame> {
 }
 
 /// `StageRule::NestedGain` keeps the table's stage (the same stage as any-gain's, with its nested gain
-/// recorded) and refuses the chance chairs' stage, whose cross-validated gain is the best of four `C`s on
-/// noise. Its checkpoints carry the nested numbers: a checkpoint written without them is trained again,
-/// one written with them is read by either rule.
+/// recorded) and refuses the chance chairs' stage, whose cross-validated gain is the best of eight choices
+/// of set and `C` on noise. Its checkpoints carry the nested numbers: a checkpoint written without them is
+/// trained again, one written with them is read by either rule.
 #[test]
 fn the_nested_gain_rule_keeps_real_gains_and_drops_chance_ones() {
     let dir = tempfile::tempdir().unwrap();

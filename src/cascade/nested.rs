@@ -14,14 +14,14 @@
 //! cross-validation **within `g`** chooses — `g`'s frames split again by [`in_inner_fold`] (frame index / 2
 //! even or odd), the same rule as the stage's (highest mean AP; ties: the smaller `C`, then the earlier set)
 //! —, or by the first-stage score when no inner choice beats the first stage's inner AP. The outer SVMs
-//! are the stage's own cross-validation's (their per-fold APs are kept, no extra fit); the inner ones are
-//! 2 × 2 × |C_GRID| fits on a quarter of the frames each (each inner fold's fits warm-started as the
-//! stage's, `combined_scores_per_c`). The nested gain is the mean over the two outer folds of (that AP − the
+//! are the stage's own cross-validation's (their per-fold APs are kept, no extra fit); the inner
+//! cross-validation is the stage's own run on `g`'s samples (`fold_samples`): 2 × 2 × |C_GRID| fits on
+//! a quarter of the frames each. The nested gain is the mean over the two outer folds of (that AP − the
 //! first stage's AP on the fold), the same arithmetic as the stage's cross-validated gain.
 
 use serde::{Deserialize, Serialize};
 
-use super::{combined_scores_per_c, subset_ap, Samples, C_GRID};
+use super::{cross_validate, Samples, Validated, C_GRID};
 
 /// Inner fold `inner` (0 or 1) of the frames of one outer fold: the frame index halved, even or odd (the
 /// outer folds split on the index's parity, so halving alternates within each).
@@ -60,46 +60,43 @@ impl NestedFolds {
     }
 }
 
-/// The mean over the inner folds of the first-stage AP and of the combined score's AP at each `C`, within
-/// the samples `train` (one outer fold's training samples).
-fn inner_cross_validation(s: &Samples, train: &[usize], iou_threshold: f32) -> (f32, Vec<Option<f32>>) {
-    let mut first = 0.0;
-    let mut cascade: Vec<Option<f32>> = vec![Some(0.0); C_GRID.len()];
-    for inner in 0..2 {
-        let fit: Vec<usize> = train.iter().copied().filter(|&n| !in_inner_fold(s.frame[n], inner)).collect();
-        let test: Vec<usize> = train.iter().copied().filter(|&n| in_inner_fold(s.frame[n], inner)).collect();
-        let base: Vec<f32> = test.iter().map(|&n| s.raw[n]).collect();
-        first += subset_ap(s, &test, &base, iou_threshold) / 2.0;
-        for (k, combined) in combined_scores_per_c(s, &fit, &test).into_iter().enumerate() {
-            match (combined, cascade[k].as_mut()) {
-                (Some(combined), Some(sum)) => *sum += subset_ap(s, &test, &combined, iou_threshold) / 2.0,
-                _ => cascade[k] = None,
-            }
-        }
+/// The samples of the frames of parity `parity` (one outer fold), renumbered `frame / 2` (with their ground
+/// truth), so that the stage's own cross-validation over them ([`cross_validate`], even and odd frame)
+/// is the inner cross-validation ([`in_inner_fold`]). Labels stay those matched on all frames.
+fn fold_samples(s: &Samples, parity: usize) -> Samples {
+    let kept: Vec<usize> = (0..s.labels.len()).filter(|&n| s.frame[n] % 2 == parity).collect();
+    Samples {
+        psi: kept.iter().map(|&n| s.psi[n].clone()).collect(),
+        raw: kept.iter().map(|&n| s.raw[n]).collect(),
+        labels: kept.iter().map(|&n| s.labels[n]).collect(),
+        frame: kept.iter().map(|&n| s.frame[n] / 2).collect(),
+        cuboids: kept.iter().map(|&n| s.cuboids[n]).collect(),
+        truth: s.truth.iter().skip(parity).step_by(2).cloned().collect(),
     }
-    (first, cascade)
 }
 
-/// The nested numbers of one training, from its cross-validation's per-fold APs (`outer[f][k]` on fold
-/// `f` at `C_GRID[k]`) and the inner cross-validations run here; `in_fold` says which frames are in outer
-/// fold `f`.
-pub(super) fn nested_folds(
-    s: &Samples,
-    outer: [Vec<Option<f32>>; 2],
-    in_fold: impl Fn(usize, usize) -> bool,
-    iou_threshold: f32,
-) -> NestedFolds {
-    let mut first = [0.0; 2];
+/// The nested numbers of one training from its cross-validation `validated` (per `C` of [`C_GRID`]; its
+/// per-fold APs are the outer ones) and the inner cross-validations run here: the stage's own
+/// cross-validation on each outer training fold's samples ([`fold_samples`]). Where no `C` could be fitted
+/// the first-stage APs read 0: every choice then falls back to the first stage, whose gain is 0 whatever
+/// its AP.
+pub(super) fn nested_folds(s: &Samples, validated: &[Option<Validated>], iou_threshold: f32) -> NestedFolds {
+    let first_aps = |v: &[Option<Validated>]| v.iter().flatten().next().map_or([0.0; 2], |v| v.fold_first);
     let mut inner_first = [0.0; 2];
     let mut inner: [Vec<Option<f32>>; 2] = [vec![], vec![]];
     for fold in 0..2 {
-        let test: Vec<usize> = (0..s.labels.len()).filter(|&n| in_fold(s.frame[n], fold)).collect();
-        let base: Vec<f32> = test.iter().map(|&n| s.raw[n]).collect();
-        first[fold] = subset_ap(s, &test, &base, iou_threshold);
-        let train: Vec<usize> = (0..s.labels.len()).filter(|&n| !in_fold(s.frame[n], fold)).collect();
-        (inner_first[fold], inner[fold]) = inner_cross_validation(s, &train, iou_threshold);
+        // Outer fold `fold` is scored by the SVMs trained on the frames of the other parity.
+        let within = cross_validate(&fold_samples(s, 1 - fold), iou_threshold);
+        let [a, b] = first_aps(&within);
+        inner_first[fold] = (a + b) / 2.0;
+        inner[fold] = within.iter().map(|v| v.as_ref().map(|v| v.ap_cascade)).collect();
     }
-    NestedFolds { first, outer, inner_first, inner }
+    NestedFolds {
+        first: first_aps(validated),
+        outer: [0, 1].map(|fold| validated.iter().map(|v| v.as_ref().map(|v| v.fold_cascade[fold])).collect()),
+        inner_first,
+        inner,
+    }
 }
 
 /// The nested cross-validated gain of the training procedure over the candidate sets' numbers (in the
@@ -134,6 +131,8 @@ pub fn nested_gain(candidates: &[&NestedFolds]) -> Option<f32> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::Cuboid;
+    use glam::Vec3;
 
     fn numbers(first: [f32; 2], outer: [[f32; 4]; 2], inner_first: [f32; 2], inner: [[f32; 4]; 2]) -> NestedFolds {
         NestedFolds {
@@ -141,6 +140,36 @@ mod tests {
             outer: outer.map(|l| l.map(Some).to_vec()),
             inner_first,
             inner: inner.map(|l| l.map(Some).to_vec()),
+        }
+    }
+
+    /// The parity-1 samples of six frames: frames 1, 3, 5 become 0, 1, 2 with their own ground truth and
+    /// samples (in order), and the stage's folds over them are the inner folds over the originals.
+    #[test]
+    fn fold_samples_renumber_one_outer_fold() {
+        let unit = |x: f32| Cuboid::new(Vec3::new(x, 0.0, 0.5), Vec3::ONE, 0.0);
+        let mut s = Samples { psi: vec![], raw: vec![], labels: vec![], frame: vec![], cuboids: vec![], truth: vec![] };
+        for f in 0..6 {
+            s.truth.push(vec![unit(f as f32); f % 3]);
+            for d in 0..2 {
+                s.psi.push(vec![f as f64, d as f64]);
+                s.raw.push((10 * f + d) as f32);
+                s.labels.push(d == 0);
+                s.frame.push(f);
+                s.cuboids.push(unit(f as f32 + 0.1 * d as f32));
+            }
+        }
+        let odd = fold_samples(&s, 1);
+        assert_eq!(odd.frame, [0, 0, 1, 1, 2, 2]);
+        assert_eq!(odd.raw, [10.0, 11.0, 30.0, 31.0, 50.0, 51.0]);
+        assert_eq!(odd.psi[3], [3.0, 1.0]);
+        assert_eq!(odd.labels, [true, false, true, false, true, false]);
+        assert_eq!(odd.cuboids[4], unit(5.0));
+        assert_eq!(odd.truth, [vec![unit(1.0)], vec![], vec![unit(5.0); 2]]);
+        for (j, original) in [1, 3, 5].into_iter().enumerate() {
+            for inner in 0..2 {
+                assert_eq!(super::super::in_fold(j, inner), in_inner_fold(original, inner));
+            }
         }
     }
 
