@@ -1446,3 +1446,152 @@ fn the_v7_cascade_learns_what_the_desk_model_says_about_a_table() {
     let v6 = ap_with(FeatureSet::V6);
     assert!(v6 < 0.9, "v6 AP {v6}");
 }
+
+/// Held-out frame `f` for recalibration: [`frame`]'s, but odd frames lose their bed detection (the bed is
+/// still annotated), so that the context cannot tell their tables apart and the labels are not separable
+/// by the combined score (a separable set would send any logistic fit's slope to its prior's bound).
+fn held_out_frame(f: usize) -> CascadeFrame {
+    let mut held_out = frame(f);
+    if f % 2 == 1 {
+        held_out.detections.retain(|d| d.category != "bed");
+    }
+    held_out
+}
+
+/// `Cascade::recalibrated` against the same fit on hand-labelled samples, and the properties of a maximum
+/// likelihood Platt fit: its probabilities sum to the number of true positives (the intercept's equation,
+/// up to the prior), it loses less log-likelihood than the calibration the cascade was trained with, and
+/// the order of the scores — every AP — does not change.
+#[test]
+fn a_cascade_is_recalibrated_on_held_out_frames() {
+    use cog_gpu::calibration::fit_logistic;
+    use cog_gpu::cascade::HeldOutFrame;
+    let training: Vec<_> = (0..40).map(frame).collect();
+    let categories = names(&["bed", "table"]);
+    let (cascade, _) =
+        train_cascade(&training, &categories, 0.25, CascadeTraining::default(), &[FeatureSet::V4]).unwrap();
+    let held_out: Vec<_> = (100..160).map(held_out_frame).collect();
+    let frames: Vec<HeldOutFrame> =
+        held_out.iter().map(|f| HeldOutFrame { detections: &f.detections, room: None, truth: &f.truth }).collect();
+    let (recalibrated, report) = cascade.recalibrated(&frames, &[], 0.25, "held-out").unwrap();
+
+    // By hand: every table detection's combined score z + z', the real table (x = 4) the true positive.
+    let mut samples = Vec::new();
+    let mut rescored = Vec::new();
+    for f in &held_out {
+        let mut detections = f.detections.clone();
+        cascade.rescore(&mut detections, None).unwrap();
+        for t in detections.iter().filter(|d| d.category == "table") {
+            samples.push((t.raw_score.unwrap() + t.context_score.unwrap(), t.centre[0] > 3.0));
+        }
+        rescored.push(CascadeFrame { detections, ..f.clone() });
+    }
+    let positives = samples.iter().filter(|s| s.1).count();
+    assert_eq!((samples.len(), positives), (120, 60));
+    assert!(samples.iter().any(|&(z, y)| !y && samples.iter().any(|&(z2, y2)| y2 && z > z2)), "not separable");
+    let (a, b) = fit_logistic(&samples).unwrap();
+    let stage = &recalibrated.stages["table"];
+    let calibration = &stage.calibration;
+    assert!((calibration.a - a).abs() < 1e-9 * a.abs() && (calibration.b - b).abs() < 1e-9 * (1.0 + b.abs()));
+    assert_eq!((calibration.detections, calibration.true_positives, calibration.frames), (120, 60, 60));
+    assert_eq!((calibration.data.as_str(), calibration.iou), ("held-out", 0.25));
+    // Only the calibration changed; the bed has no stage and gets none.
+    let before = &cascade.stages["table"];
+    assert_eq!(&cog_gpu::cascade::SecondStage { calibration: before.calibration.clone(), ..stage.clone() }, before);
+    assert_eq!(recalibrated.stages.keys().collect::<Vec<_>>(), ["table"]);
+    // The intercept's equation: Σ p = true positives, up to the prior's pull on b (10⁻³ · b).
+    let sum: f64 = samples.iter().map(|&(z, _)| f64::from(calibration.probability(z))).sum();
+    assert!((sum - 60.0).abs() < 1e-3 * (1.0 + b.abs()) + 1e-3, "Σ p = {sum}");
+    // The report: the trained calibration's expected true positives and both log losses, by hand.
+    let [row] = report.as_slice() else { panic!("{report:?}") };
+    let expected: f64 = samples.iter().map(|&(z, _)| f64::from(before.calibration.probability(z))).sum();
+    assert!((row.expected_true_positives_before - expected).abs() < 1e-6 * expected, "{row:?}");
+    let loss = |c: &cog_gpu::calibration::Calibration| {
+        samples
+            .iter()
+            .map(|&(z, y)| {
+                let p = f64::from(c.probability(z)).clamp(1e-6, 1.0 - 1e-6);
+                -(if y { p } else { 1.0 - p }).ln()
+            })
+            .sum::<f64>()
+            / samples.len() as f64
+    };
+    assert!((row.log_loss_before - loss(&before.calibration)).abs() < 1e-9, "{row:?}");
+    assert!((row.log_loss_after - loss(calibration)).abs() < 1e-9, "{row:?}");
+    // Trained on separable frames, the cascade's own calibration is far too sure of itself here.
+    assert!(row.log_loss_after < row.log_loss_before, "{row:?}");
+    // The same order, so the same AP.
+    let mut again: Vec<CascadeFrame> = held_out.clone();
+    for f in &mut again {
+        recalibrated.rescore(&mut f.detections, None).unwrap();
+    }
+    assert_eq!(table_ap(&again), table_ap(&rescored));
+
+    // A category without a stage, and held-out frames without a true table: errors, nothing returned.
+    let err = cascade.recalibrated(&frames, &names(&["bed"]), 0.25, "held-out").unwrap_err().to_string();
+    assert!(err.contains("no stage for 'bed'"), "{err}");
+    let no_truth: Vec<HeldOutFrame> =
+        held_out.iter().map(|f| HeldOutFrame { detections: &f.detections, room: None, truth: &[] }).collect();
+    let err = cascade.recalibrated(&no_truth, &[], 0.25, "held-out").unwrap_err().to_string();
+    assert!(err.contains("table") && err.contains("true and false positives"), "{err}");
+}
+
+/// `calibrate --cascade`: the cascade's stages fitted on held-out first-stage files and written to
+/// `--out`, the input cascade left as it was; a category without a stage is refused and nothing written.
+#[test]
+fn cli_calibrates_a_cascade_on_held_out_files() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (data, first) = (tmp.path().join("data"), tmp.path().join("first"));
+    std::fs::create_dir_all(&first).unwrap();
+    let mut frames = Vec::new();
+    for f in 100..130 {
+        let held_out = held_out_frame(f);
+        let name = format!("h{f}");
+        common::write_tiny_frame(&data, &name, held_out.truth.clone());
+        FrameDetections { frame: name, detections: held_out.detections.clone() }
+            .write(&first.join(format!("h{f}.json")))
+            .unwrap();
+        frames.push(held_out);
+    }
+    let training: Vec<_> = (0..40).map(frame).collect();
+    let (cascade, _) =
+        train_cascade(&training, &names(&["bed", "table"]), 0.25, CascadeTraining::default(), &[FeatureSet::V4])
+            .unwrap();
+    let (input, output) = (tmp.path().join("cascade.json"), tmp.path().join("calibrated.json"));
+    cascade.write(&input).unwrap();
+    let run = |extra: &[&str]| {
+        let mut args = vec!["calibrate", "--cascade", input.to_str().unwrap(), "--data", data.to_str().unwrap()];
+        args.extend(["--detections", first.to_str().unwrap(), "--out", output.to_str().unwrap()]);
+        args.extend(extra);
+        Command::new(env!("CARGO_BIN_EXE_cog-gpu")).args(&args).output().unwrap()
+    };
+    let out = run(&[]);
+    let (stdout, stderr) = (String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success(), "{stderr}");
+    assert!(stdout.lines().any(|l| l.starts_with("table") && l.split_whitespace().nth(2) == Some("30")), "{stdout}");
+    assert!(stdout.contains("fitted on 30 frames"), "{stdout}");
+    let held_out: Vec<cog_gpu::cascade::HeldOutFrame> = frames
+        .iter()
+        .map(|f| cog_gpu::cascade::HeldOutFrame { detections: &f.detections, room: None, truth: &f.truth })
+        .collect();
+    let (expected, _) = cascade.recalibrated(&held_out, &[], 0.25, data.to_str().unwrap()).unwrap();
+    assert_eq!(Cascade::read(&output).unwrap(), expected);
+    assert_eq!(Cascade::read(&input).unwrap(), cascade, "the input cascade is left as it was");
+
+    std::fs::remove_file(&output).unwrap();
+    // `--check` reports the same table and writes nothing.
+    let mut args = vec!["calibrate", "--cascade", input.to_str().unwrap(), "--data", data.to_str().unwrap()];
+    args.extend(["--detections", first.to_str().unwrap(), "--check"]);
+    let checked = Command::new(env!("CARGO_BIN_EXE_cog-gpu")).args(&args).output().unwrap();
+    let checked_stdout = String::from_utf8_lossy(&checked.stdout);
+    assert!(checked.status.success(), "{}", String::from_utf8_lossy(&checked.stderr));
+    assert_eq!(checked_stdout.lines().nth(1), stdout.lines().nth(1), "{checked_stdout}");
+    assert!(checked_stdout.contains("30 true positives found") && checked_stdout.contains("nothing written"));
+    assert!(!output.exists());
+    assert_eq!(Cascade::read(&input).unwrap(), cascade);
+    let out = run(&["--categories", "bed"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("no stage for 'bed'") && stderr.contains("cascade.json"), "{stderr}");
+    assert!(!output.exists());
+}

@@ -9,11 +9,18 @@
 //! rewritten in place, through a temporary file); a category with no true or no false positive among
 //! the detections is an error naming it, since no calibration can be fitted, and then no model is
 //! written (a models directory is never left half calibrated).
+//!
+//! `cog-gpu calibrate --cascade CASCADE.json --data DIR --detections DIR [--models assets/models] [--out
+//! FILE]`: fits the calibration of the context cascade's stages instead ([`Cascade::recalibrated`]), on
+//! held-out frames' **first-stage** detections (`detect --no-cascade --min-score -3` with the models the
+//! cascade was trained with); `--out` is then the cascade file to write (default: the cascade itself).
+//! The stages' weights stay, so every category's AP stays; only the probabilities change.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
 use cog_gpu::calibration::{fit_logistic, label_detections, Calibration};
+use cog_gpu::cascade::{Cascade, HeldOutFrame};
 use cog_gpu::category::normalise_name;
 use cog_gpu::eval::Detection;
 use cog_gpu::frame::{read_annotations, unique_frame_names, Dataset, Object};
@@ -25,9 +32,18 @@ use super::GlobalOptions;
 pub struct Args {
     #[command(flatten)]
     pub held_out: HeldOutArgs,
-    /// Where to write the calibrated models; default: over the models themselves.
+    /// Where to write the calibrated models (a directory); default: over the models themselves. With
+    /// --cascade, the calibrated cascade file; default: over the cascade itself.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Calibrate this context cascade's stages instead of the models: --detections are then first-stage
+    /// detections (`detect --no-cascade`) by the models the cascade was trained with (--models).
+    #[arg(long)]
+    pub cascade: Option<PathBuf>,
+    /// With --cascade: only report how the cascade's calibrations hold on the held-out frames (expected
+    /// against found true positives, log loss as stored and refitted); write nothing.
+    #[arg(long, requires = "cascade", conflicts_with = "out")]
+    pub check: bool,
 }
 
 /// What `calibrate` and `cascade` learn from: held-out frames, their detections by a models directory's
@@ -62,6 +78,9 @@ impl HeldOutArgs {
 }
 
 pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
+    if let Some(cascade) = &args.cascade {
+        return calibrate_cascade(&args.held_out, cascade, args.out.as_deref(), args.check);
+    }
     let held_out = &args.held_out;
     let mut models = held_out.models()?;
     let LabelledDetections { frames, truth, detections, .. } =
@@ -116,6 +135,60 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         model.write(&path)?;
     }
     println!("wrote {} calibrated model(s) to {}", models.len(), out_dir.display());
+    Ok(())
+}
+
+/// `calibrate --cascade`: the cascade's stages calibrated on the held-out frames, a report per stage, the
+/// file written (only when every stage could be fitted, and not with `check`).
+fn calibrate_cascade(held_out: &HeldOutArgs, path: &Path, out: Option<&Path>, check: bool) -> anyhow::Result<()> {
+    let cascade = Cascade::read(path)?;
+    cascade.check_models(&read_models_dir(&held_out.models, None)?)?;
+    let categories: Vec<String> =
+        super::options::names("--categories", &held_out.categories)?.iter().map(|c| normalise_name(c).0).collect();
+    let LabelledDetections { frames, truth, detections, rooms, .. } =
+        read_labelled_detections(&held_out.data, &held_out.detections)?;
+    let held_out_frames: Vec<HeldOutFrame> = (0..frames)
+        .map(|f| HeldOutFrame { detections: &detections[f], room: rooms[f].as_ref(), truth: &truth[f] })
+        .collect();
+    let (calibrated, report) = cascade
+        .recalibrated(&held_out_frames, &categories, held_out.iou, &held_out.data.display().to_string())
+        .with_context(|| format!("calibrating {} on {}", path.display(), held_out.detections.display()))?;
+    println!(
+        "{:<12} {:>10} {:>6} {:>11} {:>9} {:>9} {:>9} {:>9} {:>10} {:>9}",
+        "category", "detections", "TP", "expected TP", "a before", "b before", "a", "b", "loss befor", "loss"
+    );
+    for r in &report {
+        println!(
+            "{:<12} {:>10} {:>6} {:>11.1} {:>9.4} {:>9.4} {:>9.4} {:>9.4} {:>10.4} {:>9.4}",
+            r.category,
+            r.after.detections,
+            r.after.true_positives,
+            r.expected_true_positives_before,
+            r.before.a,
+            r.before.b,
+            r.after.a,
+            r.after.b,
+            r.log_loss_before,
+            r.log_loss_after
+        );
+        if let Some(shortage) = r.after.shortage() {
+            log::warn!("{}: cascade stage calibration {shortage}", r.category);
+        }
+    }
+    if check {
+        let found: usize = report.iter().map(|r| r.after.true_positives).sum();
+        let expected: f64 = report.iter().map(|r| r.expected_true_positives_before).sum();
+        println!("all stages: {found} true positives found, {expected:.1} expected by the stored calibrations; nothing written");
+        return Ok(());
+    }
+    let out = out.unwrap_or(path);
+    calibrated.write(out)?;
+    println!(
+        "wrote the cascade with {} stage calibration(s) fitted on {} frames to {}",
+        report.len(),
+        frames,
+        out.display()
+    );
     Ok(())
 }
 
