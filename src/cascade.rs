@@ -733,11 +733,12 @@ impl Cascade {
     /// its AP, does not change. `data` names the frames in the calibration's provenance.
     ///
     /// Why (our choice; the paper calibrates nothing): `cascade` fits a stage's calibration on the very
-    /// detections its SVM was trained on, whose combined scores separate true from false positives better
-    /// than on any other frames, so its probabilities are too confident by an amount that differs between
-    /// categories — and the overlay, `--min-probability` and `--overlay-min-score` compare probabilities
-    /// across categories. Fitting them on frames the cascade never saw is what `calibrate` does for the
-    /// first stage. Errors (naming the categories) when a category has no true or no false positive among
+    /// detections its SVM was trained on, whose combined scores may separate true from false positives
+    /// better than on any other frames, which would make its probabilities too confident — and the overlay,
+    /// `--min-probability` and `--overlay-min-score` compare probabilities across categories. Fitting them
+    /// on frames the cascade never saw is what `calibrate` does for the first stage. (Measured on the
+    /// shipped cascade, README "The cascade's calibration": its stored calibrations are not too confident
+    /// on held-out frames, and a refit gained no overlay precision, so it ships as trained.) Errors (naming the categories) when a category has no true or no false positive among
     /// the held-out detections: nothing is returned, so no cascade is half recalibrated.
     pub fn recalibrated(
         &self,

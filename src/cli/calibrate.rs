@@ -69,10 +69,14 @@ pub struct HeldOutArgs {
 }
 
 impl HeldOutArgs {
+    /// The categories of --categories, normalised (empty: all).
+    pub fn categories(&self) -> anyhow::Result<Vec<String>> {
+        Ok(super::options::names("--categories", &self.categories)?.iter().map(|c| normalise_name(c).0).collect())
+    }
+
     /// The models of --models (only --categories when given).
     pub fn models(&self) -> anyhow::Result<Vec<cog_gpu::model::Model>> {
-        let categories: Vec<String> =
-            super::options::names("--categories", &self.categories)?.iter().map(|c| normalise_name(c).0).collect();
+        let categories = self.categories()?;
         Ok(read_models_dir(&self.models, (!categories.is_empty()).then_some(categories.as_slice()))?)
     }
 }
@@ -142,9 +146,9 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
 /// file written (only when every stage could be fitted, and not with `check`).
 fn calibrate_cascade(held_out: &HeldOutArgs, path: &Path, out: Option<&Path>, check: bool) -> anyhow::Result<()> {
     let cascade = Cascade::read(path)?;
+    // Every model, not only --categories': each stage reads every context category's probabilities.
     cascade.check_models(&read_models_dir(&held_out.models, None)?)?;
-    let categories: Vec<String> =
-        super::options::names("--categories", &held_out.categories)?.iter().map(|c| normalise_name(c).0).collect();
+    let categories = held_out.categories()?;
     let LabelledDetections { frames, truth, detections, rooms, .. } =
         read_labelled_detections(&held_out.data, &held_out.detections)?;
     let held_out_frames: Vec<HeldOutFrame> = (0..frames)
