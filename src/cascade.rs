@@ -142,6 +142,7 @@ use crate::eval::{
     average_precision, bootstrap_frames, percentile_interval, true_positives_in_input_order, Bootstrap, Detection,
     FrameDetections, MatchedDetections, ScoredBox,
 };
+use crate::exclusion::Exclusion;
 use crate::frame::Object;
 use crate::geometry::{footprint_overlap_area, intersection_volume, polygon_contains, Cuboid};
 use crate::learn::binary_svm::{balanced_costs, train_linear_svm_from, SvmSolution};
@@ -486,6 +487,10 @@ pub struct Cascade {
     pub categories: Vec<String>,
     pub stages: BTreeMap<String, SecondStage>,
     pub training: CascadeTraining,
+    /// Cross-category exclusion applied after the stages ([`crate::exclusion`]), when fitted on held-out
+    /// frames (`calibrate --cascade C --exclusion`); absent in files without it (no exclusion).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub exclusion: Option<Exclusion>,
 }
 
 impl Cascade {
@@ -588,6 +593,9 @@ impl Cascade {
             }
             stage.check_numbers().map_err(|e| format!("'{category}': {e}"))?;
         }
+        if let Some(exclusion) = &self.exclusion {
+            exclusion.check()?;
+        }
         Ok(())
     }
 
@@ -635,6 +643,13 @@ impl Cascade {
                 other.training.iou
             ));
         }
+        if self.exclusion != other.exclusion {
+            return Err(format!(
+                "the cascades have different cross-category exclusions ({:?} and {:?}): merge cascades without \
+                 one, then fit it on the merged cascade (calibrate --cascade --exclusion)",
+                self.exclusion, other.exclusion
+            ));
+        }
         let file_set = self.feature_set().ok_or_else(|| format!("unknown feature set '{}'", self.features))?;
         let mut merged = self.clone();
         for (category, stage) in &other.stages {
@@ -661,9 +676,21 @@ impl Cascade {
     }
 
     /// Rescores one frame's first-stage detections (module doc) in the frame's predicted `room` (floor
-    /// polygon; `None` without a layout), then sorts them by score, best first (stable). Detections must
-    /// be the first stage's, calibrated (`raw_score` present) and not rescored.
+    /// polygon; `None` without a layout), applies the cross-category exclusion when the cascade has one
+    /// ([`Cascade::exclusion`]), then sorts them by score, best first (stable). Detections must be the
+    /// first stage's, calibrated (`raw_score` present) and not rescored.
     pub fn rescore(&self, detections: &mut [Detection], room: Option<&Room>) -> Result<()> {
+        self.rescore_stages(detections, room)?;
+        if let Some(exclusion) = &self.exclusion {
+            exclusion.apply(detections);
+            detections.sort_by(|a, b| b.score.total_cmp(&a.score));
+        }
+        Ok(())
+    }
+
+    /// [`Cascade::rescore`] without the exclusion: the stages' scores, sorted best first (stable) — what
+    /// the stages' calibration and the exclusion are fitted on.
+    pub fn rescore_stages(&self, detections: &mut [Detection], room: Option<&Room>) -> Result<()> {
         check_first_stage(detections)?;
         self.check_scores(detections)?;
         // ψ of the widest set any stage reads: each set's ψ is a prefix of the next one's (module doc), so
@@ -755,7 +782,7 @@ impl Cascade {
         let mut truth = Vec::with_capacity(frames.len());
         for frame in frames {
             let mut detections = frame.detections.to_vec();
-            self.rescore(&mut detections, frame.room)?;
+            self.rescore_stages(&mut detections, frame.room)?;
             for d in &mut detections {
                 if let Some(context) = d.context_score {
                     d.raw_score = Some(combined(d, context));
@@ -831,7 +858,7 @@ fn combined(detection: &Detection, context: f32) -> f32 {
 
 /// Errors unless every detection is a calibrated first-stage one.
 fn check_first_stage(detections: &[Detection]) -> Result<()> {
-    if let Some(d) = detections.iter().find(|d| d.context_score.is_some()) {
+    if let Some(d) = detections.iter().find(|d| d.context_score.is_some() || d.score_before_exclusion.is_some()) {
         return Err(Error::Input(format!(
             "a '{}' detection was already rescored by a cascade; the cascade takes first-stage detections \
              (detect --no-cascade)",
@@ -1449,6 +1476,7 @@ pub fn train_cascade_resumable(
         categories: categories.to_vec(),
         stages,
         training,
+        exclusion: None,
     };
     Ok((cascade, results.into_iter().collect(), resumed.into_inner()))
 }

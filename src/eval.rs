@@ -65,6 +65,14 @@ pub struct Detection {
     /// feature set v7 reads.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cross_scores: Option<BTreeMap<String, f32>>,
+    /// When cross-category exclusion demoted the detection ([`crate::exclusion`]): its score before, which
+    /// `score` replaced (`score = score_before_exclusion · (1 − weight · p)`, `p` the competitor's score).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub score_before_exclusion: Option<f32>,
+    /// When cross-category exclusion demoted the detection: the category of the more confident overlapping
+    /// detection that did.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub excluded_by: Option<String>,
 }
 
 impl Detection {
@@ -85,6 +93,8 @@ impl Detection {
             surface_z: None,
             latent_slice: None,
             cross_scores: None,
+            score_before_exclusion: None,
+            excluded_by: None,
         }
     }
 }

@@ -17,6 +17,7 @@ pub mod diagnose;
 pub mod draw;
 pub mod error;
 pub mod eval;
+pub mod exclusion;
 pub mod features;
 pub mod frame;
 pub mod geometry;

@@ -15,6 +15,11 @@
 //! held-out frames' **first-stage** detections (`detect --no-cascade --min-score -3` with the models the
 //! cascade was trained with); `--out` is then the cascade file to write (default: the cascade itself).
 //! The stages' weights stay, so every category's AP stays; only the probabilities change.
+//!
+//! `cog-gpu calibrate --cascade CASCADE.json --exclusion --data DIR --detections DIR [--out FILE | --check]`:
+//! fits the cascade's cross-category exclusion ([`cog_gpu::exclusion`]) on the same kind of held-out
+//! first-stage detections: the grid's mean APs (over --categories; default every category with ground
+//! truth), the chosen parameters' per-category APs, and the cascade written with them.
 
 use std::path::{Path, PathBuf};
 
@@ -23,6 +28,7 @@ use cog_gpu::calibration::{fit_logistic, label_detections, Calibration};
 use cog_gpu::cascade::{Cascade, HeldOutFrame};
 use cog_gpu::category::normalise_name;
 use cog_gpu::eval::Detection;
+use cog_gpu::exclusion::{fit_exclusion, ExclusionTrial, IOU_GRID, WEIGHT_GRID};
 use cog_gpu::frame::{read_annotations, unique_frame_names, Dataset, Object};
 use cog_gpu::model::read_models_dir;
 
@@ -44,6 +50,11 @@ pub struct Args {
     /// against found true positives, log loss as stored and refitted); write nothing.
     #[arg(long, requires = "cascade", conflicts_with = "out")]
     pub check: bool,
+    /// With --cascade: fit the cascade's cross-category exclusion (its IoU and weight, on a grid, by the
+    /// mean AP of --categories) instead of the stages' calibrations, and write the cascade with it (with
+    /// --check: only report).
+    #[arg(long, requires = "cascade")]
+    pub exclusion: bool,
 }
 
 /// What `calibrate` and `cascade` learn from: held-out frames, their detections by a models directory's
@@ -83,6 +94,9 @@ impl HeldOutArgs {
 
 pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     if let Some(cascade) = &args.cascade {
+        if args.exclusion {
+            return fit_cascade_exclusion(&args.held_out, cascade, args.out.as_deref(), args.check);
+        }
         return calibrate_cascade(&args.held_out, cascade, args.out.as_deref(), args.check);
     }
     let held_out = &args.held_out;
@@ -191,6 +205,66 @@ fn calibrate_cascade(held_out: &HeldOutArgs, path: &Path, out: Option<&Path>, ch
         "wrote the cascade with {} stage calibration(s) fitted on {} frames to {}",
         report.len(),
         frames,
+        out.display()
+    );
+    Ok(())
+}
+
+/// `calibrate --cascade --exclusion`: the cascade's cross-category exclusion fitted on the held-out frames
+/// ([`fit_exclusion`]), the grid's mean APs and the chosen parameters' per-category APs reported, the file
+/// written with it (not with `check`; without a gain, the cascade is written without an exclusion).
+fn fit_cascade_exclusion(held_out: &HeldOutArgs, path: &Path, out: Option<&Path>, check: bool) -> anyhow::Result<()> {
+    let cascade = Cascade::read(path)?;
+    cascade.check_models(&read_models_dir(&held_out.models, None)?)?;
+    let categories = held_out.categories()?;
+    let LabelledDetections { frames, truth, mut detections, rooms, .. } =
+        read_labelled_detections(&held_out.data, &held_out.detections)?;
+    for (f, frame) in detections.iter_mut().enumerate() {
+        cascade.rescore_stages(frame, rooms[f].as_ref()).with_context(|| {
+            format!("rescoring the detections of frame {} of {}", f + 1, held_out.detections.display())
+        })?;
+    }
+    let fit = fit_exclusion(&detections, &truth, &categories, held_out.iou);
+    let map = |t: &ExclusionTrial| t.mean_ap.map_or("-".to_string(), |m| format!("{:.2}", 100.0 * m));
+    println!(
+        "mean AP ({} categories, {frames} frames, IoU {}) by exclusion weight (rows) and IoU (columns); without: {}",
+        fit.categories.len(),
+        held_out.iou,
+        map(fit.without())
+    );
+    print!("{:>7}", "weight");
+    for iou in IOU_GRID {
+        print!(" {iou:>7}");
+    }
+    println!();
+    for &weight in &WEIGHT_GRID[1..] {
+        print!("{weight:>7}");
+        for t in fit.trials.iter().filter(|t| t.exclusion.weight == weight) {
+            print!(" {:>7}", map(t));
+        }
+        println!();
+    }
+    let best = fit.best();
+    let ap = |a: Option<f32>| a.map_or("-".to_string(), |a| format!("{:.1}", 100.0 * a));
+    println!("{:<12} {:>8} {:>8}", "category", "without", "with");
+    for (n, category) in fit.categories.iter().enumerate() {
+        println!("{category:<12} {:>8} {:>8}", ap(fit.without().aps[n]), ap(best.aps[n]));
+    }
+    match fit.chosen {
+        Some(e) => {
+            println!("chosen: IoU {}, weight {} (mean AP {} → {})", e.iou, e.weight, map(fit.without()), map(best))
+        }
+        None => println!("chosen: no exclusion (no weight above 0 raises the mean AP)"),
+    }
+    if check {
+        println!("nothing written");
+        return Ok(());
+    }
+    let out = out.unwrap_or(path);
+    Cascade { exclusion: fit.chosen, ..cascade }.write(out)?;
+    println!(
+        "wrote the cascade with {} to {}",
+        fit.chosen.map_or("no exclusion".into(), |e| format!("exclusion IoU {}, weight {}", e.iou, e.weight)),
         out.display()
     );
     Ok(())
