@@ -267,6 +267,16 @@ fn cli_fits_the_exclusion_and_rescore_applies_it() {
     assert!(stdout.contains("chosen: IoU 0.02, weight 0.5") && stdout.contains("nothing written"), "{stdout}");
     assert!(!output.exists());
 
+    // An unknown category, and categories without ground truth in the frames: errors, nothing written.
+    for (categories, message) in [("tabel", "'tabel' is not one of"), ("bed,sofa", "no ground-truth box of bed, sofa")]
+    {
+        let out = run(&[base.as_slice(), &["--out", output.to_str().unwrap(), "--categories", categories]].concat());
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{stderr}");
+        assert!(stderr.contains(message), "{stderr}");
+        assert!(!output.exists());
+    }
+
     let written = run(&[base.as_slice(), &["--out", output.to_str().unwrap()]].concat());
     assert!(written.status.success(), "{}", String::from_utf8_lossy(&written.stderr));
     let excluding = Cascade::read(&output).unwrap();

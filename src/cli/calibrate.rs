@@ -217,6 +217,9 @@ fn fit_cascade_exclusion(held_out: &HeldOutArgs, path: &Path, out: Option<&Path>
     let cascade = Cascade::read(path)?;
     cascade.check_models(&read_models_dir(&held_out.models, None)?)?;
     let categories = held_out.categories()?;
+    if let Some(unknown) = categories.iter().find(|c| cog_gpu::category::category_index(c).is_none()) {
+        bail!("--categories: '{unknown}' is not one of cog-gpu's 19 categories");
+    }
     let LabelledDetections { frames, truth, mut detections, rooms, .. } =
         read_labelled_detections(&held_out.data, &held_out.detections)?;
     for (f, frame) in detections.iter_mut().enumerate() {
@@ -225,6 +228,13 @@ fn fit_cascade_exclusion(held_out: &HeldOutArgs, path: &Path, out: Option<&Path>
         })?;
     }
     let fit = fit_exclusion(&detections, &truth, &categories, held_out.iou);
+    if fit.without().mean_ap.is_none() {
+        bail!(
+            "{}: no ground-truth box of {} in these frames, so no AP to fit the exclusion by (nothing written)",
+            held_out.data.display(),
+            if categories.is_empty() { "any category".to_string() } else { categories.join(", ") }
+        );
+    }
     let map = |t: &ExclusionTrial| t.mean_ap.map_or("-".to_string(), |m| format!("{:.2}", 100.0 * m));
     println!(
         "mean AP ({} categories, {frames} frames, IoU {}) by exclusion weight (rows) and IoU (columns); without: {}",
