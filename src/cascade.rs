@@ -127,7 +127,10 @@
 //! Platt fit on the training frames' detections, [`crate::calibration::fit_logistic`]) so that they
 //! still compare across categories. Features are computed from the first-stage detections only, so the
 //! result does not depend on the order the detections are rescored in. Detections of a category the
-//! cascade has no classifier for keep their first-stage score.
+//! cascade has no classifier for keep their first-stage score. After the stages, a cascade file with a
+//! cross-category exclusion ([`Cascade::exclusion`], our addition, [`crate::exclusion`]) demotes each
+//! detection under a more confident overlapping one of another category ([`Cascade::rescore`]; the
+//! stages alone: [`Cascade::rescore_stages`]).
 
 use std::collections::BTreeMap;
 use std::path::Path;

@@ -5,7 +5,7 @@
 //! `frame` (SUN RGB-D frames, point clouds) → `geometry` (cuboids, IoU, projection) → `features`
 //! (definitions, CPU reference and fast path) → `gpu` (context and kernels with their CPU twins) →
 //! `backend` (which of the two scores) → later stages (detection, learning, the room layout
-//! `room_layout`, cascade, evaluation).
+//! `room_layout`, cascade and its cross-category `exclusion`, evaluation).
 //! `synth` writes frames in the same layout the `frame` module reads.
 
 pub mod backend;
