@@ -73,18 +73,23 @@ impl Exclusion {
     /// [`Detection::excluded_by`] names the competitor's category. The order of `detections` is kept.
     pub fn apply(&self, detections: &mut [Detection]) {
         let competitors = competitors(detections, self.iou);
-        for (d, best) in detections.iter_mut().zip(competitors) {
-            let Some(best) = best.iter().filter(|c| c.iou >= self.iou).max_by(|a, b| a.score.total_cmp(&b.score))
-            else {
-                continue;
-            };
-            let factor = 1.0 - self.weight * best.score;
+        for (d, competing) in detections.iter_mut().zip(competitors) {
+            let Some((factor, by)) = self.demotion(&competing) else { continue };
             if factor < 1.0 {
                 d.score_before_exclusion = Some(d.score);
-                d.excluded_by = Some(best.category.clone());
+                d.excluded_by = Some(by.category.clone());
                 d.score *= factor;
             }
         }
+    }
+
+    /// The factor `1 − weight · p_j` a detection's score is multiplied by, and the competitor `j` that
+    /// sets it: the most confident of `competing` (the detection's [`competitors`], of any IoU) with an
+    /// IoU of at least `iou`; `None` when there is none. The one formula of [`Exclusion::apply`] and
+    /// [`fit_exclusion`].
+    pub fn demotion<'a>(&self, competing: &'a [Competitor]) -> Option<(f32, &'a Competitor)> {
+        let strongest = competing.iter().filter(|c| c.iou >= self.iou).max_by(|a, b| a.score.total_cmp(&b.score))?;
+        Some((1.0 - self.weight * strongest.score, strongest))
     }
 }
 
@@ -173,16 +178,7 @@ pub fn fit_exclusion(
     // Only what the AP reads: the category, the box and the score (not the cross scores, cloned per trial).
     let detections: Vec<Vec<Detection>> = detections
         .iter()
-        .map(|frame| {
-            frame
-                .iter()
-                .map(|d| {
-                    let mut light = Detection::new(d.category.clone(), &d.cuboid(), d.score);
-                    light.raw_score = d.raw_score;
-                    light
-                })
-                .collect()
-        })
+        .map(|frame| frame.iter().map(|d| Detection::new(d.category.clone(), &d.cuboid(), d.score)).collect())
         .collect();
     let all_competitors: Vec<Vec<Vec<Competitor>>> = {
         use rayon::prelude::*;
@@ -197,10 +193,10 @@ pub fn fit_exclusion(
                     .iter()
                     .zip(competitors)
                     .map(|(d, competing)| {
-                        let best =
-                            competing.iter().filter(|c| c.iou >= exclusion.iou).map(|c| c.score).fold(0.0, f32::max);
                         let mut demoted = d.clone();
-                        demoted.score = d.score * (1.0 - exclusion.weight * best);
+                        if let Some((factor, _)) = exclusion.demotion(competing) {
+                            demoted.score *= factor;
+                        }
                         demoted
                     })
                     .collect()
