@@ -28,7 +28,6 @@ use cog_gpu::features::preprocess::NormalSearch;
 use cog_gpu::features::window::{category_sizes, DEFAULT_SIZE_STATS};
 use cog_gpu::features::{budget, cpu, FeatureLayout, Hypothesis, PreparedWindow};
 use cog_gpu::frame::{DepthSource, Frame};
-use cog_gpu::nms::DEFAULT_VOTE_IOU;
 
 /// The real frame benchmarked when no `--frame` is given (until the synthetic standard frame exists).
 pub const DEFAULT_FRAME: &str = "../shared/data/sunrgbd/kv1-b3dodata-img_0063";
@@ -90,7 +89,7 @@ pub struct Args {
     #[arg(long, value_parser = options::normal_search, requires = "detect")]
     pub normals: Option<NormalSearch>,
     /// With --detect: box voting after the NMS (as `detect --box-voting`: an IoU in (0, 1], or `off`).
-    #[arg(long, default_value_t = options::BoxVoting(Some(DEFAULT_VOTE_IOU)), value_parser = options::box_voting, requires = "detect")]
+    #[arg(long, default_value_t, value_parser = options::box_voting, requires = "detect")]
     pub box_voting: options::BoxVoting,
     /// With --detect: timed detections of each frame.
     #[arg(long, default_value_t = 1, value_parser = options::at_least_one)]

@@ -159,12 +159,8 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
 /// `calibrate --cascade`: the cascade's stages calibrated on the held-out frames, a report per stage, the
 /// file written (only when every stage could be fitted, and not with `check`).
 fn calibrate_cascade(held_out: &HeldOutArgs, path: &Path, out: Option<&Path>, check: bool) -> anyhow::Result<()> {
-    let cascade = Cascade::read(path)?;
-    // Every model, not only --categories': each stage reads every context category's probabilities.
-    cascade.check_models(&read_models_dir(&held_out.models, None)?)?;
-    let categories = held_out.categories()?;
-    let LabelledDetections { frames, truth, detections, rooms, .. } =
-        read_labelled_detections(&held_out.data, &held_out.detections)?;
+    let (cascade, categories, LabelledDetections { frames, truth, detections, rooms, .. }) =
+        cascade_and_held_out(held_out, path)?;
     let held_out_frames: Vec<HeldOutFrame> = (0..frames)
         .map(|f| HeldOutFrame { detections: &detections[f], room: rooms[f].as_ref(), truth: &truth[f] })
         .collect();
@@ -210,18 +206,29 @@ fn calibrate_cascade(held_out: &HeldOutArgs, path: &Path, out: Option<&Path>, ch
     Ok(())
 }
 
-/// `calibrate --cascade --exclusion`: the cascade's cross-category exclusion fitted on the held-out frames
-/// ([`fit_exclusion`]), the grid's mean APs and the chosen parameters' per-category APs reported, the file
-/// written with it (not with `check`; without a gain, the cascade is written without an exclusion).
-fn fit_cascade_exclusion(held_out: &HeldOutArgs, path: &Path, out: Option<&Path>, check: bool) -> anyhow::Result<()> {
+/// What both `calibrate --cascade` modes read: the cascade at `path` (checked against every model of
+/// `--models`, not only `--categories`': each stage reads every context category's probabilities), the
+/// `--categories` (each one of the 19), and the held-out frames with their labels and detections.
+fn cascade_and_held_out(
+    held_out: &HeldOutArgs,
+    path: &Path,
+) -> anyhow::Result<(Cascade, Vec<String>, LabelledDetections)> {
     let cascade = Cascade::read(path)?;
     cascade.check_models(&read_models_dir(&held_out.models, None)?)?;
     let categories = held_out.categories()?;
     if let Some(unknown) = categories.iter().find(|c| cog_gpu::category::category_index(c).is_none()) {
         bail!("--categories: '{unknown}' is not one of cog-gpu's 19 categories");
     }
-    let LabelledDetections { frames, truth, mut detections, rooms, .. } =
-        read_labelled_detections(&held_out.data, &held_out.detections)?;
+    let labelled = read_labelled_detections(&held_out.data, &held_out.detections)?;
+    Ok((cascade, categories, labelled))
+}
+
+/// `calibrate --cascade --exclusion`: the cascade's cross-category exclusion fitted on the held-out frames
+/// ([`fit_exclusion`]), the grid's mean APs and the chosen parameters' per-category APs reported, the file
+/// written with it (not with `check`; without a gain, the cascade is written without an exclusion).
+fn fit_cascade_exclusion(held_out: &HeldOutArgs, path: &Path, out: Option<&Path>, check: bool) -> anyhow::Result<()> {
+    let (cascade, categories, LabelledDetections { frames, truth, mut detections, rooms, .. }) =
+        cascade_and_held_out(held_out, path)?;
     for (f, frame) in detections.iter_mut().enumerate() {
         cascade.rescore_stages(frame, rooms[f].as_ref()).with_context(|| {
             format!("rescoring the detections of frame {} of {}", f + 1, held_out.detections.display())

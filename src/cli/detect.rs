@@ -30,7 +30,7 @@ use cog_gpu::frame::RoomLayout;
 use cog_gpu::frame::{is_frame_dir, DepthSource, Frame};
 use cog_gpu::gpu::fast::use_kernel_on;
 use cog_gpu::model::{common_normal_search, read_models_dir, Model};
-use cog_gpu::nms::{DEFAULT_NMS_IOU, DEFAULT_VOTE_IOU};
+use cog_gpu::nms::DEFAULT_NMS_IOU;
 use cog_gpu::room_layout::output::LayoutRecord;
 use cog_gpu::room_layout::PredictedLayout;
 use image::RgbImage;
@@ -62,7 +62,7 @@ pub struct Args {
     /// with it is at least this IoU (in (0, 1]; weights: each box's odds of being right against the kept
     /// box's), then the NMS again over the voted boxes (one that moved onto a better one is dropped), or
     /// `off`: the kept boxes as the window made them. README, "Box voting"
-    #[arg(long, default_value_t = options::BoxVoting(Some(DEFAULT_VOTE_IOU)), value_parser = options::box_voting)]
+    #[arg(long, default_value_t, value_parser = options::box_voting)]
     pub box_voting: options::BoxVoting,
     /// Detections kept per category and frame.
     #[arg(long, default_value_t = 20, value_parser = options::at_least_one)]

@@ -47,9 +47,17 @@ pub fn iou(text: &str) -> Result<f32, String> {
     }
 }
 
-/// `detect --box-voting`: an IoU in (0, 1] ([`iou`]), or `off` (`None`).
+/// `detect --box-voting` (and `bench --detect --box-voting`): an IoU in (0, 1] ([`iou`]), or `off`
+/// (`None`); by default [`DEFAULT_VOTE_IOU`](cog_gpu::nms::DEFAULT_VOTE_IOU), the one place both commands
+/// take it from.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BoxVoting(pub Option<f32>);
+
+impl Default for BoxVoting {
+    fn default() -> Self {
+        BoxVoting(Some(cog_gpu::nms::DEFAULT_VOTE_IOU))
+    }
+}
 
 impl std::fmt::Display for BoxVoting {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
