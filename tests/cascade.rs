@@ -1601,4 +1601,10 @@ fn cli_calibrates_a_cascade_on_held_out_files() {
     assert_eq!(out.status.code(), Some(1), "{stderr}");
     assert!(stderr.contains("no stage for 'bed'") && stderr.contains("cascade.json"), "{stderr}");
     assert!(!output.exists());
+    // A name that is no category at all is refused by name before anything is read.
+    let out = run(&["--categories", "tabel"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("'tabel' is not one of cog-gpu's 19 categories"), "{stderr}");
+    assert!(!output.exists());
 }

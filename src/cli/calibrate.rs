@@ -26,7 +26,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context};
 use cog_gpu::calibration::{fit_logistic, label_detections, Calibration};
 use cog_gpu::cascade::{Cascade, HeldOutFrame};
-use cog_gpu::category::normalise_name;
+use cog_gpu::category::{category_index, normalise_name, CATEGORIES};
 use cog_gpu::eval::Detection;
 use cog_gpu::exclusion::{fit_exclusion, ExclusionTrial, IOU_GRID, WEIGHT_GRID};
 use cog_gpu::frame::{read_annotations, unique_frame_names, Dataset, Object};
@@ -80,9 +80,15 @@ pub struct HeldOutArgs {
 }
 
 impl HeldOutArgs {
-    /// The categories of --categories, normalised (empty: all).
+    /// The categories of --categories, normalised (empty: all); a name that is not one of the 19 is an
+    /// error that names it (for every command that takes these arguments).
     pub fn categories(&self) -> anyhow::Result<Vec<String>> {
-        Ok(super::options::names("--categories", &self.categories)?.iter().map(|c| normalise_name(c).0).collect())
+        let categories: Vec<String> =
+            super::options::names("--categories", &self.categories)?.iter().map(|c| normalise_name(c).0).collect();
+        if let Some(unknown) = categories.iter().find(|c| category_index(c).is_none()) {
+            bail!("--categories: '{unknown}' is not one of cog-gpu's 19 categories ({})", CATEGORIES.join(", "));
+        }
+        Ok(categories)
     }
 
     /// The models of --models (only --categories when given).
@@ -208,17 +214,14 @@ fn calibrate_cascade(held_out: &HeldOutArgs, path: &Path, out: Option<&Path>, ch
 
 /// What both `calibrate --cascade` modes read: the cascade at `path` (checked against every model of
 /// `--models`, not only `--categories`': each stage reads every context category's probabilities), the
-/// `--categories` (each one of the 19), and the held-out frames with their labels and detections.
+/// `--categories`, and the held-out frames with their labels and detections.
 fn cascade_and_held_out(
     held_out: &HeldOutArgs,
     path: &Path,
 ) -> anyhow::Result<(Cascade, Vec<String>, LabelledDetections)> {
+    let categories = held_out.categories()?;
     let cascade = Cascade::read(path)?;
     cascade.check_models(&read_models_dir(&held_out.models, None)?)?;
-    let categories = held_out.categories()?;
-    if let Some(unknown) = categories.iter().find(|c| cog_gpu::category::category_index(c).is_none()) {
-        bail!("--categories: '{unknown}' is not one of cog-gpu's 19 categories");
-    }
     let labelled = read_labelled_detections(&held_out.data, &held_out.detections)?;
     Ok((cascade, categories, labelled))
 }
