@@ -5,8 +5,8 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use cog_gpu::backend::Backend;
-use cog_gpu::detect::{detect_frame, overlay, DetectOptions};
-use cog_gpu::eval::FrameDetections;
+use cog_gpu::detect::{detect_frame, overlay, DetectOptions, REVOTE_DEMOTION};
+use cog_gpu::eval::{Detection, FrameDetections};
 use cog_gpu::features::LatticePhase;
 use cog_gpu::features::YawAnchor;
 use cog_gpu::features::{FeatureLayout, Groups, Preprocessed, SizeQuantiles};
@@ -659,12 +659,13 @@ fn path_comparison_allows_reordered_near_ties_and_alternate_sizes_only() {
 
 #[test]
 fn box_voting_moves_the_kept_boxes_only() {
-    // Voting keeps the NMS's choice (categories, scores, yaws, order) and changes centres and sizes, then
-    // drops the voted boxes that the NMS, run again, suppresses; at IoU 1 only a box itself (and exact
-    // duplicates) votes, so nothing moves.
+    // Voting keeps the NMS's choice (categories, scores, yaws) and changes centres and sizes, then demotes
+    // by `REVOTE_DEMOTION` the voted boxes that the NMS, run again, would drop (with no cut here, none is
+    // left out); at IoU 1 only a box itself (and exact duplicates) votes, so nothing moves.
     let frame = Frame::read(SAMPLE, DepthSource::Raw).unwrap();
     let model = density_model(FeaturePath::Fast, 0.2);
-    let plain = DetectOptions { max_per_category: 8, box_voting: None, ..DetectOptions::default() };
+    let plain =
+        DetectOptions { max_per_category: 8, box_voting: None, min_score: Some(f32::MIN), ..DetectOptions::default() };
     let detect = |options: &DetectOptions| detect_frame(&frame, std::slice::from_ref(&model), Backend::Cpu, options);
     let unvoted = detect(&plain).unwrap().detections;
     assert!(unvoted.len() >= 3, "{} detections", unvoted.len());
@@ -672,22 +673,47 @@ fn box_voting_moves_the_kept_boxes_only() {
     assert_eq!(same, unvoted);
     assert!(unvoted.windows(2).all(|w| w[0].score > w[1].score), "distinct scores, best first");
     let voted = detect(&DetectOptions { box_voting: Some(0.5), ..plain }).unwrap().detections;
-    // The voted detections are the unvoted ones in the same order, some left out: each one's twin is the
-    // next unvoted detection with its score and yaw (the scores of this frame's kept boxes are distinct).
-    let mut twins = unvoted.iter();
+    assert_eq!(voted.len(), unvoted.len(), "none dropped without a cut");
+    assert!(voted.windows(2).all(|w| w[0].score >= w[1].score), "best first");
+    // Each voted detection's twin is the unvoted detection of its yaw and score, or of its yaw and its score
+    // plus the demotion (the model is uncalibrated: slope 1; the scores of this frame's kept boxes are
+    // distinct).
+    let twin_of = |v: &Detection| -> (usize, bool) {
+        let found = unvoted.iter().position(|u| (&u.category, u.yaw) == (&v.category, v.yaw) && u.score == v.score);
+        match found {
+            Some(n) => (n, false),
+            None => {
+                let n = unvoted
+                    .iter()
+                    .position(|u| (&u.category, u.yaw) == (&v.category, v.yaw) && u.score - REVOTE_DEMOTION == v.score)
+                    .expect("a twin");
+                (n, true)
+            }
+        }
+    };
+    let twins: Vec<(usize, bool)> = voted.iter().map(twin_of).collect();
     let mut moved = 0;
-    for v in &voted {
-        let u = twins.find(|u| (&u.category, u.score, u.yaw) == (&v.category, v.score, v.yaw)).expect("a twin");
+    for (v, &(n, _)) in voted.iter().zip(&twins) {
         // A weighted mean of boxes that each overlap the kept box by IoU ≥ 0.5 stays near it.
-        assert!(iou_3d(&v.cuboid(), &u.cuboid()) >= 0.5, "{v:?} against {u:?}");
-        moved += usize::from(v.centre != u.centre || v.size != u.size);
+        assert!(iou_3d(&v.cuboid(), &unvoted[n].cuboid()) >= 0.5, "{v:?} against {:?}", unvoted[n]);
+        moved += usize::from(v.centre != unvoted[n].centre || v.size != unvoted[n].size);
     }
     assert!(moved > 0, "no box moved");
-    // The NMS's promise holds for the voted boxes: no two of a category above its IoU.
-    for (i, a) in voted.iter().enumerate() {
-        for b in &voted[i + 1..] {
-            assert!(a.category != b.category || iou_3d(&a.cuboid(), &b.cuboid()) <= plain.nms_iou, "{a:?} {b:?}");
+    // The NMS's promise holds for the boxes not demoted: no two of a category above its IoU; and each demoted
+    // box overlaps above it a box not demoted that the NMS visited before it (a better unvoted twin).
+    let kept: Vec<usize> = (0..voted.len()).filter(|&i| !twins[i].1).collect();
+    for (k, &i) in kept.iter().enumerate() {
+        for &j in &kept[k + 1..] {
+            assert!(iou_3d(&voted[i].cuboid(), &voted[j].cuboid()) <= plain.nms_iou, "{:?} {:?}", voted[i], voted[j]);
         }
+    }
+    let demoted: Vec<usize> = (0..voted.len()).filter(|&i| twins[i].1).collect();
+    assert!(!demoted.is_empty(), "no box demoted on this frame: the test does not reach the demotion");
+    for &i in &demoted {
+        let reason = kept
+            .iter()
+            .any(|&j| twins[j].0 < twins[i].0 && iou_3d(&voted[i].cuboid(), &voted[j].cuboid()) > plain.nms_iou);
+        assert!(reason, "{:?} demoted without a better box over it", voted[i]);
     }
     assert!(DetectOptions { box_voting: Some(0.0), ..plain }.validate().is_err());
 }

@@ -60,7 +60,8 @@ pub struct Args {
     pub nms_iou: f32,
     /// Box voting after the NMS: each kept box becomes the weighted mean of the window's boxes whose 3D IoU
     /// with it is at least this IoU (in (0, 1]; weights: each box's odds of being right against the kept
-    /// box's), then the NMS again over the voted boxes (one that moved onto a better one is dropped), or
+    /// box's), then the NMS again over the voted boxes (one that moved onto a better one is demoted, its
+    /// odds 400 times lower), or
     /// `off`: the kept boxes as the window made them. README, "Box voting"
     #[arg(long, default_value_t, value_parser = options::box_voting)]
     pub box_voting: options::BoxVoting,
@@ -474,10 +475,10 @@ fn run_fingerprint(
     if options.normals != NormalSearch::KdTree {
         parts.push(format!("normals: {}", options.normals.name()));
     }
-    // Since 2026-12-05 the voted boxes go through the NMS again: files voted before then (a part without
-    // it) do not resume.
+    // Since 2026-12-05 the voted boxes go through the NMS again, and since 2026-12-06 the boxes it would
+    // drop are demoted instead: files voted before then (a part without it) do not resume.
     if let Some(iou) = options.box_voting {
-        parts.push(format!("box voting: {iou}, then NMS"));
+        parts.push(format!("box voting: {iou}, then NMS demoting by {}", cog_gpu::detect::REVOTE_DEMOTION));
     }
     // Since 2026-12-05 first-stage files carry the cross scores: those written before do not resume.
     if options.cross_scores {
