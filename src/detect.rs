@@ -828,9 +828,9 @@ fn model_detections(
         // in the same order and at the same IoU (since 2026-12-05; README, "Box voting", "The NMS after the
         // vote"). A box it would drop is demoted by `REVOTE_DEMOTION` instead (since 2026-12-06, "Demoted,
         // not dropped"): often it is the one that hits the object, and the better box beside it is poorly
-        // placed; demoted, it ranks below the frame's other boxes of the model and comes back only where
-        // nothing better is left. A demoted box below the cut is dropped, so a greedy visit in score order
-        // keeps, above any cut, the same boxes with the same scores: the cut property holds.
+        // placed; demoted, it ranks below the box that took its place (its odds e⁶ ≈ 400 times lower) and
+        // counts only where nothing scores better. A demoted box below the cut is dropped, so a greedy
+        // visit in score order keeps, above any cut, the same boxes with the same scores: the cut property holds.
         let survivors = suppress_in_order(
             0..detections.len(),
             |i| detections[i].cuboid(),
