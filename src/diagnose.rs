@@ -1,6 +1,6 @@
 //! Diagnosis of where a detector loses average precision (`cog-gpu eval --diagnose`).
 //!
-//! Six numbers, each isolating one stage of the pipeline or one kind of error:
+//! Seven numbers, each isolating one stage of the pipeline or one kind of error:
 //!
 //! 1. **Window recall ceiling** ([`best_window_ious`], [`frame_window_best_ious`], [`WindowRecall`]): for
 //!    each ground-truth box, the largest 3D IoU ([`crate::geometry::iou_3d`]) of any hypothesis the model's
@@ -27,6 +27,11 @@
 //!    a better detector must push down.
 //! 6. **What each kind costs** ([`oracle_aps`]): the AP with every false positive of a kind removed (an
 //!    oracle), and with all of them — the AP a perfect rescoring of the same detections would reach.
+//! 7. **What became of each object** ([`object_outcomes`], [`ObjectSummary`]): per ground-truth box, the
+//!    true positive that found it and how far down the category's ranking (the precision there: found
+//!    ahead of the false positives or behind them), or, when missed, whether a detection of the category
+//!    came near it and whether another category's detection sits on it — so that the recall the AP lacks
+//!    can be traced to the objects themselves (their size, their distance from the camera).
 //!
 //! Detections are read through [`Detection::score`] only, so other fields a detections file may carry do
 //! not change the diagnosis.
@@ -514,6 +519,162 @@ pub fn oracle_aps(
 }
 
 // ---------------------------------------------------------------------------------------------------------
+// 7. What became of each ground-truth box
+
+/// Below this precision a true positive counts as found *behind* the false positives
+/// ([`ObjectSummary::found_behind`]): at that point of the ranking the category has shown more false
+/// positives than true ones, so the object adds little to the AP and a user reading the list by score
+/// meets it late. (Choice: one half, the point where a detection is as likely wrong as right.)
+pub const FOUND_AHEAD_PRECISION: f32 = 0.5;
+
+/// What became of one ground-truth box ([`object_outcomes`]).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ObjectOutcome {
+    /// Index of its frame among the evaluated frames.
+    pub image: usize,
+    /// Its index among the frame's annotated objects (every category, in the annotation's order).
+    pub object: usize,
+    pub category: String,
+    /// Width, depth, height (metres).
+    pub size: [f32; 3],
+    /// Distance of its centre from the camera on the ground plane (metres; the upright frame's origin is
+    /// the camera).
+    pub distance_m: f32,
+    /// The detection of the category that takes it as a true positive under the benchmark's matching
+    /// ([`crate::eval::average_precision`]); `None`: missed.
+    pub found: Option<FoundBy>,
+    /// The largest 3D IoU of any detection of the category in its frame with it (0 without one): for a
+    /// missed box, whether a detection came near ([`TOUCH_IOU`]) or none did. A box can be missed with a
+    /// detection at IoU ≥ the threshold when that detection took another box of the frame.
+    pub best_iou: f32,
+    /// The most confident detection of **another** category with a 3D IoU ≥ the threshold with it.
+    pub other: Option<OtherDetection>,
+}
+
+/// The true positive that found a ground-truth box ([`ObjectOutcome::found`]).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct FoundBy {
+    pub score: f32,
+    pub iou: f32,
+    /// The category's precision over all frames when the AP's ranking reaches this detection.
+    pub precision: f32,
+    /// The category's false positives (all frames) ranked before it.
+    pub false_positives_before: usize,
+}
+
+/// A detection of another category on a ground-truth box ([`ObjectOutcome::other`]).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct OtherDetection {
+    pub category: String,
+    pub score: f32,
+    pub iou: f32,
+}
+
+/// How a category's ground-truth boxes fared ([`ObjectOutcome`]s counted); the four counts add up to the
+/// boxes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct ObjectSummary {
+    /// Found by a true positive ranked at a precision ≥ [`FOUND_AHEAD_PRECISION`].
+    pub found_ahead: usize,
+    /// Found by a true positive ranked at a lower precision.
+    pub found_behind: usize,
+    /// Missed, with a detection of the category at IoU ≥ [`TOUCH_IOU`] (poorly placed, or taken by
+    /// another box).
+    pub missed_near: usize,
+    /// Missed, with no detection of the category at IoU ≥ [`TOUCH_IOU`].
+    pub missed_far: usize,
+    /// Of the missed ones, those with a detection of another category at IoU ≥ the threshold.
+    pub missed_with_other: usize,
+}
+
+impl ObjectSummary {
+    /// Counts `outcomes` (one category's).
+    pub fn of(outcomes: &[ObjectOutcome]) -> ObjectSummary {
+        let mut summary = ObjectSummary::default();
+        for o in outcomes {
+            match &o.found {
+                Some(f) if f.precision >= FOUND_AHEAD_PRECISION => summary.found_ahead += 1,
+                Some(_) => summary.found_behind += 1,
+                None if o.best_iou >= TOUCH_IOU => summary.missed_near += 1,
+                None => summary.missed_far += 1,
+            }
+            if o.found.is_none() && o.other.is_some() {
+                summary.missed_with_other += 1;
+            }
+        }
+        summary
+    }
+}
+
+/// What became of every ground-truth box of `category` (`truth[i]` and `detections[i]`: image `i`'s
+/// objects and detections, any category), in image order, then annotation order: the true positive that
+/// found it (with the precision and the false positives before it in the AP's ranking), the best IoU of
+/// the category's detections in its frame, and the most confident detection of another category on it.
+pub fn object_outcomes(
+    truth: &[Vec<Object>],
+    detections: &[Vec<Detection>],
+    category: &str,
+    iou_threshold: f32,
+) -> Vec<ObjectOutcome> {
+    let ground_truth = category_truth(truth, category);
+    let scored = scored_boxes(detections, category);
+    let pr = average_precision(&scored, &ground_truth, iou_threshold);
+    let order = crate::eval::score_order(&scored);
+    let matched = crate::eval::matched_truth_in_input_order(&scored, &ground_truth, iou_threshold);
+    // found[image][k]: (rank in the AP's order, detection) of the true positive that took the image's k-th
+    // box of the category.
+    let mut found: Vec<Vec<Option<(usize, usize)>>> = ground_truth.iter().map(|g| vec![None; g.len()]).collect();
+    for (rank, &d) in order.iter().enumerate() {
+        if let Some(k) = matched[d] {
+            found[scored[d].image][k] = Some((rank, d));
+        }
+    }
+    let mut outcomes = Vec::new();
+    for (image, objects) in truth.iter().enumerate() {
+        let frame_detections = detections.get(image).map(Vec::as_slice).unwrap_or(&[]);
+        let mut k = 0;
+        for (object, o) in objects.iter().enumerate() {
+            if o.category != category {
+                continue;
+            }
+            let best_iou = frame_detections
+                .iter()
+                .filter(|d| d.category == category)
+                .map(|d| iou_3d(&d.cuboid(), &o.cuboid))
+                .fold(0.0f32, f32::max);
+            let other = frame_detections
+                .iter()
+                .filter(|d| d.category != category)
+                .map(|d| (d, iou_3d(&d.cuboid(), &o.cuboid)))
+                .filter(|(_, iou)| *iou >= iou_threshold)
+                .fold(None, |best: Option<(&Detection, f32)>, (d, iou)| match best {
+                    Some((b, _)) if b.score >= d.score => best,
+                    _ => Some((d, iou)),
+                })
+                .map(|(d, iou)| OtherDetection { category: d.category.clone(), score: d.score, iou });
+            let found = found[image][k].map(|(rank, d)| FoundBy {
+                score: scored[d].score,
+                iou: iou_3d(&scored[d].cuboid, &o.cuboid),
+                precision: pr.precision[rank],
+                false_positives_before: pr.true_positive[..rank].iter().filter(|&&hit| !hit).count(),
+            });
+            outcomes.push(ObjectOutcome {
+                image,
+                object,
+                category: category.to_string(),
+                size: o.cuboid.size.to_array(),
+                distance_m: o.cuboid.centre.truncate().length(),
+                found,
+                best_iou,
+                other,
+            });
+            k += 1;
+        }
+    }
+    outcomes
+}
+
+// ---------------------------------------------------------------------------------------------------------
 // All together
 
 /// The diagnosis of one category, as printed by `cog-gpu eval --diagnose --json`. Fractions are in
@@ -544,6 +705,8 @@ pub struct CategoryDiagnosis {
     pub false_positives: FalsePositiveKinds,
     /// The AP without the false positives of each kind ([`oracle_aps`]).
     pub oracle_ap: OracleAps,
+    /// What became of its ground-truth boxes ([`object_outcomes`], counted).
+    pub objects: ObjectSummary,
 }
 
 /// Diagnoses each of `categories` (numbers 2 and 3 of the module doc, and number 1 from `window`: the best
@@ -578,6 +741,7 @@ pub fn diagnose_categories(
                 rank_ap: rank.ap,
                 false_positives: false_positive_kinds(truth, detections, category, iou_threshold),
                 oracle_ap: oracle_aps(truth, detections, category, iou_threshold),
+                objects: ObjectSummary::of(&object_outcomes(truth, detections, category, iou_threshold)),
             }
         })
         .collect()

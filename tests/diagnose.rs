@@ -7,8 +7,8 @@ use std::process::Command;
 mod common;
 
 use cog_gpu::diagnose::{
-    best_window_ious, diagnose_categories, false_positive_kinds, frame_window_best_ious, in_frame_ranking, oracle_aps,
-    overlay_precision, rank_average_precision, OverlayRule, WindowRecall,
+    best_window_ious, diagnose_categories, false_positive_kinds, frame_window_best_ious, in_frame_ranking,
+    object_outcomes, oracle_aps, overlay_precision, rank_average_precision, ObjectSummary, OverlayRule, WindowRecall,
 };
 use cog_gpu::eval::{Detection, FrameDetections};
 use cog_gpu::features::hypotheses::{sliding_window, window_yaws, WindowOptions};
@@ -239,12 +239,12 @@ fn false_positive_kinds_by_hand() {
     assert_eq!((none.examined, none.most_confused_with), (0, None));
 }
 
-#[test]
-fn oracle_aps_by_hand() {
-    // Frame 0: chairs at 0, 3 and 30 (the one at 30 never detected), a sofa at 6; frame 1: a table, no chair.
+/// Frame 0: chairs at 0, 3 and 30 (the one at 30 never detected), a sofa at 6, and seven chair detections;
+/// frame 1: a table at (0, 4), no chair, one chair detection far away.
+fn chairs_case() -> (Vec<Vec<Object>>, Vec<Vec<Detection>>) {
     let mut frame0: Vec<Object> = [0.0, 3.0, 30.0].map(|x| object("chair", unit_box(x, 0.0))).to_vec();
     frame0.push(object("sofa", unit_box(6.0, 0.0)));
-    let truth = vec![frame0, vec![object("table", unit_box(0.0, 0.0))]];
+    let truth = vec![frame0, vec![object("table", unit_box(0.0, 4.0))]];
     let detections = vec![
         vec![
             det("chair", unit_box(6.0, 0.0), 0.9),  // on the sofa: confusion
@@ -256,6 +256,12 @@ fn oracle_aps_by_hand() {
         ],
         vec![det("chair", unit_box(20.0, 0.0), 0.7)], // nothing there, frame without chairs
     ];
+    (truth, detections)
+}
+
+#[test]
+fn oracle_aps_by_hand() {
+    let (truth, detections) = chairs_case();
     // In score order: conf, TP, bg, loc, TP, dup, bg; 3 chairs. All-point interpolated AP, by hand:
     //   all:            precision 0, 1/2, 1/3, 1/4, 2/5, …  → 1/3·1/2 + 1/3·2/5 = 0.3
     //   without dup:    the same up to the last true positive → 0.3
@@ -274,6 +280,58 @@ fn oracle_aps_by_hand() {
     assert!(close(oracle.without_false_positives, 2.0 / 3.0), "{oracle:?}");
     // Without ground truth: nothing to measure.
     assert_eq!(oracle_aps(&truth, &detections, "bed", 0.25), Default::default());
+}
+
+#[test]
+fn object_outcomes_by_hand() {
+    // The case of `oracle_aps_by_hand`: in score order conf (0.9), TP chair 0 (0.8), bg (0.7), loc (0.6),
+    // TP chair 3 (0.5), dup (0.45), bg (0.4); the chair at 30 is never detected. Frame 1's table gets a
+    // table detection 0.8 m off (IoU 0.2/1.8 = 0.11: near, not found), two desks on it (0.6 and 0.3,
+    // exact) and a sofa 0.5 m off (IoU 0.5/1.5 = 1/3) at 0.95: the most confident other category's
+    // detection at IoU ≥ 0.25 is the sofa, though the desks overlap more.
+    let (truth, mut detections) = chairs_case();
+    detections[1].extend([
+        det("table", unit_box(0.8, 4.0), 0.5),
+        det("desk", unit_box(0.0, 4.0), 0.6),
+        det("desk", unit_box(0.0, 4.0), 0.3),
+        det("sofa", unit_box(0.5, 4.0), 0.95),
+    ]);
+    let chairs = object_outcomes(&truth, &detections, "chair", 0.25);
+    assert_eq!(chairs.len(), 3);
+    assert_eq!(chairs.iter().map(|o| (o.image, o.object)).collect::<Vec<_>>(), [(0, 0), (0, 1), (0, 2)]);
+    // Chair 0: the second in the ranking, after one false positive: precision 1/2.
+    let found = chairs[0].found.as_ref().expect("chair 0 is found");
+    assert_eq!((found.score, found.false_positives_before), (0.8, 1));
+    assert!((found.precision - 0.5).abs() < 1e-6 && (found.iou - 1.0).abs() < 1e-6, "{found:?}");
+    // Chair 3: fifth, after three false positives (conf, bg of frame 1, loc): precision 2/5.
+    let found = chairs[1].found.as_ref().expect("chair 3 is found");
+    assert_eq!((found.score, found.false_positives_before), (0.5, 3));
+    assert!((found.precision - 0.4).abs() < 1e-6, "{found:?}");
+    assert!((chairs[1].distance_m - 3.0).abs() < 1e-6 && (chairs[1].best_iou - 1.0).abs() < 1e-6);
+    // Chair 30: missed, no chair detection near it, nothing else on it.
+    assert!(chairs[2].found.is_none() && chairs[2].best_iou == 0.0 && chairs[2].other.is_none());
+    assert_eq!(
+        ObjectSummary::of(&chairs),
+        ObjectSummary { found_ahead: 1, found_behind: 1, missed_near: 0, missed_far: 1, missed_with_other: 0 }
+    );
+    let tables = object_outcomes(&truth, &detections, "table", 0.25);
+    assert_eq!(tables.len(), 1);
+    let table = &tables[0];
+    assert!(table.found.is_none());
+    assert!((table.best_iou - 0.2 / 1.8).abs() < 1e-5, "{table:?}");
+    assert!((table.distance_m - 4.0).abs() < 1e-6 && table.size == [1.0, 1.0, 1.0]);
+    let other = table.other.as_ref().expect("other categories on the table");
+    assert_eq!((other.category.as_str(), other.score), ("sofa", 0.95));
+    assert!((other.iou - 1.0 / 3.0).abs() < 1e-5, "{other:?}");
+    assert_eq!(
+        ObjectSummary::of(&tables),
+        ObjectSummary { found_ahead: 0, found_behind: 0, missed_near: 1, missed_far: 0, missed_with_other: 1 }
+    );
+    // diagnose_categories carries the same counts; a category without ground truth has none.
+    let diagnosis = diagnose_categories(&truth, &detections, &["chair".into(), "bed".into()], 0.25, None);
+    assert_eq!(diagnosis[0].objects, ObjectSummary::of(&chairs));
+    assert_eq!(diagnosis[1].objects, ObjectSummary::default());
+    assert!(object_outcomes(&truth, &detections, "bed", 0.25).is_empty());
 }
 
 #[test]
@@ -386,6 +444,7 @@ fn cli_diagnose_json_and_table() {
         "rank_ap",
         "false_positives",
         "oracle_ap",
+        "objects",
     ];
     let mut expected: Vec<&str> = keys.to_vec();
     expected.sort();
@@ -436,6 +495,31 @@ fn cli_diagnose_json_and_table() {
         );
     }
     assert_eq!(bed["oracle_ap"]["without_background"].as_f64(), Some(1.0));
+    // Both beds found: a's first (precision 1), b's after a's far box (precision 2/3) — both ahead.
+    let objects = &bed["objects"];
+    let counts = ["found_ahead", "found_behind", "missed_near", "missed_far", "missed_with_other"];
+    assert_eq!(counts.map(|k| objects[k].as_u64()), [Some(2), Some(0), Some(0), Some(0), Some(0)]);
+    assert!(report.get("objects").is_none(), "the list only with --objects");
+    let summary = table.split("ground-truth boxes: found ahead").nth(1).expect("the objects table");
+    let line = summary.lines().find(|l| l.starts_with("bed ")).expect("a bed row");
+    assert_eq!(line.split_whitespace().collect::<Vec<_>>(), ["bed", "2", "2", "0", "0", "0", "0"]);
+    let out = run(&["--json", "--objects"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let listed: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let listed = listed["objects"].as_array().expect("--objects lists the boxes");
+    assert_eq!(listed.len(), 2);
+    assert_eq!((listed[0]["frame"].as_str(), listed[1]["frame"].as_str()), (Some("a"), Some("b")));
+    assert_eq!(listed[1]["category"], "bed");
+    assert_eq!(listed[1]["found"]["false_positives_before"], 1);
+    assert!((num(&listed[1]["found"]["precision"]) - 2.0 / 3.0).abs() < 1e-6);
+    assert!((num(&listed[1]["distance_m"]) - 3.0).abs() < 1e-6);
+    let out = run(&["--objects"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.lines()
+            .any(|l| l.starts_with("b #0 bed") && l.contains("found at 0.300") && l.contains("1 false positives")),
+        "{text}"
+    );
 
     // Flags: --models needs --diagnose; a missing models directory is named.
     let plain = Command::new(env!("CARGO_BIN_EXE_cog-gpu"))

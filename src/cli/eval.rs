@@ -19,7 +19,8 @@
 //!   [`cog_gpu::diagnose`] (window recall only with `--models`: frames with ground truth of a category that
 //!   has a model are read, preprocessed and windowed as `detect` does; evaluated categories without a model
 //!   get no window numbers and a warning). `--models` and `--step` need `--diagnose`; so do
-//!   `--overlay-top` and `--overlay-min-score`, the rule of the "overlay as drawn" line (`detect`'s).
+//!   `--overlay-top` and `--overlay-min-score`, the rule of the "overlay as drawn" line (`detect`'s), and
+//!   `--objects`, the list of every ground-truth box ([`cog_gpu::diagnose::object_outcomes`]).
 
 use std::collections::{BTreeMap, HashSet};
 use std::path::{Path, PathBuf};
@@ -28,7 +29,8 @@ use anyhow::{bail, Context};
 use cog_gpu::category::{CATEGORIES, LARGE_CATEGORIES};
 use cog_gpu::detect::{DEFAULT_OVERLAY_MIN_PROBABILITY, DEFAULT_OVERLAY_TOP};
 use cog_gpu::diagnose::{
-    diagnose_categories, frame_window_best_ious, overlay_precision, CategoryDiagnosis, OverlayPrecision, OverlayRule,
+    diagnose_categories, frame_window_best_ious, object_outcomes, overlay_precision, CategoryDiagnosis, ObjectOutcome,
+    OverlayPrecision, OverlayRule, FOUND_AHEAD_PRECISION, TOUCH_IOU,
 };
 use cog_gpu::draw::category_colour;
 use cog_gpu::eval::{
@@ -98,6 +100,12 @@ pub struct Args {
     /// `--overlay-min-score` (the same default as `detect`'s).
     #[arg(long, requires = "diagnose", default_value_t = DEFAULT_OVERLAY_MIN_PROBABILITY, value_parser = options::probability)]
     pub overlay_min_score: f32,
+    /// With --diagnose: also list every ground-truth box of the evaluated categories — its frame, size and
+    /// distance from the camera, the true positive that found it (score, IoU, the precision and the false
+    /// positives before it in the category's ranking) or, when missed, the best IoU of the category's
+    /// detections in its frame and the most confident other category's detection on it.
+    #[arg(long, requires = "diagnose")]
+    pub objects: bool,
     /// Evaluate room layouts instead of detections: per-frame and mean free-space IoU of the `layout`
     /// files (or `detect` files with a "layout") in --detections against each frame's room annotation
     /// (see `eval_layout`).
@@ -161,6 +169,17 @@ struct DiagnosisReport {
     overlay_precision: OverlayPrecision,
     /// The boxes `detect`'s overlay draws ([`OverlayRule::Drawn`]), with the rule's two numbers.
     overlay_drawn: DrawnOverlay,
+    /// `--objects`: every ground-truth box of the evaluated categories.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    objects: Option<Vec<NamedOutcome>>,
+}
+
+/// One `--objects` entry: the frame's directory name, then [`ObjectOutcome`]'s fields.
+#[derive(Serialize)]
+struct NamedOutcome {
+    frame: String,
+    #[serde(flatten)]
+    outcome: ObjectOutcome,
 }
 
 #[derive(Serialize)]
@@ -332,6 +351,13 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         let overlay = overlay_precision(&truth, &detections, &categories, args.iou, OverlayRule::GroundTruthCount);
         let drawn_rule = OverlayRule::Drawn { top: args.overlay_top, min_probability: args.overlay_min_score };
         let drawn = overlay_precision(&truth, &detections, &categories, args.iou, drawn_rule);
+        let objects = args.objects.then(|| {
+            categories
+                .iter()
+                .flat_map(|c| object_outcomes(&truth, &detections, c, args.iou))
+                .map(|outcome| NamedOutcome { frame: frame_name(&frames[outcome.image]), outcome })
+                .collect::<Vec<_>>()
+        });
         if args.json {
             let report = DiagnosisReport {
                 diagnosis: diagnosis.iter().map(|d| (d.category.clone(), d.clone())).collect(),
@@ -341,10 +367,14 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
                     min_probability: args.overlay_min_score,
                     precision: drawn,
                 },
+                objects,
             };
             println!("{}", serde_json::to_string_pretty(&report)?);
         } else {
             print_diagnosis(&args, &diagnosis, &overlay, &drawn, evaluated, missing);
+            if let Some(objects) = &objects {
+                print_objects(objects, args.iou);
+            }
         }
         return super::batch_result(&failures, names.len());
     }
@@ -677,6 +707,29 @@ fn window_recall(
     Ok(all)
 }
 
+/// `--objects` (text): one line per ground-truth box.
+fn print_objects(objects: &[NamedOutcome], iou: f32) {
+    println!("every ground-truth box (size w×d×h m, distance from the camera on the ground, m):");
+    for NamedOutcome { frame, outcome: o } in objects {
+        let what = match &o.found {
+            Some(f) => format!(
+                "found at {:.3} (IoU {:.2}; precision {:.2}, {} false positives before it)",
+                f.score, f.iou, f.precision, f.false_positives_before
+            ),
+            None => format!("missed (best IoU of its category's detections {:.2})", o.best_iou),
+        };
+        let other = match &o.other {
+            Some(d) => format!("; {} at {:.3} on it (IoU {:.2} ≥ {iou})", d.category, d.score, d.iou),
+            None => String::new(),
+        };
+        let [w, d, h] = o.size;
+        println!(
+            "{frame} #{} {:<12} {w:.2}×{d:.2}×{h:.2} at {:.1} m: {what}{other}",
+            o.object, o.category, o.distance_m
+        );
+    }
+}
+
 fn print_diagnosis(
     args: &Args,
     diagnosis: &[CategoryDiagnosis],
@@ -764,6 +817,22 @@ fn print_diagnosis(
     }
     let all: Vec<[Option<f32>; 7]> = diagnosis.iter().map(columns).collect();
     row("mean", std::array::from_fn(|c| mean_ap(all.iter().map(|v| &v[c]))));
+    println!(
+        "ground-truth boxes: found ahead (a true positive at precision ≥ {FOUND_AHEAD_PRECISION}) or behind, missed \
+         near (a detection at IoU ≥ {TOUCH_IOU}) or far; missed with another category's detection on it (IoU ≥ {}):",
+        args.iou
+    );
+    println!(
+        "{:<12} {:>6} {:>7} {:>7} {:>7} {:>7} {:>7}",
+        "category", "#GT", "ahead", "behind", "m.near", "m.far", "m.other"
+    );
+    for d in diagnosis {
+        let o = &d.objects;
+        println!(
+            "{:<12} {:>6} {:>7} {:>7} {:>7} {:>7} {:>7}",
+            d.category, d.gt_boxes, o.found_ahead, o.found_behind, o.missed_near, o.missed_far, o.missed_with_other
+        );
+    }
     println!(
         "overlay precision (per frame the top k detections, k = its ground-truth boxes): {}/{} = {}",
         overlay.true_positives,
