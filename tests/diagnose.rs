@@ -8,7 +8,8 @@ mod common;
 
 use cog_gpu::diagnose::{
     best_window_ious, diagnose_categories, false_positive_kinds, frame_window_best_ious, in_frame_ranking,
-    object_outcomes, oracle_aps, overlay_precision, rank_average_precision, ObjectSummary, OverlayRule, WindowRecall,
+    in_view_share, object_outcomes, oracle_aps, overlay_precision, rank_average_precision, ObjectSummary, OverlayRule,
+    WindowRecall,
 };
 use cog_gpu::eval::{Detection, FrameDetections};
 use cog_gpu::features::hypotheses::{sliding_window, window_yaws, WindowOptions};
@@ -16,7 +17,7 @@ use cog_gpu::features::LatticePhase;
 use cog_gpu::features::YawAnchor;
 use cog_gpu::features::{FeatureLayout, FeatureScene, Groups, Preprocessed, SizeQuantiles};
 use cog_gpu::frame::{Frame, Object};
-use cog_gpu::geometry::{iou_3d, Cuboid};
+use cog_gpu::geometry::{iou_3d, Camera, Cuboid};
 use cog_gpu::model::{FeaturePath, FeatureSettings, Model, WindowSettings};
 use cog_gpu::synth::{self, SynthOptions};
 use glam::Vec3;
@@ -335,6 +336,27 @@ fn object_outcomes_by_hand() {
 }
 
 #[test]
+fn in_view_share_analytic() {
+    // Upright = camera axes (Rtilt = I: x right, y forward = depth, z up); fx = fy = 100 and the principal
+    // point at the centre of a 100 × 100 image: pixel u = 100·x/y + 49.5 (0-based), inside for u in
+    // [−0.5, 99.5), i.e. x/y in [−0.5, 0.5), and likewise −z/y.
+    let camera = Camera::new([100.0, 100.0, 50.5, 50.5], glam::Mat3::IDENTITY);
+    let small = |x: f32, y: f32| Cuboid::new(Vec3::new(x, y, 0.0), Vec3::new(0.2, 0.01, 0.2), 0.0);
+    assert_eq!(in_view_share(&small(0.0, 3.0), &camera, 100, 100), 1.0, "in front, in the middle");
+    assert_eq!(in_view_share(&small(0.0, -3.0), &camera, 100, 100), 0.0, "behind the camera");
+    assert_eq!(in_view_share(&small(3.0, 1.0), &camera, 100, 100), 0.0, "beside the image");
+    // Centred on the left edge's plane x = −y/2 at depth 2: of the 10 cells along x (centres −1.09 …
+    // −0.91), the five at x ≥ −0.99 project inside (x/y ≥ −0.99/1.995 > −0.5), the five at x ≤ −1.01
+    // outside (x/y ≤ −1.01/2.005 < −0.5), at every depth of the thin box.
+    assert_eq!(in_view_share(&small(-1.0, 2.0), &camera, 100, 100), 0.5);
+    // The image's size counts: in a 60-pixel-tall picture the cells below v = 59.5 (−z/y ≥ 0.1, z ≤ −0.3
+    // at depth 3) would be lost — none of this box's; in a 50-pixel-wide one every cell at x/y ≥ 0 is
+    // outside: half.
+    assert_eq!(in_view_share(&small(0.0, 3.0), &camera, 100, 60), 1.0);
+    assert_eq!(in_view_share(&small(0.0, 3.0), &camera, 50, 100), 0.5);
+}
+
+#[test]
 fn window_recall_summary() {
     let r = WindowRecall::from_best_ious(&[0.1, 0.3, 0.6, 1.0]);
     assert_eq!(r.boxes, 4);
@@ -513,6 +535,12 @@ fn cli_diagnose_json_and_table() {
     assert_eq!(listed[1]["found"]["false_positives_before"], 1);
     assert!((num(&listed[1]["found"]["precision"]) - 2.0 / 3.0).abs() < 1e-6);
     assert!((num(&listed[1]["distance_m"]) - 3.0).abs() < 1e-6);
+    // The share in view, from the tiny frame's camera (fx = fy = 10, principal point (4.5, 3.5), 8 × 6
+    // pixels, Rtilt = I).
+    let tiny_camera = Camera::new([10.0, 10.0, 4.5, 3.5], glam::Mat3::IDENTITY);
+    let expected = in_view_share(&unit_box(0.0, 3.0), &tiny_camera, 8, 6);
+    assert!(expected > 0.25 && expected < 1.0, "{expected}");
+    assert!((num(&listed[1]["in_view"]) - expected as f64).abs() < 1e-6);
     let out = run(&["--objects"]);
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(
@@ -520,6 +548,8 @@ fn cli_diagnose_json_and_table() {
             .any(|l| l.starts_with("b #0 bed") && l.contains("found at 0.300") && l.contains("1 false positives")),
         "{text}"
     );
+    let words = |l: &str| l.split_whitespace().map(str::to_string).collect::<Vec<_>>();
+    assert!(text.lines().any(|l| words(l).starts_with(&["bed", "0", "of", "2"].map(String::from))), "{text}");
 
     // Flags: --models needs --diagnose; a missing models directory is named.
     let plain = Command::new(env!("CARGO_BIN_EXE_cog-gpu"))

@@ -29,8 +29,8 @@ use anyhow::{bail, Context};
 use cog_gpu::category::{CATEGORIES, LARGE_CATEGORIES};
 use cog_gpu::detect::{DEFAULT_OVERLAY_MIN_PROBABILITY, DEFAULT_OVERLAY_TOP};
 use cog_gpu::diagnose::{
-    diagnose_categories, frame_window_best_ious, object_outcomes, overlay_precision, CategoryDiagnosis, ObjectOutcome,
-    OverlayPrecision, OverlayRule, FOUND_AHEAD_PRECISION, TOUCH_IOU,
+    diagnose_categories, frame_window_best_ious, in_view_share, object_outcomes, overlay_precision, CategoryDiagnosis,
+    ObjectOutcome, OverlayPrecision, OverlayRule, FOUND_AHEAD_PRECISION, MOSTLY_OUT_OF_VIEW, TOUCH_IOU,
 };
 use cog_gpu::draw::category_colour;
 use cog_gpu::eval::{
@@ -39,6 +39,7 @@ use cog_gpu::eval::{
 };
 use cog_gpu::features::Preprocessed;
 use cog_gpu::frame::{frame_name, read_annotations, unique_frame_names, Dataset, DepthSource, Frame, Object};
+use cog_gpu::geometry::Camera;
 use cog_gpu::model::{read_models_dir, Model};
 use cog_gpu::synth::{read_support_heights, SUPPORT_FILE};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -174,10 +175,12 @@ struct DiagnosisReport {
     objects: Option<Vec<NamedOutcome>>,
 }
 
-/// One `--objects` entry: the frame's directory name, then [`ObjectOutcome`]'s fields.
+/// One `--objects` entry: the frame's directory name, the share of the box in view ([`in_view_share`]),
+/// then [`ObjectOutcome`]'s fields.
 #[derive(Serialize)]
 struct NamedOutcome {
     frame: String,
+    in_view: f32,
     #[serde(flatten)]
     outcome: ObjectOutcome,
 }
@@ -351,13 +354,11 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         let overlay = overlay_precision(&truth, &detections, &categories, args.iou, OverlayRule::GroundTruthCount);
         let drawn_rule = OverlayRule::Drawn { top: args.overlay_top, min_probability: args.overlay_min_score };
         let drawn = overlay_precision(&truth, &detections, &categories, args.iou, drawn_rule);
-        let objects = args.objects.then(|| {
-            categories
-                .iter()
-                .flat_map(|c| object_outcomes(&truth, &detections, c, args.iou))
-                .map(|outcome| NamedOutcome { frame: frame_name(&frames[outcome.image]), outcome })
-                .collect::<Vec<_>>()
-        });
+        let objects = if args.objects {
+            Some(named_outcomes(&frames, &truth, &detections, &categories, args.iou)?)
+        } else {
+            None
+        };
         if args.json {
             let report = DiagnosisReport {
                 diagnosis: diagnosis.iter().map(|d| (d.category.clone(), d.clone())).collect(),
@@ -707,10 +708,46 @@ fn window_recall(
     Ok(all)
 }
 
-/// `--objects` (text): one line per ground-truth box.
+/// `--objects`: every ground-truth box of `categories` ([`object_outcomes`]) with its frame's name and its
+/// share in view, which reads each frame with such a box (its camera and image size).
+fn named_outcomes(
+    frames: &[PathBuf],
+    truth: &[Vec<Object>],
+    detections: &[Vec<Detection>],
+    categories: &[String],
+    iou: f32,
+) -> anyhow::Result<Vec<NamedOutcome>> {
+    let outcomes: Vec<ObjectOutcome> =
+        categories.iter().flat_map(|c| object_outcomes(truth, detections, c, iou)).collect();
+    let needed: HashSet<usize> = outcomes.iter().map(|o| o.image).collect();
+    let cameras: BTreeMap<usize, (Camera, u32, u32)> = frames
+        .par_iter()
+        .enumerate()
+        .filter(|(i, _)| needed.contains(i))
+        .map(|(i, dir)| {
+            let frame = Frame::read(dir, DepthSource::Raw)
+                .with_context(|| format!("{}: reading the frame for --objects", dir.display()))?;
+            Ok((i, (Camera::new(frame.intrinsics(), frame.rtilt()), frame.width(), frame.height())))
+        })
+        .collect::<anyhow::Result<_>>()?;
+    Ok(outcomes
+        .into_iter()
+        .map(|outcome| {
+            let (camera, width, height) = &cameras[&outcome.image];
+            let box_ = &truth[outcome.image][outcome.object].cuboid;
+            NamedOutcome {
+                frame: frame_name(&frames[outcome.image]),
+                in_view: in_view_share(box_, camera, *width, *height),
+                outcome,
+            }
+        })
+        .collect())
+}
+
+/// `--objects` (text): one line per ground-truth box, then per category the boxes mostly out of view.
 fn print_objects(objects: &[NamedOutcome], iou: f32) {
     println!("every ground-truth box (size w×d×h m, distance from the camera on the ground, m):");
-    for NamedOutcome { frame, outcome: o } in objects {
+    for NamedOutcome { frame, in_view, outcome: o } in objects {
         let what = match &o.found {
             Some(f) => format!(
                 "found at {:.3} (IoU {:.2}; precision {:.2}, {} false positives before it)",
@@ -724,9 +761,31 @@ fn print_objects(objects: &[NamedOutcome], iou: f32) {
         };
         let [w, d, h] = o.size;
         println!(
-            "{frame} #{} {:<12} {w:.2}×{d:.2}×{h:.2} at {:.1} m: {what}{other}",
-            o.object, o.category, o.distance_m
+            "{frame} #{} {:<12} {w:.2}×{d:.2}×{h:.2} at {:.1} m, {:.0} % in view: {what}{other}",
+            o.object,
+            o.category,
+            o.distance_m,
+            100.0 * in_view
         );
+    }
+    println!(
+        "boxes mostly out of view (less than {:.0} % of the box in the picture), and how many of them are found:",
+        100.0 * MOSTLY_OUT_OF_VIEW
+    );
+    let mut by_category: BTreeMap<&str, (usize, usize, usize)> = BTreeMap::new();
+    for NamedOutcome { in_view, outcome: o, .. } in objects {
+        let entry = by_category.entry(o.category.as_str()).or_default();
+        entry.0 += 1;
+        if *in_view < MOSTLY_OUT_OF_VIEW {
+            entry.1 += 1;
+            entry.2 += o.found.is_some() as usize;
+        }
+    }
+    // In the evaluated categories' order (the listing's).
+    let mut seen = HashSet::new();
+    for o in objects.iter().map(|n| &n.outcome).filter(|o| seen.insert(o.category.as_str())) {
+        let (boxes, out, found) = by_category[o.category.as_str()];
+        println!("{:<12} {out} of {boxes} mostly out of view, {found} of them found", o.category);
     }
 }
 
