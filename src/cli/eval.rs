@@ -101,10 +101,11 @@ pub struct Args {
     /// `--overlay-min-score` (the same default as `detect`'s).
     #[arg(long, requires = "diagnose", default_value_t = DEFAULT_OVERLAY_MIN_PROBABILITY, value_parser = options::probability)]
     pub overlay_min_score: f32,
-    /// With --diagnose: also list every ground-truth box of the evaluated categories — its frame, size and
-    /// distance from the camera, the true positive that found it (score, IoU, the precision and the false
-    /// positives before it in the category's ranking) or, when missed, the best IoU of the category's
-    /// detections in its frame and the most confident other category's detection on it.
+    /// With --diagnose: also list every ground-truth box of the evaluated categories — its frame, size,
+    /// distance from the camera and share of its volume in the picture (reads each such frame's camera),
+    /// the true positive that found it (score, IoU, the precision and the false positives before it in the
+    /// category's ranking) or, when missed, the best IoU of the category's detections in its frame, and the
+    /// most confident other category's detection on it; then per category the boxes mostly out of view.
     #[arg(long, requires = "diagnose")]
     pub objects: bool,
     /// Evaluate room layouts instead of detections: per-frame and mean free-space IoU of the `layout`
