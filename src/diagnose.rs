@@ -650,15 +650,16 @@ pub fn object_outcomes(
 ) -> Vec<ObjectOutcome> {
     let ground_truth = category_truth(truth, category);
     let scored = scored_boxes(detections, category);
-    let pr = average_precision(&scored, &ground_truth, iou_threshold);
-    let order = crate::eval::score_order(&scored);
     let matched = crate::eval::matched_truth_in_input_order(&scored, &ground_truth, iou_threshold);
-    // found[image][k]: (rank in the AP's order, detection) of the true positive that took the image's k-th
-    // box of the category.
-    let mut found: Vec<Vec<Option<(usize, usize)>>> = ground_truth.iter().map(|g| vec![None; g.len()]).collect();
-    for (rank, &d) in order.iter().enumerate() {
+    // found[image][k]: the true positive that took the image's k-th box of the category — the detection, the
+    // precision when the AP's ranking reaches it, and the false positives ranked before it.
+    let mut found: Vec<Vec<Option<(usize, f32, usize)>>> = ground_truth.iter().map(|g| vec![None; g.len()]).collect();
+    let mut true_positives = 0;
+    for (rank, &d) in crate::eval::score_order(&scored).iter().enumerate() {
         if let Some(k) = matched[d] {
-            found[scored[d].image][k] = Some((rank, d));
+            true_positives += 1;
+            let precision = true_positives as f32 / (rank + 1) as f32;
+            found[scored[d].image][k] = Some((d, precision, rank + 1 - true_positives));
         }
     }
     let mut outcomes = Vec::new();
@@ -684,11 +685,11 @@ pub fn object_outcomes(
                     _ => Some((d, iou)),
                 })
                 .map(|(d, iou)| OtherDetection { category: d.category.clone(), score: d.score, iou });
-            let found = found[image][k].map(|(rank, d)| FoundBy {
+            let found = found[image][k].map(|(d, precision, false_positives_before)| FoundBy {
                 score: scored[d].score,
                 iou: iou_3d(&scored[d].cuboid, &o.cuboid),
-                precision: pr.precision[rank],
-                false_positives_before: pr.true_positive[..rank].iter().filter(|&&hit| !hit).count(),
+                precision,
+                false_positives_before,
             });
             outcomes.push(ObjectOutcome {
                 image,
