@@ -366,6 +366,89 @@ pub fn evaluate_categories(
 }
 
 // ---------------------------------------------------------------------------------------------------------
+// Ignored ground truth (PASCAL VOC's "difficult" objects)
+
+/// How many ground-truth boxes and detections of one category [`ignore_boxes`] took out.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct IgnoredCounts {
+    pub boxes: usize,
+    pub detections: usize,
+}
+
+/// What [`ignore_boxes`] leaves of an evaluation's inputs.
+#[derive(Clone, Debug, PartialEq)]
+pub struct WithoutIgnored {
+    /// Per image, its ground-truth boxes that are not ignored, in their order.
+    pub truth: Vec<Vec<crate::frame::Object>>,
+    /// Per image, its detections that are not dropped, in their order.
+    pub detections: Vec<Vec<Detection>>,
+    /// Per category (of the boxes and detections taken out, evaluated or not), what was taken out.
+    pub counts: BTreeMap<String, IgnoredCounts>,
+}
+
+/// The images' ground truth and detections with the boxes marked in `ignored` (`ignored[i][o]`: image `i`'s
+/// object `o`; a shorter list marks nothing) taken out as PASCAL VOC's devkit takes out its "difficult"
+/// objects: an ignored box is no longer a positive, and a detection whose best box is an ignored one at IoU ≥
+/// `iou_threshold` is dropped — neither a true nor a false positive. "Best" is [`average_precision`]'s
+/// choice among the image's boxes of the detection's category, ignored ones included: the highest 3D IoU,
+/// ties to the first box in the list. Everything else keeps its order.
+///
+/// Evaluating the result with [`evaluate_categories`] is VOC's rule exactly: a kept detection whose best
+/// box was a kept one takes the same best box among the kept (removing others cannot change a maximum they
+/// did not hold, and a tie went to the first, which is then kept); one whose best box was ignored at an IoU
+/// below the threshold is a false positive in both (no kept box overlaps it more).
+pub fn ignore_boxes(
+    truth: &[Vec<crate::frame::Object>],
+    ignored: &[Vec<bool>],
+    detections: &[Vec<Detection>],
+    iou_threshold: f32,
+) -> WithoutIgnored {
+    let mut counts: BTreeMap<String, IgnoredCounts> = BTreeMap::new();
+    let is_ignored =
+        |image: usize, object: usize| ignored.get(image).and_then(|m| m.get(object)).copied() == Some(true);
+    let mut kept_truth = Vec::with_capacity(truth.len());
+    let mut kept_detections = Vec::with_capacity(detections.len());
+    for (image, objects) in truth.iter().enumerate() {
+        let mut kept = Vec::with_capacity(objects.len());
+        for (o, object) in objects.iter().enumerate() {
+            if is_ignored(image, o) {
+                counts.entry(object.category.clone()).or_default().boxes += 1;
+            } else {
+                kept.push(object.clone());
+            }
+        }
+        kept_truth.push(kept);
+    }
+    for (image, frame) in detections.iter().enumerate() {
+        let objects = truth.get(image).map(Vec::as_slice).unwrap_or(&[]);
+        let mut kept = Vec::with_capacity(frame.len());
+        for detection in frame {
+            let cuboid = detection.cuboid();
+            // The best box as `match_in_order` picks it: a later box replaces the best only when strictly
+            // better.
+            let best = objects.iter().enumerate().filter(|(_, o)| o.category == detection.category).fold(
+                None,
+                |best: Option<(usize, f32)>, (o, object)| {
+                    let iou = iou_3d(&cuboid, &object.cuboid);
+                    match best {
+                        Some((_, b)) if b >= iou => best,
+                        _ => Some((o, iou)),
+                    }
+                },
+            );
+            match best {
+                Some((o, iou)) if iou >= iou_threshold && is_ignored(image, o) => {
+                    counts.entry(detection.category.clone()).or_default().detections += 1;
+                }
+                _ => kept.push(detection.clone()),
+            }
+        }
+        kept_detections.push(kept);
+    }
+    WithoutIgnored { truth: kept_truth, detections: kept_detections, counts }
+}
+
+// ---------------------------------------------------------------------------------------------------------
 // Bootstrap intervals over frames
 
 /// How [`bootstrap_aps`] resamples: `resamples` draws of as many frames as the set has, with replacement,

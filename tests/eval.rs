@@ -297,3 +297,134 @@ fn pooled_surface_accuracy_by_hand() {
     assert_eq!((all.true_positives, all.measured, all.within_nearest, all.within_main), (4, 3, 2, 1));
     assert!((all.median_error_m.unwrap() - 0.02).abs() < 1e-6, "{:?}", all.median_error_m);
 }
+
+/// PASCAL VOC's devkit matching with "difficult" objects (VOCevaldet.m, written from its description, not
+/// with the crate's matching): detections by score, highest first (stable); each takes the box of its
+/// image with the largest overlap (strictly larger replaces, so ties go to the first box), difficult ones
+/// included; at overlap ≥ `threshold` a difficult box makes the detection neither true nor false, a free
+/// box a true positive (then taken), a taken box a false positive; below it a false positive. Recall over
+/// the boxes that are not difficult; AP the all-point area under the non-increasing precision envelope,
+/// with recall 0 → precision of the first point and the curve closed at (1, 0) as the devkit pads it.
+fn voc_ap(detections: &[(usize, f32, Cuboid)], truth: &[Vec<(Cuboid, bool)>], threshold: f32) -> Option<f64> {
+    let positives = truth.iter().flatten().filter(|(_, difficult)| !difficult).count();
+    if positives == 0 {
+        return None;
+    }
+    let mut order: Vec<usize> = (0..detections.len()).collect();
+    order.sort_by(|&a, &b| detections[b].1.partial_cmp(&detections[a].1).unwrap());
+    let mut taken: Vec<Vec<bool>> = truth.iter().map(|t| vec![false; t.len()]).collect();
+    let (mut tp, mut fp) = (0usize, 0usize);
+    let (mut recall, mut precision) = (vec![0.0f64], vec![0.0f64]);
+    for &d in &order {
+        let (image, _, cuboid) = &detections[d];
+        let mut best: Option<(usize, f32)> = None;
+        for (j, (box_, _)) in truth[*image].iter().enumerate() {
+            let overlap = cog_gpu::geometry::iou_3d(cuboid, box_);
+            if best.is_none_or(|(_, o)| overlap > o) {
+                best = Some((j, overlap));
+            }
+        }
+        match best {
+            Some((j, overlap)) if overlap >= threshold => {
+                if truth[*image][j].1 {
+                    continue;
+                }
+                if taken[*image][j] {
+                    fp += 1;
+                } else {
+                    taken[*image][j] = true;
+                    tp += 1;
+                }
+            }
+            _ => fp += 1,
+        }
+        recall.push(tp as f64 / positives as f64);
+        precision.push(tp as f64 / (tp + fp) as f64);
+    }
+    recall.push(1.0);
+    precision.push(0.0);
+    for k in (0..precision.len() - 1).rev() {
+        precision[k] = precision[k].max(precision[k + 1]);
+    }
+    Some((1..recall.len()).map(|k| (recall[k] - recall[k - 1]) * precision[k]).sum())
+}
+
+#[test]
+fn ignored_boxes_follow_vocs_difficult_rule() {
+    use cog_gpu::eval::{evaluate_categories, ignore_boxes};
+    // xorshift64*: random scenes of beds and chairs crowded into a 3 m square so that boxes overlap.
+    let mut state = 0x9E37_79B9_7F4A_7C15u64;
+    let mut uniform = move || {
+        state ^= state >> 12;
+        state ^= state << 25;
+        state ^= state >> 27;
+        (state.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let mut checked_with_dropped = 0;
+    for trial in 0..300 {
+        let frames = 1 + (uniform() * 5.0) as usize;
+        let (mut truth, mut marks, mut detections) = (Vec::new(), Vec::new(), Vec::new());
+        for _ in 0..frames {
+            let mut objects = Vec::new();
+            for _ in 0..(uniform() * 5.0) as usize {
+                let category = if uniform() < 0.7 { "bed" } else { "chair" };
+                let size = Vec3::new(0.5 + uniform(), 0.5 + uniform(), 0.5 + uniform());
+                let centre = Vec3::new(3.0 * uniform(), 3.0 * uniform(), size.z / 2.0);
+                objects.push(object(category, Cuboid::new(centre, size, uniform() * 3.0)));
+                // Now and then a second annotation of the same box: every detection then overlaps the two
+                // equally, and the tie goes to the first (marked or not) on both sides.
+                if uniform() < 0.15 {
+                    objects.push(objects[objects.len() - 1].clone());
+                }
+            }
+            let ignored: Vec<bool> = objects.iter().map(|_| uniform() < 0.35).collect();
+            let mut frame = Vec::new();
+            for _ in 0..(uniform() * 8.0) as usize {
+                // Half near an annotated box (of either category), half anywhere.
+                let cuboid = match objects.get((uniform() * 2.0 * objects.len() as f32) as usize) {
+                    Some(o) => Cuboid {
+                        centre: o.cuboid.centre + Vec3::new(uniform() - 0.5, uniform() - 0.5, 0.0) * 0.8,
+                        ..o.cuboid
+                    },
+                    None => Cuboid::new(Vec3::new(3.0 * uniform(), 3.0 * uniform(), 0.5), Vec3::ONE, uniform()),
+                };
+                let category = if uniform() < 0.8 { "bed" } else { "chair" };
+                // Scores on a coarse grid: ties happen, and both sides keep input order on them.
+                frame.push(Detection::new(category, &cuboid, (uniform() * 10.0).floor() / 10.0));
+            }
+            truth.push(objects);
+            marks.push(ignored);
+            detections.push(frame);
+        }
+        let threshold = if trial % 2 == 0 { 0.25 } else { 0.5 };
+        let kept = ignore_boxes(&truth, &marks, &detections, threshold);
+        let (kept_truth, kept_detections, counts) = (kept.truth, kept.detections, kept.counts);
+        let ours = evaluate_categories(&kept_truth, &kept_detections, &["bed".to_string()], threshold)[0].pr.ap;
+        let voc_truth: Vec<Vec<(Cuboid, bool)>> = truth
+            .iter()
+            .zip(&marks)
+            .map(|(objects, m)| {
+                objects.iter().zip(m).filter(|(o, _)| o.category == "bed").map(|(o, &d)| (o.cuboid, d)).collect()
+            })
+            .collect();
+        let voc_detections: Vec<(usize, f32, Cuboid)> = detections
+            .iter()
+            .enumerate()
+            .flat_map(|(i, f)| f.iter().filter(|d| d.category == "bed").map(move |d| (i, d.score, d.cuboid())))
+            .collect();
+        let reference = voc_ap(&voc_detections, &voc_truth, threshold);
+        match (ours, reference) {
+            (None, None) => {}
+            (Some(a), Some(b)) => assert!((a as f64 - b).abs() < 1e-5, "trial {trial}: {a} against VOC's {b}"),
+            other => panic!("trial {trial}: {other:?}"),
+        }
+        // The counts: every marked box, and exactly the detections that left.
+        let marked_beds = voc_truth.iter().flatten().filter(|(_, d)| *d).count();
+        let bed = counts.get("bed").copied().unwrap_or_default();
+        assert_eq!(bed.boxes, marked_beds, "trial {trial}");
+        let left = |d: &[Vec<Detection>]| d.iter().flatten().filter(|d| d.category == "bed").count();
+        assert_eq!(bed.detections, left(&detections) - left(&kept_detections), "trial {trial}");
+        checked_with_dropped += (bed.detections > 0 && reference.is_some()) as usize;
+    }
+    assert!(checked_with_dropped > 50, "the random scenes exercise dropped detections ({checked_with_dropped})");
+}

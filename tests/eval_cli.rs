@@ -264,3 +264,66 @@ fn bootstrap_intervals_and_paired_differences() {
     let out = run(&["--data", data, "--detections", dets, "--bootstrap", "1"]);
     assert_eq!(out.status.code(), Some(1), "{}", String::from_utf8_lossy(&out.stderr));
 }
+
+#[test]
+fn ignore_out_of_view_by_hand() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (data, dets) = dataset(tmp.path());
+    let (data, dets) = (data.to_str().unwrap(), dets.to_str().unwrap());
+    // The tiny frames' camera (fx = fy = 10, 0-based principal point (3.5, 2.5), 8 × 6 pixels, Rtilt = I)
+    // sees u = 10·x/y + 3.5 ∈ [−0.5, 7.5), i.e. |x/y| < 0.4. In view: the beds at x = 0 (90 %, see
+    // tests/diagnose.rs) and f1's chair at y = 6 (x/y ≤ 0.09, z/y ≤ 0.2: all of it). Out of view (none of
+    // it): f1's bed at x = 5 (x/y ≥ 4.5/3.5) and f4's chair at x = 3 (x/y ≥ 2.5/3.5).
+    // IoU 0.25: the 0.6 bed detection's best box is the ignored bed at x = 5 (IoU 1/3): dropped. Bed: FP
+    // (0.95), TP (0.9), FP (0.7), TP (0.5) of 2 boxes → precision 0, 1/2, 1/3, 1/2, recall 0, 1/2, 1/2, 1;
+    // envelope 1/2 → AP 1/2. Chair: its one detection finds the one box left → AP 1. mAP 3/4.
+    let args = ["--data", data, "--detections", dets, "--categories", "bed,chair", "--ignore-out-of-view", "0.25"];
+    let report = run_json(&args);
+    assert!(close(&report["ap"]["bed"], 0.5), "{report}");
+    assert!(close(&report["ap"]["chair"], 1.0), "{report}");
+    assert!(close(&report["map"], 0.75), "{report}");
+    assert_eq!((report["ground_truth"]["bed"].as_u64(), report["detections"]["bed"].as_u64()), (Some(2), Some(4)));
+    let ignored = &report["ignored"];
+    assert!(close(&ignored["min_in_view"], 0.25));
+    assert_eq!(ignored["ignored"]["bed"], serde_json::json!({"boxes": 1, "detections": 1}));
+    assert_eq!(ignored["ignored"]["chair"], serde_json::json!({"boxes": 1, "detections": 0}));
+    // Without the option nothing is ignored and there is no "ignored" key (the AP of aps_match_hand_computation).
+    let plain = run_json(&args[..6]);
+    assert!(close(&plain["ap"]["bed"], 0.6) && plain.get("ignored").is_none(), "{plain}");
+    // IoU 0.5: the 0.6 detection's best box is still the ignored one, but at IoU 1/3 < 0.5 it takes
+    // nothing and stays a false positive: FP, TP, FP, FP, TP of 2 → precision 0, 1/2, 1/3, 1/4, 2/5, recall
+    // 0, 1/2, 1/2, 1/2, 1; envelope 1/2, 1/2, 2/5, 2/5, 2/5 → AP 1/2·1/2 + 1/2·2/5 = 0.45.
+    let strict = run_json(&[&args[..], &["--iou", "0.5"]].concat());
+    assert!(close(&strict["ap"]["bed"], 0.45), "{strict}");
+    assert_eq!(strict["ignored"]["ignored"]["bed"], serde_json::json!({"boxes": 1, "detections": 0}));
+    // A share of 1 also ignores the beds 90 % in view: no bed is left (AP null), all five detections but
+    // the far one (best box at IoU 0) and f3's (no box) are dropped.
+    let all = run_json(&[&args[..6], &["--ignore-out-of-view", "1"]].concat());
+    assert!(all["ap"]["bed"].is_null(), "{all}");
+    assert_eq!(all["ignored"]["ignored"]["bed"], serde_json::json!({"boxes": 3, "detections": 3}));
+
+    // --versus drops the other set's detections by the same rule: against itself every difference is 0 and
+    // its bed AP is the 1/2 above (0.45 if its shifted bed were kept and counted false).
+    let versus = run_json(&[&args[..], &["--bootstrap", "200", "--versus", dets]].concat());
+    let versus = &versus["bootstrap"]["versus"];
+    assert!(close(&versus["ap"]["bed"], 0.5), "{versus}");
+    assert_eq!(versus["difference_interval"]["bed"], serde_json::json!([0.0, 0.0]));
+
+    // The table says what it left out; the diagnosis runs on what is left (2 bed boxes).
+    let out = run(&args);
+    let table = String::from_utf8_lossy(&out.stdout);
+    assert!(table.contains("ignored (--ignore-out-of-view 0.25): 2 ground-truth boxes"), "{table}");
+    assert!(table.contains("bed 1/1, chair 1/0"), "{table}");
+    let diagnosis = run_json(&[&args[..], &["--diagnose"]].concat());
+    assert_eq!(diagnosis["diagnosis"]["bed"]["gt_boxes"], 2, "{diagnosis}");
+    assert!(diagnosis["ignored"].is_object());
+    // A share outside (0, 1] and the option with --layout are refused.
+    for bad in [
+        &["--ignore-out-of-view", "0"][..],
+        &["--ignore-out-of-view", "1.5"],
+        &["--layout", "--ignore-out-of-view", "0.5"],
+    ] {
+        let out = run(&[&["--data", data, "--detections", dets][..], bad].concat());
+        assert_eq!(out.status.code(), Some(1), "{bad:?}: {}", String::from_utf8_lossy(&out.stderr));
+    }
+}

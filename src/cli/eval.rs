@@ -21,6 +21,10 @@
 //!   get no window numbers and a warning). `--models` and `--step` need `--diagnose`; so do
 //!   `--overlay-top` and `--overlay-min-score`, the rule of the "overlay as drawn" line (`detect`'s), and
 //!   `--objects`, the list of every ground-truth box ([`cog_gpu::diagnose::object_outcomes`]).
+//! * `--ignore-out-of-view SHARE` takes the boxes with less than SHARE of their volume in view out of
+//!   everything reported ([`cog_gpu::eval::ignore_boxes`], PASCAL VOC's "difficult" rule), after the
+//!   frames are read and before anything is evaluated; the `--versus` set loses its detections on them by
+//!   the same rule. Only boxes of evaluated categories are looked at (their frames are read for cameras).
 
 use std::collections::{BTreeMap, HashSet};
 use std::path::{Path, PathBuf};
@@ -34,8 +38,8 @@ use cog_gpu::diagnose::{
 };
 use cog_gpu::draw::category_colour;
 use cog_gpu::eval::{
-    bootstrap_aps, evaluate_categories, mean_ap, percentile_interval, surface_accuracy, Bootstrap, CategoryEvaluation,
-    Detection, FrameDetections, SurfaceAccuracy,
+    bootstrap_aps, evaluate_categories, ignore_boxes, mean_ap, percentile_interval, surface_accuracy, Bootstrap,
+    CategoryEvaluation, Detection, FrameDetections, IgnoredCounts, SurfaceAccuracy, WithoutIgnored,
 };
 use cog_gpu::features::Preprocessed;
 use cog_gpu::frame::{frame_name, read_annotations, unique_frame_names, Dataset, DepthSource, Frame, Object};
@@ -127,6 +131,14 @@ pub struct Args {
     /// interval of the difference of the mean free-space IoUs.
     #[arg(long, value_name = "DIR", requires = "bootstrap")]
     pub versus: Option<PathBuf>,
+    /// Ignore the ground-truth boxes with less than SHARE of their volume in the picture, as PASCAL VOC
+    /// ignores its "difficult" objects: such a box is no longer a positive, and a detection whose best box
+    /// of its category is one (at IoU ≥ --iou) is dropped instead of counted false
+    /// (`cog_gpu::eval::ignore_boxes`; the share is `cog_gpu::diagnose::in_view_share`, which reads the
+    /// camera of every frame with ground truth of an evaluated category). 0.25 is the diagnosis's "mostly
+    /// out of view". Off by default: the benchmark counts every annotated box.
+    #[arg(long, value_name = "SHARE", value_parser = options::share, conflicts_with_all = ["layout", "surfaces"])]
+    pub ignore_out_of_view: Option<f32>,
 }
 
 /// A (low, high) bootstrap interval of an AP or of a difference of APs (fractions).
@@ -174,6 +186,9 @@ struct DiagnosisReport {
     /// `--objects`: every ground-truth box of the evaluated categories.
     #[serde(skip_serializing_if = "Option::is_none")]
     objects: Option<Vec<NamedOutcome>>,
+    /// `--ignore-out-of-view`: what was taken out.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    ignored: Option<IgnoredReport>,
 }
 
 /// One `--objects` entry: the frame's directory name, the share of the box in view ([`in_view_share`]),
@@ -215,6 +230,17 @@ struct Report {
     /// `--surfaces` with two or more such categories: theirs together (`"category": "all"`).
     #[serde(skip_serializing_if = "Option::is_none")]
     surfaces_pooled: Option<SurfaceAccuracy>,
+    /// `--ignore-out-of-view`: what was taken out.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    ignored: Option<IgnoredReport>,
+}
+
+/// `--ignore-out-of-view` in the JSON: the share, and per evaluated category the boxes with less of it in
+/// view and the detections whose best box they are, both taken out of the evaluation.
+#[derive(Clone, Serialize)]
+struct IgnoredReport {
+    min_in_view: f32,
+    ignored: BTreeMap<String, IgnoredCounts>,
 }
 
 /// The requested categories, checked against the 19 known ones.
@@ -346,6 +372,18 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
             args.detections.display()
         );
     }
+    let out_of_view = match args.ignore_out_of_view {
+        Some(share) => Some(OutOfView::mark(&frames, &truth, &categories, share)?),
+        None => None,
+    };
+    let (truth, detections, ignored) = match &out_of_view {
+        Some(marks) => {
+            let kept = marks.apply(&detections, args.iou);
+            let report = marks.report(&kept.counts, &categories);
+            (kept.truth, kept.detections, Some(report))
+        }
+        None => (truth, detections, None),
+    };
     if args.diagnose {
         let window = match &models {
             Some(models) => Some(window_recall(&frames, &truth, models)?),
@@ -370,10 +408,14 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
                     precision: drawn,
                 },
                 objects,
+                ignored,
             };
             println!("{}", serde_json::to_string_pretty(&report)?);
         } else {
             print_diagnosis(&args, &diagnosis, &overlay, &drawn, evaluated, missing);
+            if let Some(ignored) = &ignored {
+                print_ignored(ignored);
+            }
             if let Some(objects) = &objects {
                 print_objects(objects, args.iou);
             }
@@ -385,7 +427,15 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     let bootstrap = match args.bootstrap {
         Some(resamples) => {
             let versus = match &args.versus {
-                Some(dir) => Some((dir.clone(), read_detection_dir(dir, &frames)?)),
+                Some(dir) => {
+                    let other = read_detection_dir(dir, &frames)?;
+                    // The same boxes ignored, and the other set's detections on them dropped by the same rule.
+                    let other = match &out_of_view {
+                        Some(marks) => marks.apply(&other, args.iou).detections,
+                        None => other,
+                    };
+                    Some((dir.clone(), other))
+                }
                 None => None,
             };
             let settings = Bootstrap { resamples: resamples as usize, seed: args.bootstrap_seed };
@@ -415,10 +465,14 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
             bootstrap,
             surfaces,
             surfaces_pooled,
+            ignored,
         };
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
         print_table(&args, &results, map, evaluated, missing);
+        if let Some(ignored) = &ignored {
+            print_ignored(ignored);
+        }
         if let Some(summary) = &bootstrap {
             print_bootstrap(&results, map, summary);
         }
@@ -721,16 +775,7 @@ fn named_outcomes(
     let outcomes: Vec<ObjectOutcome> =
         categories.iter().flat_map(|c| object_outcomes(truth, detections, c, iou)).collect();
     let needed: HashSet<usize> = outcomes.iter().map(|o| o.image).collect();
-    let cameras: BTreeMap<usize, (Camera, u32, u32)> = frames
-        .par_iter()
-        .enumerate()
-        .filter(|(i, _)| needed.contains(i))
-        .map(|(i, dir)| {
-            let frame = Frame::read(dir, DepthSource::Raw)
-                .with_context(|| format!("{}: reading the frame for --objects", dir.display()))?;
-            Ok((i, (Camera::new(frame.intrinsics(), frame.rtilt()), frame.width(), frame.height())))
-        })
-        .collect::<anyhow::Result<_>>()?;
+    let cameras = frame_cameras(frames, &needed, "--objects")?;
     Ok(outcomes
         .into_iter()
         .map(|outcome| {
@@ -743,6 +788,85 @@ fn named_outcomes(
             }
         })
         .collect())
+}
+
+/// The camera and image size (pixels) of each frame in `needed` (indices into `frames`), each frame read
+/// in full; an unreadable frame is an error naming it and `flag`, the option that needed it.
+fn frame_cameras(
+    frames: &[PathBuf],
+    needed: &HashSet<usize>,
+    flag: &str,
+) -> anyhow::Result<BTreeMap<usize, (Camera, u32, u32)>> {
+    frames
+        .par_iter()
+        .enumerate()
+        .filter(|(i, _)| needed.contains(i))
+        .map(|(i, dir)| {
+            let frame = Frame::read(dir, DepthSource::Raw)
+                .with_context(|| format!("{}: reading the frame for {flag}", dir.display()))?;
+            Ok((i, (Camera::new(frame.intrinsics(), frame.rtilt()), frame.width(), frame.height())))
+        })
+        .collect()
+}
+
+/// `--ignore-out-of-view SHARE`: the frames' ground truth and, per box, whether it is ignored — a box of
+/// an evaluated category with less than `share` of its volume in view ([`in_view_share`]); boxes of the
+/// other categories are never marked (no evaluated detection can take them).
+struct OutOfView {
+    share: f32,
+    truth: Vec<Vec<Object>>,
+    marked: Vec<Vec<bool>>,
+}
+
+impl OutOfView {
+    fn mark(frames: &[PathBuf], truth: &[Vec<Object>], categories: &[String], share: f32) -> anyhow::Result<Self> {
+        let evaluated = |o: &Object| categories.contains(&o.category);
+        let needed: HashSet<usize> = (0..truth.len()).filter(|&i| truth[i].iter().any(evaluated)).collect();
+        let cameras = frame_cameras(frames, &needed, "--ignore-out-of-view")?;
+        let marked = truth
+            .iter()
+            .enumerate()
+            .map(|(i, objects)| {
+                objects
+                    .iter()
+                    .map(|o| {
+                        evaluated(o) && {
+                            let (camera, width, height) = &cameras[&i];
+                            in_view_share(&o.cuboid, camera, *width, *height) < share
+                        }
+                    })
+                    .collect()
+            })
+            .collect();
+        Ok(OutOfView { share, truth: truth.to_vec(), marked })
+    }
+
+    /// [`ignore_boxes`] of these marks on `detections` (of the same frames).
+    fn apply(&self, detections: &[Vec<Detection>], iou: f32) -> WithoutIgnored {
+        ignore_boxes(&self.truth, &self.marked, detections, iou)
+    }
+
+    /// What was taken out, per evaluated category (zeros included).
+    fn report(&self, counts: &BTreeMap<String, IgnoredCounts>, categories: &[String]) -> IgnoredReport {
+        IgnoredReport {
+            min_in_view: self.share,
+            ignored: categories.iter().map(|c| (c.clone(), counts.get(c).copied().unwrap_or_default())).collect(),
+        }
+    }
+}
+
+/// `--ignore-out-of-view` (text): what the table above left out.
+fn print_ignored(report: &IgnoredReport) {
+    let (boxes, detections) = report.ignored.values().fold((0, 0), |(b, d), c| (b + c.boxes, d + c.detections));
+    println!(
+        "ignored (--ignore-out-of-view {}): {boxes} ground-truth boxes with less than {:.0} % of their volume in \
+         the picture and the {detections} detections whose best box they are (as PASCAL VOC's difficult objects); \
+         per category, boxes/detections:",
+        report.min_in_view,
+        100.0 * report.min_in_view
+    );
+    let parts: Vec<String> = report.ignored.iter().map(|(c, n)| format!("{c} {}/{}", n.boxes, n.detections)).collect();
+    println!("  {}", parts.join(", "));
 }
 
 /// `--objects` (text): one line per ground-truth box, then per category the boxes mostly out of view.

@@ -86,6 +86,16 @@ pub fn probability(text: &str) -> Result<f32, String> {
     }
 }
 
+/// `eval --ignore-out-of-view`: a share of a box's volume, in (0, 1].
+pub fn share(text: &str) -> Result<f32, String> {
+    let value = number(text)?;
+    if value > 0.0 && value <= 1.0 {
+        Ok(value as f32)
+    } else {
+        Err(format!("{value} is not a share in (0, 1]"))
+    }
+}
+
 /// `train --c`: the regularisation constant, finite and > 0.
 pub fn positive(text: &str) -> Result<f64, String> {
     let value = number(text)?;
