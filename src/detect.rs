@@ -910,8 +910,9 @@ pub fn replacement_problem(categories: &[String], models: &[Model]) -> Option<St
 /// The [`Detection::cross_scores`] hold every cross-category model's score of each box, so replacing a
 /// model of [`CROSS_SCORE_CATEGORIES`](crate::category::CROSS_SCORE_CATEGORIES) makes those of the kept detections stale (the old model's), and
 /// those of the update may miss the models it was not run with: then the merged detections carry none
-/// (a cascade with a cross stage refuses them; detect the frames again for one). Replacing only other
-/// categories keeps them, as detecting everything again would give them.
+/// (a cascade with a cross stage refuses them; [`cross_scores`] on the frame computes them again, as
+/// `merge-detections --data` does). Replacing only other categories keeps them, as detecting everything
+/// again would give them.
 pub fn replace_categories(
     base: &[Detection],
     update: &[Detection],

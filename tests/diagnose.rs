@@ -8,8 +8,7 @@ mod common;
 
 use cog_gpu::diagnose::{
     best_window_ious, diagnose_categories, false_positive_kinds, frame_window_best_ious, in_frame_ranking,
-    in_view_share, object_outcomes, oracle_aps, overlay_precision, rank_average_precision, ObjectSummary, OverlayRule,
-    WindowRecall,
+    object_outcomes, oracle_aps, overlay_precision, rank_average_precision, ObjectSummary, OverlayRule, WindowRecall,
 };
 use cog_gpu::eval::{Detection, FrameDetections};
 use cog_gpu::features::hypotheses::{sliding_window, window_yaws, WindowOptions};
@@ -17,7 +16,7 @@ use cog_gpu::features::LatticePhase;
 use cog_gpu::features::YawAnchor;
 use cog_gpu::features::{FeatureLayout, FeatureScene, Groups, Preprocessed, SizeQuantiles};
 use cog_gpu::frame::{Frame, Object};
-use cog_gpu::geometry::{iou_3d, Camera, Cuboid};
+use cog_gpu::geometry::{in_view_share, iou_3d, Camera, Cuboid};
 use cog_gpu::model::{FeaturePath, FeatureSettings, Model, WindowSettings};
 use cog_gpu::synth::{self, SynthOptions};
 use glam::Vec3;

@@ -183,6 +183,39 @@ fn merging_re_detected_categories_equals_detecting_everything_again() {
     let step2 = files(&path("step2"));
     assert_eq!(cross_scores(&step2), 0);
     assert_eq!(step2, without_cross(reference.clone()));
+    // With the frames (--data) the cross scores are computed again: then the merge is the full detection,
+    // cross scores included, bit for bit.
+    let with_data = |base: &str, update: &str, categories: &str, out: &str| {
+        let mut args = merge(base, update, categories, out);
+        args.extend(["--data".to_string(), text(&data)]);
+        args
+    };
+    ok(&as_str(&with_data("base", "chair-new", "chair", "step1-data")));
+    let step1_data = files(&path("step1-data"));
+    assert_eq!(cross_scores(&step1_data), cross_scores(&reference));
+    ok(&as_str(&with_data("step1-data", "desk-new", "desk,monitor", "step2-data")));
+    assert_eq!(files(&path("step2-data")), reference);
+    // Only the chair replaced: its boxes and the kept desks' carry the new chair model's cross score, which
+    // differs from the old one's (the old chair's bias was moved by −0.7), and the desks keep the old desk's.
+    let chair_cross = |files: &[(String, serde_json::Value)], category: &str| -> Vec<f64> {
+        files
+            .iter()
+            .flat_map(|(_, f)| f["detections"].as_array().unwrap())
+            .filter(|d| d["category"] == category)
+            .map(|d| d["cross_scores"]["chair"].as_f64().unwrap())
+            .collect()
+    };
+    let (old_desk, new_desk) = (chair_cross(&base, "desk"), chair_cross(&step1_data, "desk"));
+    assert_eq!(old_desk.len(), new_desk.len());
+    for (o, n) in old_desk.iter().zip(&new_desk) {
+        assert!((n - o - 0.7).abs() < 1e-4, "a desk box's chair score moves with the chair's bias: {o} → {n}");
+    }
+    let err = failure(&as_str(&{
+        let mut args = merge("base", "chair-new", "chair", "x");
+        args.extend(["--data".to_string(), text(&path("new"))]);
+        args
+    }));
+    assert!(err.contains("not in --data"), "{err}");
     // Replacing the monitor alone (no cross category) keeps the base's cross scores, box for box.
     let monitor_new = path("monitor-new");
     detect(&data, &old, &monitor_new, Some("monitor"));

@@ -288,6 +288,7 @@ fn example_limits(negatives: usize) -> cog_gpu::learn::detector::ExampleLimits {
         others: OtherInstances::Removed,
         support: Support::Floor,
         seen: None,
+        min_in_view: None,
         normals: Default::default(),
     }
 }
@@ -645,14 +646,10 @@ fn the_seen_rule_counts_the_points_above_the_floor_slab_inside_the_box() {
     assert!(rule(2).sees(&cube, &points, 0.1));
 }
 
-#[test]
-fn skip_unseen_leaves_out_instances_without_points() {
-    use cog_gpu::learn::detector::{collect_examples, ExampleLimits, SeenRule};
-    let dir = tempfile::tempdir().unwrap();
-    let frames = tiny_frames(dir.path());
-    // Beside every bed, a copy 40 m away along X: far beyond any depth sensor, it holds no point.
-    let mut far_copies = 0;
-    for frame in &frames {
+/// Adds to each frame's annotation a copy of every bed moved 40 m along X; returns how many.
+fn add_far_bed_copies(frames: &[PathBuf]) -> usize {
+    let mut copies = 0;
+    for frame in frames {
         let path = frame.join("annotation3Dfinal/index.json");
         let mut index: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
         let objects = index["objects"].as_array_mut().unwrap();
@@ -663,10 +660,20 @@ fn skip_unseen_leaves_out_instances_without_points() {
                 *x = serde_json::json!(x.as_f64().unwrap() + 40.0);
             }
             objects.push(bed);
-            far_copies += 1;
+            copies += 1;
         }
         std::fs::write(&path, serde_json::to_string(&index).unwrap()).unwrap();
     }
+    copies
+}
+
+#[test]
+fn skip_unseen_leaves_out_instances_without_points() {
+    use cog_gpu::learn::detector::{collect_examples, ExampleLimits, SeenRule};
+    let dir = tempfile::tempdir().unwrap();
+    let frames = tiny_frames(dir.path());
+    // Beside every bed, a copy 40 m away along X: far beyond any depth sensor, it holds no point.
+    let far_copies = add_far_bed_copies(&frames);
     assert!(far_copies > 0, "seed 11's bedrooms must have beds");
     let is_far = |c: &Cuboid| c.centre.truncate().length() > 30.0;
     let limits = |seen| ExampleLimits { seen, ..example_limits(1) };
@@ -680,6 +687,39 @@ fn skip_unseen_leaves_out_instances_without_points() {
     assert!(seen.iter().all(|c| !is_far(c)), "an instance without points must not be a positive");
     assert!(!seen.is_empty(), "the beds in view stay positives");
     assert_eq!(seen.len() + far_copies, all.len(), "the beds in view all hold 50 points: only the copies go");
+}
+
+#[test]
+fn skip_out_of_view_leaves_out_instances_beside_the_picture() {
+    use cog_gpu::frame::{DepthSource, Frame};
+    use cog_gpu::geometry::{in_view_share, Camera};
+    use cog_gpu::learn::detector::{collect_examples, ExampleLimits};
+    let dir = tempfile::tempdir().unwrap();
+    let frames = tiny_frames(dir.path());
+    // Beside every bed, a copy 40 m along X: more than 10 m sideways for every metre ahead, far outside
+    // any camera's field of view (none of it in the picture).
+    let copies = add_far_bed_copies(&frames);
+    assert!(copies > 0, "seed 11's bedrooms must have beds");
+    // The originals' shares, from each frame's camera.
+    let mut expected_kept = 0;
+    for frame in &frames {
+        let read = Frame::read(frame, DepthSource::Raw).unwrap();
+        let camera = Camera::new(read.intrinsics(), read.rtilt());
+        for bed in read.objects.iter().filter(|o| o.category == "bed" && o.cuboid.centre.truncate().length() < 30.0) {
+            expected_kept += (in_view_share(&bed.cuboid, &camera, read.width(), read.height()) >= 0.25) as usize;
+        }
+    }
+    let is_copy = |c: &Cuboid| c.centre.truncate().length() > 30.0;
+    let truths = |min_in_view| -> Vec<Cuboid> {
+        let limits = ExampleLimits { min_in_view, ..example_limits(1) };
+        collect_examples(&frames, "bed", limits).unwrap().examples.iter().filter_map(|e| e.truth).collect()
+    };
+    let all = truths(None);
+    assert_eq!(all.iter().filter(|c| is_copy(c)).count(), copies, "without the rule every instance is a positive");
+    let kept = truths(Some(0.25));
+    assert!(kept.iter().all(|c| !is_copy(c)), "an instance out of the picture must not be a positive");
+    assert!(expected_kept > 0, "some of the beds are in the picture");
+    assert_eq!(kept.len(), expected_kept, "exactly the beds with a quarter of their box in view stay");
 }
 
 /// `hardest` by hand: the highest hardness first, ties to the earlier candidate, NaN and −∞ last, and the

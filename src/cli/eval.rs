@@ -33,8 +33,8 @@ use anyhow::{bail, Context};
 use cog_gpu::category::{CATEGORIES, LARGE_CATEGORIES};
 use cog_gpu::detect::{DEFAULT_OVERLAY_MIN_PROBABILITY, DEFAULT_OVERLAY_TOP};
 use cog_gpu::diagnose::{
-    diagnose_categories, frame_window_best_ious, in_view_share, object_outcomes, overlay_precision, CategoryDiagnosis,
-    ObjectOutcome, OverlayPrecision, OverlayRule, FOUND_AHEAD_PRECISION, MOSTLY_OUT_OF_VIEW, TOUCH_IOU,
+    diagnose_categories, frame_window_best_ious, object_outcomes, overlay_precision, CategoryDiagnosis, ObjectOutcome,
+    OverlayPrecision, OverlayRule, FOUND_AHEAD_PRECISION, MOSTLY_OUT_OF_VIEW, TOUCH_IOU,
 };
 use cog_gpu::draw::category_colour;
 use cog_gpu::eval::{
@@ -43,7 +43,7 @@ use cog_gpu::eval::{
 };
 use cog_gpu::features::Preprocessed;
 use cog_gpu::frame::{frame_name, read_annotations, unique_frame_names, Dataset, DepthSource, Frame, Object};
-use cog_gpu::geometry::Camera;
+use cog_gpu::geometry::{in_view_share, Camera};
 use cog_gpu::model::{read_models_dir, Model};
 use cog_gpu::synth::{read_support_heights, SUPPORT_FILE};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -134,7 +134,7 @@ pub struct Args {
     /// Ignore the ground-truth boxes with less than SHARE of their volume in the picture, as PASCAL VOC
     /// ignores its "difficult" objects: such a box is no longer a positive, and a detection whose best box
     /// of its category is one (at IoU ≥ --iou) is dropped instead of counted false
-    /// (`cog_gpu::eval::ignore_boxes`; the share is `cog_gpu::diagnose::in_view_share`, which reads the
+    /// (`cog_gpu::eval::ignore_boxes`; the share is `cog_gpu::geometry::in_view_share`, which reads the
     /// camera of every frame with ground truth of an evaluated category). 0.25 is the diagnosis's "mostly
     /// out of view". Off by default: the benchmark counts every annotated box.
     #[arg(long, value_name = "SHARE", value_parser = options::share, conflicts_with_all = ["layout", "surfaces"])]

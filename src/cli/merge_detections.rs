@@ -6,16 +6,26 @@
 //! write, at the cost of detecting only the changed categories. So a change of one first-stage model
 //! re-detects one category of the cascade's training set (`cog-gpu cascade`) instead of all 19.
 //!
+//! A replaced category of [`cog_gpu::category::CROSS_SCORE_CATEGORIES`] changes the cross scores of every
+//! cross-category box (the new model scores the kept boxes too): with `--data DIR` (the frames' dataset)
+//! each merged frame is read and preprocessed as `detect --cpu` does and the cross scores are computed
+//! again ([`cog_gpu::detect::cross_scores`]), so the files equal a full detection's; without it they are
+//! dropped (a cascade with a v7 stage then refuses the files), with a warning.
+//!
 //! Refused: cascaded files (merge the first stage, then `rescore`); a replaced category on whose detections
 //! a surface model (monitor on desks, sink on counters) that is not replaced searches; a frame of one
 //! directory missing from the other; an `--update` without any detection of the categories.
 
 use std::path::{Path, PathBuf};
 
+use std::collections::BTreeMap;
+
 use anyhow::{bail, Context};
 use cog_gpu::category::normalise_name;
-use cog_gpu::detect::{replace_categories, replacement_problem};
+use cog_gpu::detect::{cross_scores, replace_categories, replacement_problem};
 use cog_gpu::eval::{Detection, FrameDetections};
+use cog_gpu::features::Preprocessed;
+use cog_gpu::frame::{unique_frame_names, Dataset, DepthSource, Frame};
 use cog_gpu::model::read_models_dir;
 
 use super::GlobalOptions;
@@ -40,6 +50,12 @@ pub struct Args {
     /// Where to write the merged files (neither --base nor --update).
     #[arg(long)]
     pub out: PathBuf,
+    /// The dataset the detections are of (every frame directory below it): when a replaced category is
+    /// one whose model scores the other large categories' boxes (the cascade's cross scores), each merged
+    /// frame is read and preprocessed on the CPU and every box's cross scores are computed again with the
+    /// merged models, as `detect --cpu` writes them. Without it they are dropped.
+    #[arg(long)]
+    pub data: Option<PathBuf>,
 }
 
 pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
@@ -66,6 +82,27 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
             );
         }
     }
+    let crossed = categories.iter().any(|c| cog_gpu::category::is_cross_score_category(c));
+    // Frame name → directory, only when the cross scores are computed again.
+    let frame_dirs: Option<BTreeMap<String, PathBuf>> = match (&args.data, crossed) {
+        (Some(data), true) => {
+            let dataset = Dataset::open(data)?;
+            let names = unique_frame_names(&dataset.frames)?;
+            Some(names.into_iter().zip(dataset.frames).collect())
+        }
+        (Some(data), false) => {
+            log::info!(
+                "--data {}: not read, no replaced category's model makes cross scores (the kept ones stay valid)",
+                data.display()
+            );
+            None
+        }
+        (None, _) => None,
+    };
+    let normals = match &frame_dirs {
+        Some(_) => Some(super::detect::normal_search_for(&models_dir, &models, None)?),
+        None => None,
+    };
     let base_files = detection_files(&args.base)?;
     let update_files = detection_files(&args.update)?;
     if base_files.is_empty() {
@@ -77,6 +114,12 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     let mut added = vec![0usize; categories.len()];
     let mut removed = vec![0usize; categories.len()];
     let mut merged_files = Vec::with_capacity(base_files.len());
+    let bar = indicatif::ProgressBar::new(base_files.len() as u64);
+    if frame_dirs.is_some() {
+        bar.set_style(indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} frames, cross scores ({eta})")?);
+    } else {
+        bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+    }
     for name in &base_files {
         let (base_path, update_path) = (args.base.join(name), args.update.join(name));
         if !update_path.is_file() {
@@ -109,10 +152,20 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
             removed[n] += base.detections.iter().filter(|d| &d.category == category).count();
             added[n] += update.detections.iter().filter(|d| &d.category == category).count();
         }
-        let detections = replace_categories(&base.detections, &update.detections, &categories, &models);
+        let mut detections = replace_categories(&base.detections, &update.detections, &categories, &models);
+        if let (Some(dirs), Some(search)) = (&frame_dirs, normals) {
+            let dir = dirs.get(&base.frame).with_context(|| {
+                format!("{}: frame '{}' is not in --data {}", base_path.display(), base.frame, show(&args.data))
+            })?;
+            let frame = Frame::read(dir, DepthSource::Raw)?;
+            let pre = Preprocessed::from_frame_with(&frame, search)?;
+            cross_scores(&pre, &models, &mut detections);
+        }
         let file = super::options::with_detections(&base_text, &base_path, &detections)?;
         merged_files.push((name.clone(), file));
+        bar.inc(1);
     }
+    bar.finish_and_clear();
     if added.iter().all(|&n| n == 0) {
         bail!(
             "{}: holds no detection of {} in any frame: was it made with `detect --categories {}`?",
@@ -122,11 +175,13 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         );
     }
     if let Some(category) = categories.iter().find(|c| cog_gpu::category::is_cross_score_category(c)) {
-        log::warn!(
-            "the merged detections carry no cross scores: '{category}' is one of the categories whose models score \
-             each other's boxes, so the kept boxes' cross scores would be the old model's (a cascade with a v7 \
-             stage refuses them; detect the frames again for one)"
-        );
+        if frame_dirs.is_none() {
+            log::warn!(
+                "the merged detections carry no cross scores: '{category}' is one of the categories whose models \
+                 score each other's boxes, so the kept boxes' cross scores would be the old model's (a cascade \
+                 with a v7 stage refuses them; give the frames with --data to compute them again)"
+            );
+        }
     }
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     for (name, file) in &merged_files {
@@ -169,4 +224,9 @@ fn first_stage(path: &Path, text: &str) -> anyhow::Result<FrameDetections> {
         );
     }
     Ok(frame)
+}
+
+/// `--data` for messages.
+fn show(data: &Option<PathBuf>) -> String {
+    data.as_ref().map(|d| d.display().to_string()).unwrap_or_default()
 }

@@ -1033,6 +1033,14 @@ pub struct ExampleLimits {
     /// empty boxes. `None` trains on every instance (as every shipped model was trained). The choice among
     /// the seen instances is [`spread`] over them, as over all.
     pub seen: Option<SeenRule>,
+    /// Instances with less than this share of their annotated box in the picture
+    /// ([`crate::geometry::in_view_share`]: the box's volume that projects onto the image, occlusion
+    /// ignored) are not positives: a bed beside the camera whose foot is in the picture keeps its whole box
+    /// under synth's annotation rules, and the window's best box for it fits the visible part or an empty
+    /// corner — training toward it teaches the model boxes that hold little of their object. `None` trains
+    /// on every instance (as every shipped model was trained). The choice among the kept instances is
+    /// [`spread`] over them, as over all.
+    pub min_in_view: Option<f32>,
     /// How the frames' normals find their neighbours (the model records it: `features.normals`).
     pub normals: NormalSearch,
 }
@@ -1121,6 +1129,31 @@ pub fn spread(total: usize, count: usize) -> Vec<usize> {
     (0..count).map(|k| k * total / count).collect()
 }
 
+/// The `(frame, instance)` pairs of `candidates` (in order) that `keep` keeps: it gets each frame with
+/// candidates, read, and the frame's instances of `category`, and says which to keep (one flag each).
+fn kept_positives(
+    frames: &[std::path::PathBuf],
+    annotations: &[Vec<crate::frame::Object>],
+    category: &str,
+    candidates: &[(usize, usize)],
+    keep: impl Fn(&crate::frame::Frame, &[Cuboid]) -> Vec<bool> + Sync,
+) -> Result<Vec<(usize, usize)>> {
+    let mut with_instances: Vec<usize> = candidates.iter().map(|p| p.0).collect();
+    with_instances.dedup();
+    let flags: Vec<(usize, Vec<bool>)> = with_instances
+        .par_iter()
+        .map(|&f| {
+            let frame = crate::frame::Frame::read(&frames[f], crate::frame::DepthSource::Raw)?;
+            Ok((f, keep(&frame, &instances_of(&annotations[f], category))))
+        })
+        .collect::<Result<_>>()?;
+    Ok(candidates
+        .iter()
+        .copied()
+        .filter(|&(f, k)| flags.binary_search_by_key(&f, |s| s.0).is_ok_and(|i| flags[i].1[k]))
+        .collect())
+}
+
 /// The `(frame, instance)` pairs of `candidates` whose instance `rule` sees in its frame's point cloud,
 /// in order; logs how many were left out.
 fn seen_positives(
@@ -1130,29 +1163,40 @@ fn seen_positives(
     candidates: &[(usize, usize)],
     rule: SeenRule,
 ) -> Result<Vec<(usize, usize)>> {
-    let mut with_instances: Vec<usize> = candidates.iter().map(|p| p.0).collect();
-    with_instances.dedup();
-    let seen: Vec<(usize, Vec<bool>)> = with_instances
-        .par_iter()
-        .map(|&f| {
-            let frame = crate::frame::Frame::read(&frames[f], crate::frame::DepthSource::Raw)?;
-            let points = frame.point_cloud().points;
-            let floor = crate::features::preprocess::floor_height(&points);
-            let flags = instances_of(&annotations[f], category).iter().map(|c| rule.sees(c, &points, floor)).collect();
-            Ok((f, flags))
-        })
-        .collect::<Result<_>>()?;
-    let kept: Vec<(usize, usize)> = candidates
-        .iter()
-        .copied()
-        .filter(|&(f, k)| seen.binary_search_by_key(&f, |s| s.0).is_ok_and(|i| seen[i].1[k]))
-        .collect();
+    let kept = kept_positives(frames, annotations, category, candidates, |frame, instances| {
+        let points = frame.point_cloud().points;
+        let floor = crate::features::preprocess::floor_height(&points);
+        instances.iter().map(|c| rule.sees(c, &points, floor)).collect()
+    })?;
     log::info!(
         "{} of {} instances of '{category}' hold fewer than {} points above the floor slab (unseen by the depth \
          sensor); not trained on",
         candidates.len() - kept.len(),
         candidates.len(),
         rule.min_points
+    );
+    Ok(kept)
+}
+
+/// The `(frame, instance)` pairs of `candidates` with at least `min_share` of their box in view of their
+/// frame's camera ([`crate::geometry::in_view_share`]), in order; logs how many were left out.
+fn in_view_positives(
+    frames: &[std::path::PathBuf],
+    annotations: &[Vec<crate::frame::Object>],
+    category: &str,
+    candidates: &[(usize, usize)],
+    min_share: f32,
+) -> Result<Vec<(usize, usize)>> {
+    let kept = kept_positives(frames, annotations, category, candidates, |frame, instances| {
+        let camera = crate::geometry::Camera::new(frame.intrinsics(), frame.rtilt());
+        let share = |c: &Cuboid| crate::geometry::in_view_share(c, &camera, frame.width(), frame.height());
+        instances.iter().map(|c| share(c) >= min_share).collect()
+    })?;
+    log::info!(
+        "{} of {} instances of '{category}' have less than {:.0} % of their box in the picture; not trained on",
+        candidates.len() - kept.len(),
+        candidates.len(),
+        100.0 * min_share
     );
     Ok(kept)
 }
@@ -1243,6 +1287,10 @@ pub fn collect_examples(
     }
     let positives = match limits.seen {
         Some(rule) => seen_positives(frames, &annotations, category, &positives, rule)?,
+        None => positives,
+    };
+    let positives = match limits.min_in_view {
+        Some(share) => in_view_positives(frames, &annotations, category, &positives, share)?,
         None => positives,
     };
     let positives: Vec<(usize, usize)> =
