@@ -16,9 +16,8 @@
 //! a surface model (monitor on desks, sink on counters) that is not replaced searches; a frame of one
 //! directory missing from the other; an `--update` without any detection of the categories.
 
-use std::path::{Path, PathBuf};
-
 use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
 use cog_gpu::category::normalise_name;
@@ -155,7 +154,8 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         let mut detections = replace_categories(&base.detections, &update.detections, &categories, &models);
         if let (Some(dirs), Some(search)) = (&frame_dirs, normals) {
             let dir = dirs.get(&base.frame).with_context(|| {
-                format!("{}: frame '{}' is not in --data {}", base_path.display(), base.frame, show(&args.data))
+                let data = args.data.as_deref().unwrap_or(Path::new("")).display();
+                format!("{}: frame '{}' is not in --data {data}", base_path.display(), base.frame)
             })?;
             let frame = Frame::read(dir, DepthSource::Raw)?;
             let pre = Preprocessed::from_frame_with(&frame, search)?;
@@ -224,9 +224,4 @@ fn first_stage(path: &Path, text: &str) -> anyhow::Result<FrameDetections> {
         );
     }
     Ok(frame)
-}
-
-/// `--data` for messages.
-fn show(data: &Option<PathBuf>) -> String {
-    data.as_ref().map(|d| d.display().to_string()).unwrap_or_default()
 }
