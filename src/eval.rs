@@ -231,14 +231,7 @@ fn match_in_order(
     for &d in order {
         let det = &detections[d];
         let truths = ground_truth.get(det.image).map(Vec::as_slice).unwrap_or(&[]);
-        let best = truths.iter().enumerate().map(|(g, truth)| (g, iou_3d(&det.cuboid, truth))).fold(
-            None,
-            |best: Option<(usize, f32)>, (g, iou)| match best {
-                Some((_, b)) if b >= iou => best,
-                _ => Some((g, iou)),
-            },
-        );
-        let hit = match best {
+        let hit = match best_truth(&det.cuboid, truths.iter().enumerate()) {
             Some((g, iou)) if iou >= iou_threshold && !taken[det.image][g] => {
                 taken[det.image][g] = true;
                 Some(g)
@@ -248,6 +241,16 @@ fn match_in_order(
         matches.push(hit);
     }
     matches
+}
+
+/// The ground-truth box a detection `cuboid` takes under the benchmark's matching (module doc): of
+/// `truths` (index, box), the one with the highest 3D IoU, ties to the first — a later box replaces the best
+/// only when strictly better —, with that IoU; `None` without boxes.
+fn best_truth<'a>(cuboid: &Cuboid, truths: impl Iterator<Item = (usize, &'a Cuboid)>) -> Option<(usize, f32)> {
+    truths.map(|(g, truth)| (g, iou_3d(cuboid, truth))).fold(None, |best, (g, iou)| match best {
+        Some((_, b)) if b >= iou => best,
+        _ => Some((g, iou)),
+    })
 }
 
 /// For each of `boxes`, **in input order**, the ground-truth box of its image that it takes as a true
@@ -423,20 +426,8 @@ pub fn ignore_boxes(
         let objects = truth.get(image).map(Vec::as_slice).unwrap_or(&[]);
         let mut kept = Vec::with_capacity(frame.len());
         for detection in frame {
-            let cuboid = detection.cuboid();
-            // The best box as `match_in_order` picks it: a later box replaces the best only when strictly
-            // better.
-            let best = objects.iter().enumerate().filter(|(_, o)| o.category == detection.category).fold(
-                None,
-                |best: Option<(usize, f32)>, (o, object)| {
-                    let iou = iou_3d(&cuboid, &object.cuboid);
-                    match best {
-                        Some((_, b)) if b >= iou => best,
-                        _ => Some((o, iou)),
-                    }
-                },
-            );
-            match best {
+            let same_category = objects.iter().enumerate().filter(|(_, o)| o.category == detection.category);
+            match best_truth(&detection.cuboid(), same_category.map(|(o, object)| (o, &object.cuboid))) {
                 Some((o, iou)) if iou >= iou_threshold && is_ignored(image, o) => {
                     counts.entry(detection.category.clone()).or_default().detections += 1;
                 }

@@ -37,14 +37,19 @@ fn number(text: &str) -> Result<f64, String> {
     }
 }
 
-/// `--iou` of `eval` and `calibrate`: a 3D IoU in (0, 1].
-pub fn iou(text: &str) -> Result<f32, String> {
+/// A number in (0, 1]; the error names what it should have been.
+fn above_zero_up_to_one(text: &str, what: &str) -> Result<f32, String> {
     let value = number(text)?;
     if value > 0.0 && value <= 1.0 {
         Ok(value as f32)
     } else {
-        Err(format!("{value} is not in (0, 1]"))
+        Err(format!("{value} is not {what} in (0, 1]"))
     }
+}
+
+/// `--iou` of `eval` and `calibrate`: a 3D IoU in (0, 1].
+pub fn iou(text: &str) -> Result<f32, String> {
+    above_zero_up_to_one(text, "an IoU")
 }
 
 /// `detect --box-voting` (and `bench --detect --box-voting`): an IoU in (0, 1] ([`iou`]), or `off`
@@ -86,14 +91,9 @@ pub fn probability(text: &str) -> Result<f32, String> {
     }
 }
 
-/// `eval --ignore-out-of-view`: a share of a box's volume, in (0, 1].
+/// `eval --ignore-out-of-view`, `train --skip-out-of-view`: a share of a box's volume, in (0, 1].
 pub fn share(text: &str) -> Result<f32, String> {
-    let value = number(text)?;
-    if value > 0.0 && value <= 1.0 {
-        Ok(value as f32)
-    } else {
-        Err(format!("{value} is not a share in (0, 1]"))
-    }
+    above_zero_up_to_one(text, "a share")
 }
 
 /// `train --c`: the regularisation constant, finite and > 0.
