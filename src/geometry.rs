@@ -177,7 +177,12 @@ impl Camera {
     /// 0-based image coordinates of an upright point, or `None` when it lies less than
     /// [`MIN_PROJECT_DEPTH`] in front of the camera.
     pub fn project(&self, p: Vec3) -> Option<Vec2> {
-        let c = self.to_camera(p);
+        self.project_camera(self.to_camera(p))
+    }
+
+    /// 0-based image coordinates of a point in camera coordinates (x right, y down, z forward), or `None`
+    /// when it lies less than [`MIN_PROJECT_DEPTH`] in front of the camera.
+    pub fn project_camera(&self, c: Vec3) -> Option<Vec2> {
         if c.z < MIN_PROJECT_DEPTH {
             return None;
         }
@@ -611,7 +616,6 @@ pub const IN_VIEW_SAMPLES: u32 = 10;
 /// recovered from the points.
 pub fn in_view_share(cuboid: &Cuboid, camera: &Camera, width: u32, height: u32) -> f32 {
     let n = IN_VIEW_SAMPLES;
-    let (w, h) = (width as f32 - 0.5, height as f32 - 0.5);
     let mut inside = 0u32;
     for i in 0..n {
         for j in 0..n {
@@ -619,10 +623,17 @@ pub fn in_view_share(cuboid: &Cuboid, camera: &Camera, width: u32, height: u32) 
                 let unit = |c: u32| (c as f32 + 0.5) / n as f32 - 0.5;
                 let local = Vec3::new(unit(i), unit(j), unit(k)) * cuboid.size;
                 if let Some(uv) = camera.project(cuboid.from_local(local)) {
-                    inside += (uv.x >= -0.5 && uv.x < w && uv.y >= -0.5 && uv.y < h) as u32;
+                    inside += on_image(uv, [width, height]) as u32;
                 }
             }
         }
     }
     inside as f32 / (n * n * n) as f32
+}
+
+/// Whether 0-based image coordinates `uv` lie on an image of `size` (width, height) pixels: pixel centres
+/// are integers, so the image spans [−0.5, width − 0.5) × [−0.5, height − 0.5).
+pub fn on_image(uv: Vec2, size: [u32; 2]) -> bool {
+    let (w, h) = (size[0] as f32 - 0.5, size[1] as f32 - 0.5);
+    uv.x >= -0.5 && uv.x < w && uv.y >= -0.5 && uv.y < h
 }

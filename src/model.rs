@@ -6,6 +6,7 @@
 //!   "layout_id": "cog-v1 grid=5x5x5 expanded=1 groups=density,normals,cog,view",
 //!   "layout": {"base_grid": [5, 5, 5], "expanded": true,
 //!              "groups": {"density": true, "normals": true, "cog": true, "view": true}},
+//!              (and "out_of_view": true when that group is on: `features::feature_layout`)
 //!   "sizes": {"widths": [5 numbers], "depths": [3], "heights": [3]},
 //!   "window": {"step": 0.1, "min_points": 50, "yaw_anchor": "walls", "support": "floor", "lattice": "camera"},
 //!   "features": {"path": "fast", "subdivisions": 2},

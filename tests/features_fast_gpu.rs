@@ -55,21 +55,6 @@ fn sample(window: &PreparedWindow, count: usize) -> Vec<Hypothesis> {
     kept.iter().step_by(stride).take(count).copied().collect()
 }
 
-/// `count` pseudo-random weight vectors in [−1, 1) (a 64-bit LCG per vector).
-fn random_weights(layout: &FeatureLayout, count: usize, seed: u64) -> Vec<Vec<f32>> {
-    (0..count as u64)
-        .map(|w| {
-            let mut state = (seed * 1000 + w).wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (0..layout.dim())
-                .map(|_| {
-                    state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-                    ((state >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
-                })
-                .collect()
-        })
-        .collect()
-}
-
 fn bits(v: &[f32]) -> Vec<u32> {
     v.iter().map(|x| x.to_bits()).collect()
 }
@@ -118,7 +103,7 @@ fn gpu_fast_scores_match_the_cpu_on_a_real_frame_and_are_reproducible() {
     let layout = FeatureLayout::default();
     let hyps = sample(&window, 2000);
     assert!(hyps.len() >= 1500, "{} hypotheses", hyps.len());
-    let weights = random_weights(&layout, 3, 1);
+    let weights = common::random_weights(&layout, 3, 1);
     let gpu = compare_paths(&ctx, &window, &layout, &hyps, &weights, "real frame, default layout");
     // Bit-identical across runs (exact integer sums, fixed reduction order).
     let engine = FastEngine::new(&window.scene, &layout, FastOptions::default());
@@ -133,7 +118,7 @@ fn gpu_fast_scores_match_the_cpu_on_a_synthetic_frame() {
     let hyps = sample(&window, 3000);
     assert!(hyps.len() >= 1000, "{} hypotheses", hyps.len());
     let layout = FeatureLayout::default();
-    compare_paths(&ctx, &window, &layout, &hyps, &random_weights(&layout, 2, 2), "synthetic frame");
+    compare_paths(&ctx, &window, &layout, &hyps, &common::random_weights(&layout, 2, 2), "synthetic frame");
 }
 
 #[test]
@@ -141,7 +126,7 @@ fn gpu_fast_scores_honour_switched_off_groups_and_other_grids() {
     let Some(ctx) = context() else { return };
     let window = synthetic_window("table");
     let hyps = sample(&window, 600);
-    let off = |density, normals, cog, view| Groups { density, normals, cog, view };
+    let off = |density, normals, cog, view| Groups { density, normals, cog, view, out_of_view: false };
     for layout in [
         FeatureLayout::new([5, 5, 5], true, off(true, false, true, false)).unwrap(),
         FeatureLayout::new([5, 5, 5], true, off(false, true, false, true)).unwrap(),
@@ -149,7 +134,7 @@ fn gpu_fast_scores_honour_switched_off_groups_and_other_grids() {
         FeatureLayout::new([3, 1, 3], true, Groups::GEOM).unwrap(),
         FeatureLayout::new([5, 5, 7], false, Groups::ALL).unwrap(),
     ] {
-        compare_paths(&ctx, &window, &layout, &hyps, &random_weights(&layout, 3, 3), &layout.id());
+        compare_paths(&ctx, &window, &layout, &hyps, &common::random_weights(&layout, 3, 3), &layout.id());
     }
 }
 
@@ -167,7 +152,7 @@ fn gpu_fast_view_part_matches_the_cpu_in_every_pass() {
     at_camera.centre = glam::Vec2::ZERO;
     hyps.push(at_camera);
     let offset = layout.view_offset();
-    let weights: Vec<Vec<f32>> = random_weights(&layout, 10, 7)
+    let weights: Vec<Vec<f32>> = common::random_weights(&layout, 10, 7)
         .into_iter()
         .map(|w| w.iter().enumerate().map(|(i, &x)| if i >= offset { x } else { 0.0 }).collect())
         .collect();
@@ -195,7 +180,7 @@ fn chunked_dispatches_batches_and_weight_passes_equal_the_single_dispatch() {
     let layout = FeatureLayout::default();
     let hyps = sample(&window, 400);
     // Ten weight vectors: two passes of the kernel (at most 8 per pass).
-    let weights = random_weights(&layout, 10, 4);
+    let weights = common::random_weights(&layout, 10, 4);
     let engine = FastEngine::new(&window.scene, &layout, FastOptions::default());
     let whole = fast_scores_gpu(&ctx, &engine, &hyps, &weights).unwrap();
     let chunks_of_7 = FastChunking { max_chunk: 7, ..FastChunking::default() };
@@ -230,7 +215,11 @@ fn several_jobs_in_one_call_equal_one_call_each() {
     let stride = (chair_window.hypotheses.len() / 300).max(1);
     let chair: Vec<Hypothesis> = chair_window.hypotheses.iter().step_by(stride).take(300).copied().collect();
     assert!(chair.len() >= 100, "{} chair hypotheses", chair.len());
-    let weights = [random_weights(&layout, 1, 5), random_weights(&layout, 1, 6), random_weights(&layout, 9, 7)];
+    let weights = [
+        common::random_weights(&layout, 1, 5),
+        common::random_weights(&layout, 1, 6),
+        common::random_weights(&layout, 9, 7),
+    ];
     let jobs = [
         FastJob { hypotheses: &bed, weights: &weights[0] },
         FastJob { hypotheses: &chair, weights: &weights[1] },
@@ -262,7 +251,8 @@ fn concurrent_calls_on_one_context_equal_the_calls_one_after_the_other() {
     let engines: Vec<FastEngine> =
         layouts.iter().map(|l| FastEngine::new(&window.scene, l, FastOptions::default())).collect();
     let hyps = sample(&window, 200);
-    let weights: Vec<Vec<Vec<f32>>> = (0..4).map(|n| random_weights(&layouts[n % 2], 1 + n, 40 + n as u64)).collect();
+    let weights: Vec<Vec<Vec<f32>>> =
+        (0..4).map(|n| common::random_weights(&layouts[n % 2], 1 + n, 40 + n as u64)).collect();
     let chunking = FastChunking { max_chunk: 64, max_batch_bytes: 16 << 20 };
     let call = |n: usize| {
         let job = FastJob { hypotheses: &hyps, weights: &weights[n] };
@@ -302,7 +292,7 @@ fn trimmed_pools_shrink_to_the_recent_frames_and_score_the_same() {
         .copied()
         .collect();
     assert!(small.len() >= 10, "{} hypotheses share the first one's table", small.len());
-    let weights = random_weights(&layout, 1, 11);
+    let weights = common::random_weights(&layout, 1, 11);
     let score = |ctx: &GpuContext, hyps: &[Hypothesis]| fast_scores_gpu(ctx, &engine, hyps, &weights).unwrap();
 
     let Some(fresh) = context() else { return };

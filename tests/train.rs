@@ -414,22 +414,7 @@ fn train_with_surfaces_writes_a_version_2_model_that_detect_uses() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("already a model with surfaces"));
     // Detection with the surface model.
-    let detections = dir.path().join("detections");
-    let frame = std::fs::read_dir(data).unwrap().flatten().map(|e| e.path()).find(|p| p.is_dir()).unwrap();
-    let out = run(&[
-        "detect",
-        frame.to_str().unwrap(),
-        "--models",
-        surface.parent().unwrap().to_str().unwrap(),
-        "--out",
-        detections.to_str().unwrap(),
-        "--min-score",
-        "-5",
-        "--no-overlay",
-    ]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let name = frame.file_name().unwrap().to_str().unwrap();
-    let found = read(&detections.join(format!("{name}.json")));
+    let found = detect_first_frame(data, surface.parent().unwrap(), &dir.path().join("detections"));
     let list = found["detections"].as_array().unwrap();
     assert!(!list.is_empty());
     for d in list {
@@ -437,6 +422,46 @@ fn train_with_surfaces_writes_a_version_2_model_that_detect_uses() {
         let (centre, height) = (d["centre"][2].as_f64().unwrap(), d["size"][2].as_f64().unwrap());
         assert!((z - centre).abs() <= height / 2.0, "surface {z} outside the box {centre} ± {height}/2");
     }
+}
+
+/// The out-of-view group end to end: `train --groups …,out-of-view` writes a model of 12 360 weights whose
+/// layout names the group, and `detect` reads and uses it (on a bedroom whose beds reach out of the 160×120
+/// picture, some indicator weights are learned non-zero).
+#[test]
+fn train_with_out_of_view_indicators_writes_a_model_that_detect_uses() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = tiny_dataset(dir.path());
+    let data = data.to_str().unwrap();
+    let model_path = dir.path().join("oov/bed.json");
+    let mut args = train_args(data, model_path.to_str().unwrap(), "3");
+    args.extend(["--groups", "density,normals,cog,view,out-of-view"]);
+    let out = run(&args);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let read = |p: &Path| -> serde_json::Value { serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap() };
+    let model = read(&model_path);
+    let layout = FeatureLayout {
+        groups: cog_gpu::features::Groups { out_of_view: true, ..cog_gpu::features::Groups::ALL },
+        ..FeatureLayout::default()
+    };
+    let weights: Vec<f64> = model["weights"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+    assert_eq!(weights.len(), 12360);
+    assert_eq!(weights.len(), layout.dim());
+    assert!(weights[layout.out_of_view_offset()..].iter().any(|&w| w != 0.0), "no indicator weight learned");
+    assert!(model.to_string().contains("out-of-view"), "the model's layout names the group");
+    let found = detect_first_frame(data, model_path.parent().unwrap(), &dir.path().join("detections"));
+    assert!(!found["detections"].as_array().unwrap().is_empty());
+}
+
+/// `detect` of the first frame of `data` with the models of `models` (no overlay, raw scores down to −5)
+/// into `out`; its detections file.
+fn detect_first_frame(data: &str, models: &Path, out: &Path) -> serde_json::Value {
+    let frame = std::fs::read_dir(data).unwrap().flatten().map(|e| e.path()).find(|p| p.is_dir()).unwrap();
+    let args =
+        ["detect", frame.to_str().unwrap(), "--models", models.to_str().unwrap(), "--out", out.to_str().unwrap()];
+    let result = run(&[&args[..], &["--min-score", "-5", "--no-overlay"]].concat());
+    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    let name = frame.file_name().unwrap().to_str().unwrap();
+    serde_json::from_str(&std::fs::read_to_string(out.join(format!("{name}.json"))).unwrap()).unwrap()
 }
 
 #[test]

@@ -151,7 +151,8 @@ pub struct Args {
     #[arg(long, default_value_t = DEFAULT_SUBDIVISIONS)]
     pub subdivisions: u32,
     /// Feature groups (the paper's ablation): comma-separated of density, normals, cog, view, and geom
-    /// (density and normals together).
+    /// (density and normals together); `out-of-view` adds the per-voxel out-of-view indicators (not in
+    /// the paper, see README "Out-of-view voxels").
     #[arg(long, default_value = "density,normals,cog,view")]
     pub groups: String,
     /// Do not expand the 5×5×5 grid by a voxel layer (the paper's "+expanded" off).
@@ -450,15 +451,18 @@ fn initial_surface_weights(model: &Model, layout: &FeatureLayout) -> anyhow::Res
 
 /// Parses a comma-separated group list.
 pub fn parse_groups(text: &str) -> anyhow::Result<Groups> {
-    let mut groups = Groups { density: false, normals: false, cog: false, view: false };
+    let mut groups = Groups::NONE;
     for name in text.split(',').map(str::trim).filter(|s| !s.is_empty()) {
         match name {
             "density" => groups.density = true,
             "normals" => groups.normals = true,
             "cog" => groups.cog = true,
             "view" => groups.view = true,
+            "out-of-view" => groups.out_of_view = true,
             "geom" => (groups.density, groups.normals) = (true, true),
-            other => bail!("unknown feature group '{other}' (expected density, normals, cog, view or geom)"),
+            other => {
+                bail!("unknown feature group '{other}' (expected density, normals, cog, view, out-of-view or geom)")
+            }
         }
     }
     if !(groups.density || groups.normals || groups.cog || groups.view) {

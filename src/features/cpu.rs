@@ -382,6 +382,7 @@ pub fn hypothesis_features(scene: &FeatureScene, layout: &FeatureLayout, hyp: &H
         let offset = layout.view_offset();
         out[offset..offset + super::feature_layout::VIEW].copy_from_slice(&view_features(record.view_x));
     }
+    super::out_of_view::write_out_of_view(scene, layout, hyp, out);
     inside
 }
 

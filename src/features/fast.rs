@@ -49,6 +49,7 @@ use super::feature_layout::{
     view_features, FeatureLayout, COG, COG_BINS, COG_EPSILON, DENSITY, MAX_COLUMNS, NORMALS, PER_VOXEL, VIEW,
 };
 use super::hypotheses::Hypothesis;
+use super::out_of_view::{out_of_view_score, out_of_view_voxels, write_out_of_view};
 use super::preprocess::NORMAL_BINS;
 use super::scene::{floor_to_i64, FeatureScene, YawGrid, FIXED_PER_METRE};
 use crate::geometry::MIN_PROJECT_DEPTH;
@@ -339,6 +340,7 @@ impl<'a> FastEngine<'a> {
                     let offset = self.layout.view_offset();
                     row[offset..offset + VIEW].copy_from_slice(&self.view(&hypotheses[n]));
                 }
+                write_out_of_view(self.scene, &self.layout, &hypotheses[n], row);
             });
         });
         out
@@ -358,6 +360,12 @@ impl<'a> FastEngine<'a> {
                 let offset = self.layout.view_offset();
                 for (score, w) in row.iter_mut().zip(weights) {
                     *score += dot(&w[offset..offset + VIEW], &view);
+                }
+            }
+            if self.layout.groups.out_of_view {
+                let voxels = out_of_view_voxels(self.scene, &self.layout, hyp);
+                for (score, w) in row.iter_mut().zip(weights) {
+                    *score += out_of_view_score(&self.layout, &voxels, w);
                 }
             }
         })

@@ -9,6 +9,8 @@
 //!     [ℓ·35 + 26 ..= 34] COG bins 0..8 φ/√(‖φ‖² + ε)              (group Cog)
 //! [voxel_count·35 + 0 ..= 10]          view RBFs, centres −1, −0.8, …, 1   (group View)
 //! [voxel_count·35 + 11]                view bias = 1                        (group View)
+//! [voxel_count·35 + 12 + ℓ]            1 when voxel ℓ's centre is out of the picture, else 0
+//!                                      (group OutOfView; present only when it is on)
 //! ```
 //! Voxel index `(i, j, k)` of the (possibly expanded) grid `[nx, ny, nz]`: `i` along the cuboid's width
 //! axis from its left side, `j` along the depth axis from its **front**, `k` up from the bottom — the same
@@ -17,7 +19,20 @@
 //! the cuboid scaled by `(n+2)/n` per axis about its centre.
 //!
 //! Switching a group off does not change the order or the length: its entries are zero in the feature
-//! vector (the engine skips them) and a model's weights for them must be zero. The id names the grid,
+//! vector (the engine skips them) and a model's weights for them must be zero. The exception is the
+//! out-of-view group ([`Groups::out_of_view`], added 2026-12-06, after every model before it was
+//! trained): its `voxel_count` entries follow the view features only when it is on, so the layouts
+//! without it keep their length and their id, and every earlier model file stays valid.
+//!
+//! # Out of view (not in the paper)
+//! A voxel whose centre does not project onto the image (or lies less than
+//! [`crate::geometry::MIN_PROJECT_DEPTH`] in front of the camera) has no points — or only those of its
+//! part in view — because the camera cannot see it, not because it is empty; its 35 features look like
+//! those of an empty voxel all the same.
+//! The group's entry ℓ is 1 for such a voxel, so a model can learn, per voxel position, what the
+//! missing evidence is worth — a bed beside the camera whose foot alone is in the picture scores its
+//! out-of-view voxels with those weights instead of nothing. Occlusion is not considered (a voxel behind
+//! a nearer surface counts as in view). Computed by [`super::out_of_view`] alike for every path. The id names the grid,
 //! expansion and the groups, so a model trained with "Geom" features only cannot be applied to a
 //! Geom+COG layout by mistake.
 
@@ -56,17 +71,33 @@ pub struct Groups {
     pub normals: bool,
     pub cog: bool,
     pub view: bool,
+    /// Per-voxel out-of-view indicators (see the module doc). Written into a file only when on, so the
+    /// files of layouts without it read and write as before it existed.
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub out_of_view: bool,
+}
+
+fn is_false(on: &bool) -> bool {
+    !*on
 }
 
 impl Groups {
-    pub const ALL: Groups = Groups { density: true, normals: true, cog: true, view: true };
+    /// The paper's groups (the out-of-view indicators are not among them).
+    pub const ALL: Groups = Groups { density: true, normals: true, cog: true, view: true, out_of_view: false };
     /// The paper's "Geom": density and normals.
-    pub const GEOM: Groups = Groups { density: true, normals: true, cog: false, view: false };
+    pub const GEOM: Groups = Groups { density: true, normals: true, cog: false, view: false, out_of_view: false };
+    /// No group on (to switch groups on one by one).
+    pub const NONE: Groups = Groups { density: false, normals: false, cog: false, view: false, out_of_view: false };
 
     fn names(&self) -> Vec<&'static str> {
         let mut names = Vec::new();
-        for (on, name) in [(self.density, "density"), (self.normals, "normals"), (self.cog, "cog"), (self.view, "view")]
-        {
+        for (on, name) in [
+            (self.density, "density"),
+            (self.normals, "normals"),
+            (self.cog, "cog"),
+            (self.view, "view"),
+            (self.out_of_view, "out-of-view"),
+        ] {
             if on {
                 names.push(name);
             }
@@ -132,7 +163,27 @@ impl FeatureLayout {
 
     /// Length of the feature vector.
     pub fn dim(&self) -> usize {
-        self.voxel_count() * PER_VOXEL + VIEW
+        self.out_of_view_offset() + self.out_of_view_len()
+    }
+
+    /// Offset of the out-of-view indicators (the end of the vector when the group is off).
+    pub fn out_of_view_offset(&self) -> usize {
+        self.view_offset() + VIEW
+    }
+
+    /// Number of out-of-view indicators: one per voxel when the group is on, else 0.
+    pub fn out_of_view_len(&self) -> usize {
+        if self.groups.out_of_view {
+            self.voxel_count()
+        } else {
+            0
+        }
+    }
+
+    /// The layout with the out-of-view group off: the part of the vector every path computes from the
+    /// points (the GPU kernels compute it; the indicators are added on the CPU, [`super::out_of_view`]).
+    pub fn without_out_of_view(&self) -> FeatureLayout {
+        FeatureLayout { groups: Groups { out_of_view: false, ..self.groups }, ..*self }
     }
 
     /// Voxel index ℓ of voxel (i, j, k).
@@ -172,6 +223,7 @@ impl FeatureLayout {
             mask.extend(std::iter::repeat_n(self.groups.cog, COG_BINS));
         }
         mask.extend(std::iter::repeat_n(self.groups.view, VIEW));
+        mask.extend(std::iter::repeat_n(true, self.out_of_view_len()));
         mask
     }
 
@@ -180,19 +232,25 @@ impl FeatureLayout {
         if index >= self.dim() {
             return format!("#{index} (past the end)");
         }
+        let [nx, ny, _] = self.grid();
+        let voxel_name = |voxel: usize| {
+            let (i, j, k) = (voxel as u32 % nx, (voxel as u32 / nx) % ny, voxel as u32 / (nx * ny));
+            format!("voxel ({i},{j},{k})")
+        };
+        if index >= self.out_of_view_offset() {
+            return format!("{} out of view", voxel_name(index - self.out_of_view_offset()));
+        }
         if index >= self.view_offset() {
             let v = index - self.view_offset();
             return if v < VIEW_RBFS { format!("view rbf {v}") } else { "view bias".into() };
         }
         let (voxel, slot) = (index / PER_VOXEL, index % PER_VOXEL);
-        let [nx, ny, _] = self.grid();
-        let (i, j, k) = (voxel as u32 % nx, (voxel as u32 / nx) % ny, voxel as u32 / (nx * ny));
         let what = match slot {
             DENSITY => "density".to_string(),
             s if s < COG => format!("normal bin {}", s - NORMALS),
             s => format!("cog bin {}", s - COG),
         };
-        format!("voxel ({i},{j},{k}) {what}")
+        format!("{} {what}", voxel_name(voxel))
     }
 }
 
@@ -228,6 +286,30 @@ mod tests {
         let idx = layout.voxel_index(2, 3, 4) * PER_VOXEL + COG + 5;
         assert_eq!(layout.describe(idx), "voxel (2,3,4) cog bin 5");
         assert_eq!(layout.describe(layout.dim() - 1), "view bias");
+        let with = FeatureLayout::new([5, 5, 5], true, Groups { out_of_view: true, ..Groups::ALL }).unwrap();
+        assert_eq!(with.describe(with.dim() - 1), "voxel (6,6,6) out of view");
+        assert_eq!(with.describe(with.out_of_view_offset() + 8), "voxel (1,1,0) out of view");
+        assert_eq!(with.describe(with.out_of_view_offset() - 1), "view bias");
+    }
+
+    #[test]
+    fn out_of_view_entries_follow_the_view_only_when_on() {
+        let without = FeatureLayout::default();
+        let with = FeatureLayout { groups: Groups { out_of_view: true, ..Groups::ALL }, ..without };
+        assert_eq!(with.dim(), 12017 + 343);
+        assert_eq!(with.out_of_view_offset(), 12017);
+        assert_eq!(with.without_out_of_view(), without);
+        assert_eq!(without.id(), "cog-v1 grid=5x5x5 expanded=1 groups=density,normals,cog,view");
+        assert_eq!(with.id(), "cog-v1 grid=5x5x5 expanded=1 groups=density,normals,cog,view,out-of-view");
+        let mask = with.mask();
+        assert_eq!(mask.len(), with.dim());
+        assert!(mask[12017..].iter().all(|&m| m));
+        // A model file written before the group existed reads with the group off.
+        let text = r#"{"density":true,"normals":true,"cog":true,"view":false}"#;
+        let old: Groups = serde_json::from_str(text).unwrap();
+        assert_eq!(old, Groups { view: false, ..Groups::ALL });
+        assert_eq!(serde_json::to_string(&old).unwrap(), text, "written as before the group existed");
+        assert!(serde_json::to_string(&with.groups).unwrap().ends_with(r#""view":true,"out_of_view":true}"#));
     }
 
     #[test]

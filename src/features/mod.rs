@@ -11,6 +11,7 @@ pub mod cpu;
 pub mod fast;
 pub mod feature_layout;
 pub mod hypotheses;
+pub mod out_of_view;
 pub mod preprocess;
 pub mod scene;
 pub mod surface;

@@ -48,7 +48,11 @@ pub const SLICE_DIM: usize = SLICE_VOXELS * PER_VOXEL;
 
 /// The layout the slices are computed with: the surface grid, not expanded, the given groups without view.
 pub fn surface_layout(groups: Groups) -> FeatureLayout {
-    FeatureLayout { base_grid: SURFACE_GRID, expanded: false, groups: Groups { view: false, ..groups } }
+    FeatureLayout {
+        base_grid: SURFACE_GRID,
+        expanded: false,
+        groups: Groups { view: false, out_of_view: false, ..groups },
+    }
 }
 
 /// The surface part of a latent model's weights: `w_slice` ([`SLICE_DIM`] entries) and the height biases

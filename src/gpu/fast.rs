@@ -85,6 +85,7 @@ use crate::features::fast::{group_by_table, CellRegion, FastEngine, LayerTable, 
 use crate::features::feature_layout::{
     view_features, FeatureLayout, COG, COG_BINS, COG_EPSILON, NORMALS, PER_VOXEL, VIEW,
 };
+use crate::features::out_of_view::add_out_of_view_scores;
 use crate::features::preprocess::NORMAL_BINS;
 use crate::features::Hypothesis;
 use crate::geometry::{Cuboid, MIN_PROJECT_DEPTH};
@@ -653,6 +654,7 @@ pub fn fast_scores_gpu_jobs(
             dispatch_count += dispatches.len();
             run_batch(ctx, engine, dispatches, &mut batch_times)
         })?;
+        let scores = with_out_of_view_scores(engine, jobs, scores);
         let total = started.elapsed().as_secs_f64();
         log::debug!(
             "fast_scores time: {total:.4} s in all: grouping {:.4}, packing {:.4} (while earlier \
@@ -1086,6 +1088,16 @@ pub fn fast_scores_reference_jobs(
         }
         Ok(layout.split_scores(dispatches, &out))
     })
+    .map(|scores| with_out_of_view_scores(engine, jobs, scores))
+}
+
+/// The jobs' kernel scores with the out-of-view group's part added (on the CPU, by the rule every path
+/// shares: `features::out_of_view`; the kernel's weights hold only the voxel and view parts).
+fn with_out_of_view_scores(engine: &FastEngine, jobs: &[FastJob], mut scores: Vec<Vec<f32>>) -> Vec<Vec<f32>> {
+    for (job, job_scores) in jobs.iter().zip(&mut scores) {
+        add_out_of_view_scores(engine.scene(), engine.layout(), job.hypotheses, job.weights, job_scores);
+    }
+    scores
 }
 
 /// The CPU twin's storage-offset alignment (any power of two from 32 gives the same scores; 256 is the

@@ -12,6 +12,7 @@ use super::{Binding, GpuContext, KernelSpec};
 use crate::error::{Error, Result};
 use crate::features::cpu::HypothesisRecord;
 use crate::features::feature_layout::{FeatureLayout, MAX_COLUMNS, MAX_GRID_Z};
+use crate::features::out_of_view::{add_out_of_view_scores, widen_with_out_of_view};
 use crate::features::{FeatureScene, Hypothesis};
 
 /// The kernel's spec (registered in [`super::Kernels`]).
@@ -184,7 +185,10 @@ pub fn features_gpu(
     layout: &FeatureLayout,
     hypotheses: &[Hypothesis],
 ) -> Result<(Vec<f32>, Vec<u32>)> {
-    run(ctx, scene, layout, hypotheses, Mode::Write)
+    // The kernel computes the layout without the out-of-view group; its indicators are added on the CPU
+    // by the rule every path shares (`features::out_of_view`).
+    let (narrow, inside) = run(ctx, scene, &layout.without_out_of_view(), hypotheses, Mode::Write)?;
+    Ok((widen_with_out_of_view(scene, layout, hypotheses, narrow), inside))
 }
 
 /// Fused scoring on the GPU: `scores[h·W + w] = weights[w] · φ(h)`, without writing the features; also
@@ -199,8 +203,22 @@ pub fn scores_gpu(
     let w_total = weights.len();
     let mut scores = vec![0.0f32; hypotheses.len() * w_total];
     let mut total_inside = 0u64;
-    for (pass, group) in weights.chunks(MAX_WEIGHTS).enumerate() {
-        let (part, inside) = run(ctx, scene, layout, hypotheses, Mode::Score(group))?;
+    // The kernel scores the layout without the out-of-view group (each vector's leading part); the
+    // indicators' part is added on the CPU (`features::out_of_view`).
+    let narrow_layout = layout.without_out_of_view();
+    let narrow_dim = narrow_layout.dim();
+    for (n, w) in weights.iter().enumerate() {
+        if w.len() != layout.dim() {
+            return Err(Error::Input(format!(
+                "weight vector {n} has {} entries; the layout has {}",
+                w.len(),
+                layout.dim()
+            )));
+        }
+    }
+    let narrow_weights: Vec<Vec<f32>> = weights.iter().map(|w| w[..narrow_dim].to_vec()).collect();
+    for (pass, group) in narrow_weights.chunks(MAX_WEIGHTS).enumerate() {
+        let (part, inside) = run(ctx, scene, &narrow_layout, hypotheses, Mode::Score(group))?;
         if pass == 0 {
             total_inside = inside.iter().map(|&n| n as u64).sum();
         }
@@ -210,5 +228,6 @@ pub fn scores_gpu(
             }
         }
     }
+    add_out_of_view_scores(scene, layout, hypotheses, weights, &mut scores);
     Ok((scores, total_inside))
 }

@@ -92,3 +92,19 @@ pub fn wgsl_struct_size(module: &naga::Module, name: &str) -> usize {
         .unwrap_or_else(|| panic!("no struct {name}"));
     layouter[handle].size as usize
 }
+
+/// `count` pseudo-random weight vectors in [−1, 1) (a 64-bit LCG per vector).
+#[allow(dead_code)]
+pub fn random_weights(layout: &cog_gpu::features::FeatureLayout, count: usize, seed: u64) -> Vec<Vec<f32>> {
+    (0..count as u64)
+        .map(|w| {
+            let mut state = (seed * 1000 + w).wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (0..layout.dim())
+                .map(|_| {
+                    state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                    ((state >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
+                })
+                .collect()
+        })
+        .collect()
+}
