@@ -99,6 +99,15 @@ impl ExpandedBox {
         let cell = [0, 1, 2].map(|a| extent[a] / grid[a] as f32);
         ExpandedBox { lo, cell, extent }
     }
+
+    /// Rotated-frame centre of voxel (i, j, k) of the expanded grid.
+    pub fn voxel_centre(&self, [i, j, k]: [u32; 3]) -> Vec3 {
+        Vec3::new(
+            self.lo[0] + (i as f32 + 0.5) * self.cell[0],
+            self.lo[1] + (j as f32 + 0.5) * self.cell[1],
+            self.lo[2] + (k as f32 + 0.5) * self.cell[2],
+        )
+    }
 }
 
 impl HypothesisRecord {

@@ -588,12 +588,7 @@ impl<'a> FastEngine<'a> {
         let groups = self.layout.groups;
         let inv_cog_scale = 1.0 / self.cog_scale;
         self.for_each_voxel_sums(table, boundaries, |[i, j, k], sums| {
-            let centre = Vec3::new(
-                expanded.lo[0] + (i as f32 + 0.5) * vs,
-                expanded.lo[1] + (j as f32 + 0.5) * vt,
-                expanded.lo[2] + (k as f32 + 0.5) * vz,
-            );
-            let p = m * centre;
+            let p = m * expanded.voxel_centre([i as u32, j as u32, k as u32]);
             let mut values = [0.0f32; PER_VOXEL];
             if p.z >= MIN_PROJECT_DEPTH {
                 let area = fx

@@ -44,16 +44,10 @@ pub fn for_each_out_of_view_voxel(
         return;
     }
     let g = layout.grid();
-    let [vs, vt, vz] = expanded.cell;
     for k in 0..g[2] {
         for j in 0..g[1] {
             for i in 0..g[0] {
-                let centre = Vec3::new(
-                    expanded.lo[0] + (i as f32 + 0.5) * vs,
-                    expanded.lo[1] + (j as f32 + 0.5) * vt,
-                    expanded.lo[2] + (k as f32 + 0.5) * vz,
-                );
-                if !in_view(centre) {
+                if !in_view(expanded.voxel_centre([i, j, k])) {
                     visit(layout.voxel_index(i, j, k));
                 }
             }

@@ -206,17 +206,19 @@ pub fn scores_gpu(
     // The kernel scores the layout without the out-of-view group (each vector's leading part); the
     // indicators' part is added on the CPU (`features::out_of_view`).
     let narrow_layout = layout.without_out_of_view();
-    let narrow_dim = narrow_layout.dim();
-    for (n, w) in weights.iter().enumerate() {
-        if w.len() != layout.dim() {
+    // Without the group the vectors go to the kernel as they are (its own length check names a bad one).
+    let narrow_weights: std::borrow::Cow<[Vec<f32>]> = if layout.groups.out_of_view {
+        if let Some((n, w)) = weights.iter().enumerate().find(|(_, w)| w.len() != layout.dim()) {
             return Err(Error::Input(format!(
                 "weight vector {n} has {} entries; the layout has {}",
                 w.len(),
                 layout.dim()
             )));
         }
-    }
-    let narrow_weights: Vec<Vec<f32>> = weights.iter().map(|w| w[..narrow_dim].to_vec()).collect();
+        weights.iter().map(|w| w[..narrow_layout.dim()].to_vec()).collect()
+    } else {
+        weights.into()
+    };
     for (pass, group) in narrow_weights.chunks(MAX_WEIGHTS).enumerate() {
         let (part, inside) = run(ctx, scene, &narrow_layout, hypotheses, Mode::Score(group))?;
         if pass == 0 {
