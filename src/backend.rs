@@ -9,11 +9,12 @@
 use crate::error::Result;
 use crate::features::fast::FastEngine;
 use crate::features::preprocess::NormalSearch;
+use crate::features::surface::{SurfaceEngine, SurfaceWeights, SLICES};
 use crate::features::Preprocessed;
 use crate::features::{cpu, FeatureLayout, FeatureScene, Hypothesis};
 use crate::frame::Frame;
 pub use crate::gpu::fast::FastJob;
-use crate::gpu::fast::{fast_scores_gpu, fast_scores_gpu_jobs, use_kernel_on, FastChunking};
+use crate::gpu::fast::{fast_scores_gpu, fast_scores_gpu_jobs, slice_scores_gpu, use_kernel_on, FastChunking};
 use crate::gpu::preprocess::gradients_and_normals_gpu;
 use crate::gpu::GpuContext;
 use crate::room_layout::voxels::{self, ScoringTables, YawCells};
@@ -99,6 +100,28 @@ impl<'a> Backend<'a> {
                 }
             },
             Backend::Cpu => engine.scores(hypotheses, weights),
+        }
+    }
+
+    /// The latent support surfaces' slice scores (`w_sliceᵀφ_surface(I, B, h) + u_h`, [`SLICES`] per
+    /// hypothesis): where the fast path's kernel runs ([`use_kernel_on`]) by that kernel on the surface
+    /// grid's tables ([`slice_scores_gpu`]), else [`SurfaceEngine::slice_scores`] on the CPU; a GPU failure
+    /// is logged and the CPU scores them, as in [`Backend::fast_scores`].
+    pub fn slice_scores(
+        &self,
+        engine: &SurfaceEngine,
+        hypotheses: &[Hypothesis],
+        weights: &SurfaceWeights,
+    ) -> Vec<[f32; SLICES]> {
+        match self {
+            Backend::Gpu(ctx) if use_kernel_on(ctx) => match slice_scores_gpu(ctx, engine, hypotheses, weights) {
+                Ok(scores) => scores,
+                Err(e) => {
+                    log::warn!("slice scores on the GPU failed ({e}): scoring on the CPU");
+                    engine.slice_scores(hypotheses, weights)
+                }
+            },
+            _ => engine.slice_scores(hypotheses, weights),
         }
     }
 

@@ -244,8 +244,8 @@ pub fn score_hypotheses<'a>(
 }
 
 /// [`score_hypotheses`] and, for a model with latent support surfaces, each hypothesis's best slice
-/// ([`crate::features::surface::best_slice`]). The surface part is scored on the CPU on either backend
-/// (the slices' tables come from the fast path's CPU engine; no WGSL twin yet).
+/// ([`crate::features::surface::best_slice`]). The surface part is scored by the backend too
+/// ([`Backend::slice_scores`]: on the GPU by the fast path's kernel on the surface grid's tables).
 pub fn score_hypotheses_with_slices<'a>(
     scene: &'a FeatureScene,
     model: &Model,
@@ -258,7 +258,7 @@ pub fn score_hypotheses_with_slices<'a>(
         FeaturePath::Fast => backend.fast_scores(engines.get(scene, model), hypotheses, weights),
         FeaturePath::Exact => backend.scores(scene, &model.layout, hypotheses, weights)?.0,
     };
-    Ok(finish_scores(scene, model, hypotheses, scores))
+    Ok(finish_scores(scene, model, hypotheses, scores, backend))
 }
 
 /// One model's scores of its hypotheses and, with latent support surfaces, each one's best slice.
@@ -310,24 +310,26 @@ pub fn score_models<'a>(
             Some(scores) => scores,
             None => backend.scores(scenes[m], &model.layout, hypotheses[m], std::slice::from_ref(&model.weights))?.0,
         };
-        out.push(finish_scores(scenes[m], model, hypotheses[m], scores));
+        out.push(finish_scores(scenes[m], model, hypotheses[m], scores, backend));
     }
     Ok(out)
 }
 
 /// Adds the bias and, for a model with latent support surfaces, the best slice's surface score to the
-/// voxel scores `scores` of `hypotheses`; returns the scores and the chosen slices.
+/// voxel scores `scores` of `hypotheses`; returns the scores and the chosen slices (the slices scored by
+/// `backend`).
 fn finish_scores(
     scene: &FeatureScene,
     model: &Model,
     hypotheses: &[Hypothesis],
     mut scores: Vec<f32>,
+    backend: Backend,
 ) -> (Vec<f32>, Option<Vec<u8>>) {
     scores.iter_mut().for_each(|s| *s += model.bias);
     let slices = model.surface.as_ref().map(|surface| {
         let engine = SurfaceEngine::new(scene, model.layout.groups, model.features.fast_options());
-        engine
-            .slice_scores(hypotheses, surface)
+        backend
+            .slice_scores(&engine, hypotheses, surface)
             .iter()
             .zip(scores.iter_mut())
             .map(|(slice_scores, score)| {

@@ -101,9 +101,43 @@ impl<'a> SurfaceEngine<'a> {
 
     /// `w_sliceᵀφ_surface(I, B, h) + u_h` for every hypothesis and slice.
     pub fn slice_scores(&self, hypotheses: &[Hypothesis], weights: &SurfaceWeights) -> Vec<[f32; SLICES]> {
-        let layers = self.engine.layer_scores(hypotheses, &weights.slice);
-        layers.chunks(SLICES).map(|row| std::array::from_fn(|h| row[h] + weights.indicator[h])).collect()
+        with_height_biases(&self.engine.layer_scores(hypotheses, &weights.slice), weights)
     }
+
+    /// The fast-path engine of the surface grid, whose tables the slices are scored from: for a backend
+    /// that scores them with the fast path's kernel ([`slice_weight_vectors`]).
+    pub fn engine(&self) -> &FastEngine<'a> {
+        &self.engine
+    }
+}
+
+/// The slice weights as [`SLICES`] weight vectors of `layout` (the surface grid's, [`surface_layout`]: its
+/// voxels in layer order, then the view block, unused): vector `h` holds `w_slice` in the 25 voxels of
+/// layer `h` and zeros everywhere else, so that the fast path's fused scores with these vectors
+/// ([`FastEngine::scores`], or its GPU kernel) are the slice scores `w_sliceᵀφ_surface(I, B, h)` — scored
+/// from the same tables as the cuboid's, as the paper's §4 asks of the GPU.
+///
+/// On the CPU they equal [`FastEngine::layer_scores`] bit for bit: the features are non-negative (counts
+/// over an area, COG bins of non-negative magnitudes), so a zero weight adds `+0` to a score, which leaves
+/// it as it is, and layer `h`'s voxels are added to score `h` in the same order. The cost is `SLICES`
+/// dot products per voxel instead of one, which a GPU pays in arithmetic it has to spare; the CPU keeps
+/// [`SurfaceEngine::slice_scores`].
+pub fn slice_weight_vectors(weights: &SurfaceWeights, layout: &FeatureLayout) -> Vec<Vec<f32>> {
+    assert_eq!(layout.grid(), SURFACE_GRID, "the slices' weight vectors are the surface grid's");
+    (0..SLICES)
+        .map(|h| {
+            let mut vector = vec![0.0f32; layout.dim()];
+            vector[h * SLICE_DIM..(h + 1) * SLICE_DIM].copy_from_slice(&weights.slice);
+            vector
+        })
+        .collect()
+}
+
+/// The slice scores of hypotheses from their [`SLICES`] layer scores per hypothesis (row-major, the layout
+/// of [`FastEngine::layer_scores`] and of the fused scores with [`slice_weight_vectors`]): each plus its
+/// height's bias `u_h`.
+pub fn with_height_biases(layer_scores: &[f32], weights: &SurfaceWeights) -> Vec<[f32; SLICES]> {
+    layer_scores.chunks(SLICES).map(|row| std::array::from_fn(|h| row[h] + weights.indicator[h])).collect()
 }
 
 /// The best slice and its score; ties go to the lowest `h`.

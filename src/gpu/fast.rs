@@ -87,6 +87,7 @@ use crate::features::feature_layout::{
 };
 use crate::features::out_of_view::add_out_of_view_scores;
 use crate::features::preprocess::NORMAL_BINS;
+use crate::features::surface::{slice_weight_vectors, with_height_biases, SurfaceEngine, SurfaceWeights, SLICES};
 use crate::features::Hypothesis;
 use crate::geometry::{Cuboid, MIN_PROJECT_DEPTH};
 use glam::Vec3;
@@ -593,6 +594,22 @@ pub fn fast_scores_gpu(
     weights: &[Vec<f32>],
 ) -> Result<Vec<f32>> {
     fast_scores_gpu_chunked(ctx, engine, hypotheses, weights, FastChunking::default())
+}
+
+/// The latent support surfaces' slice scores on the GPU (paper §4: "on the GPU the seven slices of one
+/// hypothesis come from the same tables"): the fast kernel on the surface grid's tables with the
+/// [`slice_weight_vectors`], one weight vector per slice, plus the height biases — what
+/// [`SurfaceEngine::slice_scores`] gives on the CPU (its twin there: [`FastEngine::scores`] with the same
+/// vectors equals [`FastEngine::layer_scores`] bit for bit), to the kernel's ~1e-6 relative.
+pub fn slice_scores_gpu(
+    ctx: &GpuContext,
+    engine: &SurfaceEngine,
+    hypotheses: &[Hypothesis],
+    weights: &SurfaceWeights,
+) -> Result<Vec<[f32; SLICES]>> {
+    let layers =
+        fast_scores_gpu(ctx, engine.engine(), hypotheses, &slice_weight_vectors(weights, engine.engine().layout()))?;
+    Ok(with_height_biases(&layers, weights))
 }
 
 /// [`fast_scores_gpu`] cut as `chunking` says.
