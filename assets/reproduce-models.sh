@@ -340,7 +340,10 @@ case "$mode" in
         # Since 2026-11-28 the measured support surfaces find the surface under a cover (a bed's mattress
         # under its duvet), and the surface models train on those surfaces, so the monitor and sink this
         # mode trains differ from the shipped ones (equal within the noise on the test set; the shipped
-        # files stay because the cascade is tied to them: README, "Small objects: numbers").
+        # files stay because the cascade is tied to them: README, "Small objects: numbers"). Likewise since
+        # 2026-12-06 a table's, desk's, dresser's or nightstand's surface is its highest face with a fifth
+        # of the fullest face's points (`top_surface_height`), which moves some desks' surfaces and so the
+        # monitor's training examples (README, "Surfaces measured from the points").
         dir="$WORK/small"
         large=bed,chair,sofa,table,desk,toilet,bathtub,dresser,nightstand,bookshelf
         floor=box,door,counter,garbage_bin,pillow,lamp,tv

@@ -43,7 +43,7 @@ use crate::features::hypotheses::{
 };
 use crate::features::preprocess::NormalSearch;
 use crate::features::scene::rotate;
-use crate::features::surface::{best_slice, measured_surface_height, refined_surface_height, SurfaceEngine};
+use crate::features::surface::{best_slice, category_surface_height, refined_surface_height, SurfaceEngine};
 use crate::features::{FeatureScene, Hypothesis, Preprocessed};
 use crate::frame::Frame;
 use crate::geometry::{Camera, Cuboid};
@@ -763,8 +763,10 @@ fn detect_windows<'a>(
     // measured in a latent model's chosen slice.
     detections.par_iter_mut().for_each(|d| {
         let cuboid = d.cuboid();
-        let measured =
-            SURFACE_CATEGORIES.contains(&d.category.as_str()).then(|| measured_surface_height(pre, &cuboid)).flatten();
+        let measured = SURFACE_CATEGORIES
+            .contains(&d.category.as_str())
+            .then(|| category_surface_height(pre, &cuboid, &d.category))
+            .flatten();
         d.surface_z = measured.or_else(|| d.latent_slice.map(|h| refined_surface_height(pre, &cuboid, h as usize)));
     });
     stages.add(Stage::Nms, lap());

@@ -51,7 +51,7 @@ pub struct Detection {
     pub context_score: Option<f32>,
     /// The height (upright z, metres, the frame's coordinates like `centre`) of the detection's support
     /// surface: for a category with one ([`crate::category::SURFACE_CATEGORIES`]) measured from the points
-    /// in the box ([`crate::features::surface::measured_surface_height`]); where that finds none, and for
+    /// in the box ([`crate::features::surface::category_surface_height`]); where that finds none, and for
     /// the other models with latent surfaces, measured in the chosen slice ([`Detection::latent_slice`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub surface_z: Option<f32>,

@@ -109,7 +109,7 @@ fn the_shipped_models_meet_a_floor_on_fresh_synthetic_bedrooms() {
 const BED_AP_FLOOR: f32 = 0.5;
 
 /// The surfaces the shipped default reports on the shipped synthetic bedroom: the best bed and nightstand
-/// detections (each correct) carry a `surface_z` within one height bin of `measured_surface_height` (2 cm) of
+/// detections (each correct) carry a `surface_z` within one height bin of the measured surfaces (2 cm) of
 /// the true support surface that synth wrote beside the frame (`synth_support.json`, which the detector
 /// never reads) — the bed's mattress, under its duvet (README, "Surfaces measured from the points"; the
 /// fullest face alone, the duvet, lay 4.1 cm above it).

@@ -439,3 +439,86 @@ fn the_measured_surface_is_the_fullest_horizontal_face_in_the_footprint() {
     };
     assert_eq!(measured_surface_height(&sparse, &table), None);
 }
+
+/// A nightstand whose top is mostly hidden by what stands on it shows more upward points on its lower
+/// shelf: the fullest face is the shelf, the surface of a top-surface category is the top (the highest face
+/// with a fifth of the fullest's points), and a top with fewer than that, or fewer than
+/// `MEASURED_MIN_POINTS`, leaves the shelf. A bed keeps the fullest face whatever lies above it.
+#[test]
+fn a_top_surface_category_reports_its_top_over_a_fuller_shelf() {
+    use cog_gpu::features::surface::{
+        category_surface_height, measured_surface_height, top_surface_height, MEASURED_MIN_POINTS, TOP_FACE_SHARE,
+        TOP_SURFACE_CATEGORIES,
+    };
+    assert!(TOP_SURFACE_CATEGORIES.contains(&"nightstand") && !TOP_SURFACE_CATEGORIES.contains(&"bed"));
+    // A nightstand 0.6 m high, 0.5 × 0.4 m, on a floor at z = 0; a shelf at 0.2 m.
+    let stand = Cuboid::new(Vec3::new(0.2, 2.5, 0.3), Vec3::new(0.5, 0.4, 0.6), 0.0);
+    let scene = |top_points: usize, shelf_points: usize| {
+        let mut points = Vec::new();
+        for k in 0..shelf_points {
+            points.push(stand.from_local(Vec3::new(-0.2 + 0.4 * (k % 20) as f32 / 20.0, -0.1, 0.2 - 0.3)));
+        }
+        for k in 0..top_points {
+            points.push(stand.from_local(Vec3::new(-0.2 + 0.4 * (k % 20) as f32 / 20.0, 0.1, 0.6 - 0.3)));
+        }
+        let normals = vec![Vec3::Z; points.len()];
+        let gradients = vec![Vec2::ZERO; points.len()];
+        let camera = Camera::new([500.0, 500.0, 320.5, 240.5], Mat3::IDENTITY);
+        Preprocessed { camera, image_size: [640, 480], points, normals, gradients, floor: 0.0 }
+    };
+    // 100 shelf points, 25 on the top (a quarter: at least a fifth, and at least MEASURED_MIN_POINTS).
+    let pre = scene(25, 100);
+    const { assert!(25.0 >= TOP_FACE_SHARE * 100.0 && 25 >= MEASURED_MIN_POINTS) };
+    assert_eq!(measured_surface_height(&pre, &stand), Some(0.2), "the fullest face is the shelf");
+    assert_eq!(top_surface_height(&pre, &stand), Some(0.6), "the highest face with enough points is the top");
+    assert_eq!(category_surface_height(&pre, &stand, "nightstand"), Some(0.6));
+    assert_eq!(category_surface_height(&pre, &stand, "bed"), Some(0.2), "a bed keeps the fullest face");
+    // 15 top points against 100: under a fifth, so the shelf; 25 against 100 but the top with 9 points
+    // (under MEASURED_MIN_POINTS) against 40: the shelf too.
+    assert_eq!(top_surface_height(&scene(15, 100), &stand), Some(0.2));
+    assert_eq!(top_surface_height(&scene(MEASURED_MIN_POINTS - 1, 40), &stand), Some(0.2));
+    // Only a top: the top, as the fullest face.
+    assert_eq!(top_surface_height(&scene(30, 0), &stand), Some(0.6));
+    // No face with MEASURED_MIN_POINTS: none.
+    assert_eq!(top_surface_height(&scene(MEASURED_MIN_POINTS - 1, 0), &stand), None);
+}
+
+/// A bed's mattress 7.5 cm under its duvet (the generator's duvets are up to 7 cm thick, beyond the 6 cm
+/// that `measured_surface_height` looks down): a bed's surface looks down to `BED_COVER_DEPTH_M` and finds
+/// it; the same points as a sofa's (or through `measured_surface_height`) give the duvet; a face 10 cm down
+/// is out of a bed's reach too.
+#[test]
+fn a_beds_mattress_is_found_deeper_under_its_duvet() {
+    use cog_gpu::features::surface::{
+        category_surface_height, measured_surface_height, BED_COVER_DEPTH_M, MEASURED_COVER_DEPTH_M,
+    };
+    const { assert!(MEASURED_COVER_DEPTH_M < 0.075 && 0.075 < BED_COVER_DEPTH_M && BED_COVER_DEPTH_M < 0.10) };
+    let bed = Cuboid::new(Vec3::new(-0.4, 2.5, 0.275), Vec3::new(2.0, 1.6, 0.55), 20f32.to_radians());
+    // 400 duvet points at 0.55 m and a strip of 20 mattress points at `mattress` beside it.
+    let scene = |mattress: f32| {
+        let mut points = Vec::new();
+        let mut add = |x: f32, y: f32, z: f32| points.push(bed.from_local(Vec3::new(x, y, z - 0.275)));
+        for i in 0..20 {
+            for j in 0..20 {
+                add(-0.9 + 1.2 * i as f32 / 20.0, -0.7 + 1.4 * j as f32 / 20.0, 0.55);
+            }
+        }
+        for k in 0..20 {
+            add(0.95, -0.7 + 0.01 * k as f32, mattress);
+        }
+        let normals = vec![Vec3::Z; points.len()];
+        let gradients = vec![Vec2::ZERO; points.len()];
+        let camera = Camera::new([500.0, 500.0, 320.5, 240.5], Mat3::IDENTITY);
+        Preprocessed { camera, image_size: [640, 480], points, normals, gradients, floor: 0.0 }
+    };
+    let near = |z: Option<f32>, want: f32| z.is_some_and(|z| (z - want).abs() < 1e-4);
+    let deep = scene(0.475);
+    assert!(near(category_surface_height(&deep, &bed, "bed"), 0.475));
+    assert!(near(category_surface_height(&deep, &bed, "sofa"), 0.55));
+    assert!(near(measured_surface_height(&deep, &bed), 0.55));
+    // A face 10 cm down: beyond a bed's reach as well.
+    assert!(near(category_surface_height(&scene(0.45), &bed, "bed"), 0.55));
+    // 5 cm down: both find it.
+    assert!(near(category_surface_height(&scene(0.50), &bed, "bed"), 0.50));
+    assert!(near(measured_surface_height(&scene(0.50), &bed), 0.50));
+}
