@@ -23,7 +23,6 @@ use cog_gpu::gpu::fast::{
     FastChunking, FastJob,
 };
 use cog_gpu::gpu::{GpuContext, TRIM_FRAMES};
-use cog_gpu::synth::{self, SynthOptions};
 
 const FRAME: &str = "../shared/data/sunrgbd/kv1-b3dodata-img_0063";
 const STATS: &str = "../shared/data/sunrgbd-size-stats.json";
@@ -40,19 +39,6 @@ fn sizes(category: &str) -> Vec<glam::Vec3> {
 fn real_window(category: &str) -> PreparedWindow {
     let frame = Frame::read(FRAME, DepthSource::Raw).unwrap();
     PreparedWindow::new(&frame, sizes(category), 0.1, 50).unwrap()
-}
-
-/// A small synthetic frame (160×120) and its `category` window.
-fn synthetic_window(category: &str) -> PreparedWindow {
-    let frame = synth::generate_frame(3, 0, &SynthOptions::small(160, 120)).unwrap().frame;
-    PreparedWindow::new(&frame, sizes(category), 0.1, 50).unwrap()
-}
-
-/// Up to `count` kept hypotheses, evenly spread (so all yaws and sizes appear).
-fn sample(window: &PreparedWindow, count: usize) -> Vec<Hypothesis> {
-    let kept = &window.set.hypotheses;
-    let stride = (kept.len() / count).max(1);
-    kept.iter().step_by(stride).take(count).copied().collect()
 }
 
 fn bits(v: &[f32]) -> Vec<u32> {
@@ -101,7 +87,7 @@ fn gpu_fast_scores_match_the_cpu_on_a_real_frame_and_are_reproducible() {
     let Some(ctx) = context() else { return };
     let window = real_window("bed");
     let layout = FeatureLayout::default();
-    let hyps = sample(&window, 2000);
+    let hyps = common::spread_sample(&window, 2000);
     assert!(hyps.len() >= 1500, "{} hypotheses", hyps.len());
     let weights = common::random_weights(&layout, 3, 1);
     let gpu = compare_paths(&ctx, &window, &layout, &hyps, &weights, "real frame, default layout");
@@ -114,8 +100,8 @@ fn gpu_fast_scores_match_the_cpu_on_a_real_frame_and_are_reproducible() {
 #[test]
 fn gpu_fast_scores_match_the_cpu_on_a_synthetic_frame() {
     let Some(ctx) = context() else { return };
-    let window = synthetic_window("chair");
-    let hyps = sample(&window, 3000);
+    let window = common::synthetic_window("chair");
+    let hyps = common::spread_sample(&window, 3000);
     assert!(hyps.len() >= 1000, "{} hypotheses", hyps.len());
     let layout = FeatureLayout::default();
     compare_paths(&ctx, &window, &layout, &hyps, &common::random_weights(&layout, 2, 2), "synthetic frame");
@@ -124,8 +110,8 @@ fn gpu_fast_scores_match_the_cpu_on_a_synthetic_frame() {
 #[test]
 fn gpu_fast_scores_honour_switched_off_groups_and_other_grids() {
     let Some(ctx) = context() else { return };
-    let window = synthetic_window("table");
-    let hyps = sample(&window, 600);
+    let window = common::synthetic_window("table");
+    let hyps = common::spread_sample(&window, 600);
     let off = |density, normals, cog, view| Groups { density, normals, cog, view, out_of_view: false };
     for layout in [
         FeatureLayout::new([5, 5, 5], true, off(true, false, true, false)).unwrap(),
@@ -144,9 +130,9 @@ fn gpu_fast_scores_honour_switched_off_groups_and_other_grids() {
 #[test]
 fn gpu_fast_view_part_matches_the_cpu_in_every_pass() {
     let Some(ctx) = context() else { return };
-    let window = synthetic_window("sofa");
+    let window = common::synthetic_window("sofa");
     let layout = FeatureLayout::default();
-    let mut hyps = sample(&window, 500);
+    let mut hyps = common::spread_sample(&window, 500);
     assert!(hyps.len() >= 300, "{} hypotheses", hyps.len());
     let mut at_camera = hyps[0];
     at_camera.centre = glam::Vec2::ZERO;
@@ -176,9 +162,9 @@ fn gpu_fast_view_part_matches_the_cpu_in_every_pass() {
 #[test]
 fn chunked_dispatches_batches_and_weight_passes_equal_the_single_dispatch() {
     let Some(ctx) = context() else { return };
-    let window = synthetic_window("bed");
+    let window = common::synthetic_window("bed");
     let layout = FeatureLayout::default();
-    let hyps = sample(&window, 400);
+    let hyps = common::spread_sample(&window, 400);
     // Ten weight vectors: two passes of the kernel (at most 8 per pass).
     let weights = common::random_weights(&layout, 10, 4);
     let engine = FastEngine::new(&window.scene, &layout, FastOptions::default());
@@ -207,11 +193,11 @@ fn several_jobs_in_one_call_equal_one_call_each() {
     let Some(ctx) = context() else { return };
     // Three models' windows on one scene (one engine): bed, chair and bed again (the repeated job shares
     // every table with the first), with one, one and nine weight vectors.
-    let window = synthetic_window("bed");
+    let window = common::synthetic_window("bed");
     let layout = FeatureLayout::default();
     let engine = FastEngine::new(&window.scene, &layout, FastOptions::default());
     let chair_window = sliding_window(&window.scene, &WindowOptions { sizes: sizes("chair"), min_points: 50 });
-    let bed = sample(&window, 300);
+    let bed = common::spread_sample(&window, 300);
     let stride = (chair_window.hypotheses.len() / 300).max(1);
     let chair: Vec<Hypothesis> = chair_window.hypotheses.iter().step_by(stride).take(300).copied().collect();
     assert!(chair.len() >= 100, "{} chair hypotheses", chair.len());
@@ -246,11 +232,11 @@ fn concurrent_calls_on_one_context_equal_the_calls_one_after_the_other() {
     // two engines (other grids, other weights), run concurrently and then in turn, small batches forcing
     // several per call: the same bits either way, and the pool reused between them.
     let Some(ctx) = context() else { return };
-    let window = synthetic_window("bed");
+    let window = common::synthetic_window("bed");
     let layouts = [FeatureLayout::default(), FeatureLayout::new([3, 1, 3], true, Groups::ALL).unwrap()];
     let engines: Vec<FastEngine> =
         layouts.iter().map(|l| FastEngine::new(&window.scene, l, FastOptions::default())).collect();
-    let hyps = sample(&window, 200);
+    let hyps = common::spread_sample(&window, 200);
     let weights: Vec<Vec<Vec<f32>>> =
         (0..4).map(|n| common::random_weights(&layouts[n % 2], 1 + n, 40 + n as u64)).collect();
     let chunking = FastChunking { max_chunk: 64, max_batch_bytes: 16 << 20 };
@@ -277,10 +263,10 @@ fn trimmed_pools_shrink_to_the_recent_frames_and_score_the_same() {
     // one (each ended by `end_frame`, as `detect` does) leave the pools exactly as a fresh context's after
     // the small call alone, and the small call's scores are the same bits before, during and after.
     let Some(ctx) = context() else { return };
-    let window = synthetic_window("bed");
+    let window = common::synthetic_window("bed");
     let layout = FeatureLayout::default();
     let engine = FastEngine::new(&window.scene, &layout, FastOptions::default());
-    let large = sample(&window, 3000);
+    let large = common::spread_sample(&window, 3000);
     // The small call: 40 hypotheses of one table (same yaw, bottom and height).
     let first = window.set.hypotheses[0];
     let small: Vec<Hypothesis> = window

@@ -5,37 +5,18 @@
 
 mod common;
 
-use std::path::Path;
-
 use cog_gpu::features::cpu;
 use cog_gpu::features::fast::{FastEngine, FastOptions};
 use cog_gpu::features::feature_layout::{FeatureLayout, Groups};
 use cog_gpu::features::out_of_view::out_of_view_voxels;
-use cog_gpu::features::{Hypothesis, PreparedWindow, SizeQuantiles};
+use cog_gpu::features::{Hypothesis, PreparedWindow};
 use cog_gpu::geometry::{voxel_corners, Cuboid};
 use cog_gpu::gpu::fast::fast_scores_gpu;
 use cog_gpu::gpu::features::{features_gpu, scores_gpu};
-use cog_gpu::synth::{self, SynthOptions};
 use glam::Vec3;
-
-const STATS: &str = "../shared/data/sunrgbd-size-stats.json";
 
 fn with_out_of_view(base_grid: [u32; 3], expanded: bool) -> FeatureLayout {
     FeatureLayout::new(base_grid, expanded, Groups { out_of_view: true, ..Groups::ALL }).unwrap()
-}
-
-/// A small synthetic bedroom (160×120) and its bed window: beds' boxes near the camera reach out of the
-/// picture.
-fn bed_window() -> PreparedWindow {
-    let frame = synth::generate_frame(3, 0, &SynthOptions::small(160, 120)).unwrap().frame;
-    let sizes = SizeQuantiles::from_stats_file(Path::new(STATS), "bed").unwrap().sizes();
-    PreparedWindow::new(&frame, sizes, 0.1, 50).unwrap()
-}
-
-/// Up to `count` hypotheses evenly spread over the window's.
-fn sample(window: &PreparedWindow, count: usize) -> Vec<Hypothesis> {
-    let kept = &window.set.hypotheses;
-    kept.iter().step_by((kept.len() / count).max(1)).take(count).copied().collect()
 }
 
 /// Independent expectation for voxel (i, j, k): its centre as the mean of its eight corners
@@ -83,8 +64,8 @@ fn expected_out_of_view(window: &PreparedWindow, layout: &FeatureLayout, hyp: &H
 
 #[test]
 fn indicators_mark_exactly_the_voxel_centres_off_the_picture() {
-    let window = bed_window();
-    let hyps = sample(&window, 3000);
+    let window = common::synthetic_window("bed");
+    let hyps = common::spread_sample(&window, 3000);
     assert!(hyps.len() >= 1000, "{} hypotheses", hyps.len());
     for layout in [with_out_of_view([5, 5, 5], true), with_out_of_view([3, 1, 3], false)] {
         let (features, _) = cpu::features(&window.scene, &layout, &hyps);
@@ -132,10 +113,10 @@ fn assert_close(got: &[f32], expected: &[f32], magnitude: &[f32], what: &str) {
 
 #[test]
 fn every_path_gives_the_same_indicators_and_scores() {
-    let window = bed_window();
+    let window = common::synthetic_window("bed");
     let scene = &window.scene;
     let layout = with_out_of_view([5, 5, 5], true);
-    let hyps = sample(&window, 600);
+    let hyps = common::spread_sample(&window, 600);
     let dim = layout.dim();
     let offset = layout.out_of_view_offset();
     let (exact, _) = cpu::features(scene, &layout, &hyps);

@@ -228,17 +228,38 @@ pub const MEASURED_COVER_SHARE: f32 = 0.01;
 /// true support of 46 % of its beds, this rule of 77 %, no table, desk, dresser, nightstand, sofa or counter
 /// lost), then measured once on the test set (README, "Surfaces measured from the points").
 pub fn measured_surface_height(pre: &Preprocessed, cuboid: &Cuboid) -> Option<f32> {
-    fullest_surface_height(pre, cuboid, MEASURED_COVER_DEPTH_M)
+    measure_surface(pre, cuboid, SurfaceRule::FULLEST)
 }
 
-/// [`measured_surface_height`] looking `cover_depth` metres below the fullest face for a surface under a
-/// cover.
-fn fullest_surface_height(pre: &Preprocessed, cuboid: &Cuboid, cover_depth: f32) -> Option<f32> {
+/// A face of the upward points' height histogram: `(heights, low, high)` → its height and points.
+type FaceFinder = fn(&[f32], f32, f32) -> Option<(f32, usize)>;
+
+/// How a surface is measured from the upward points in a box: which face of their height histogram
+/// ([`fullest_face`] or [`highest_face`]), and how far below it a surface under a cover is looked for
+/// ([`covered_face`]). [`category_surface_height`] picks one per category.
+#[derive(Clone, Copy)]
+struct SurfaceRule {
+    face: FaceFinder,
+    cover_depth: f32,
+}
+
+impl SurfaceRule {
+    /// [`measured_surface_height`]'s: the fullest face, a cover down to [`MEASURED_COVER_DEPTH_M`].
+    const FULLEST: SurfaceRule = SurfaceRule { face: fullest_face, cover_depth: MEASURED_COVER_DEPTH_M };
+    /// A bed's: the fullest face, its mattress down to [`BED_COVER_DEPTH_M`] under it.
+    const BED: SurfaceRule = SurfaceRule { face: fullest_face, cover_depth: BED_COVER_DEPTH_M };
+    /// [`top_surface_height`]'s: the highest face, a cover down to [`MEASURED_COVER_DEPTH_M`].
+    const TOP: SurfaceRule = SurfaceRule { face: highest_face, cover_depth: MEASURED_COVER_DEPTH_M };
+}
+
+/// The surface `rule` measures in `cuboid`: among the upward points between one slice above its bottom and
+/// one slice above its top, the rule's face, or the surface under a cover below it.
+fn measure_surface(pre: &Preprocessed, cuboid: &Cuboid, rule: SurfaceRule) -> Option<f32> {
     let slice = cuboid.size.z / SLICES as f32;
     let (low, high) = (cuboid.bottom() + slice, cuboid.top() + slice);
     let heights = upward_heights(pre, cuboid, low, high);
-    let (fullest, fullest_points) = fullest_face(&heights, low, high)?;
-    Some(covered_face(&heights, low, high, fullest, fullest_points, cover_depth).unwrap_or(fullest))
+    let (face, face_points) = (rule.face)(&heights, low, high)?;
+    Some(covered_face(&heights, low, high, face, face_points, rule.cover_depth).unwrap_or(face))
 }
 
 /// The surface categories whose support surface is their top — a table's, a desk's, a dresser's, a
@@ -257,13 +278,14 @@ pub const TOP_FACE_SHARE: f32 = 0.2;
 /// Detection's `surface_z`, the surfaces the small objects are searched on, the training examples'
 /// surfaces and the diagnosis's window recall all come from here.
 pub fn category_surface_height(pre: &Preprocessed, cuboid: &Cuboid, category: &str) -> Option<f32> {
-    if TOP_SURFACE_CATEGORIES.contains(&category) {
-        top_surface_height(pre, cuboid)
+    let rule = if TOP_SURFACE_CATEGORIES.contains(&category) {
+        SurfaceRule::TOP
     } else if category == "bed" {
-        fullest_surface_height(pre, cuboid, BED_COVER_DEPTH_M)
+        SurfaceRule::BED
     } else {
-        measured_surface_height(pre, cuboid)
-    }
+        SurfaceRule::FULLEST
+    };
+    measure_surface(pre, cuboid, rule)
 }
 
 /// The support surface of a piece of furniture whose surface is its top (since 2026-12-06, our addition):
@@ -282,11 +304,7 @@ pub fn category_surface_height(pre: &Preprocessed, cuboid: &Cuboid, category: &s
 /// on the top whose upward face holds a fifth of the top's points (a box, a stack of books) is taken for
 /// the top; capping the face at the box's top (or half a slice above it) did no better there.
 pub fn top_surface_height(pre: &Preprocessed, cuboid: &Cuboid) -> Option<f32> {
-    let slice = cuboid.size.z / SLICES as f32;
-    let (low, high) = (cuboid.bottom() + slice, cuboid.top() + slice);
-    let heights = upward_heights(pre, cuboid, low, high);
-    let (top, top_points) = highest_face(&heights, low, high)?;
-    Some(covered_face(&heights, low, high, top, top_points, MEASURED_COVER_DEPTH_M).unwrap_or(top))
+    measure_surface(pre, cuboid, SurfaceRule::TOP)
 }
 
 /// The highest face of [`top_surface_height`]: its height and the points of its three [`MEASURED_BIN_M`]
@@ -302,9 +320,13 @@ fn highest_face(heights: &[f32], low: f32, high: f32) -> Option<(f32, usize)> {
         around[b] >= need && around[b] >= below && around[b] >= above
     };
     let chosen = (peak + 1..bins).rev().find(|&b| is_face(b)).unwrap_or(peak);
-    let mut face_heights: Vec<f32> = heights.iter().copied().filter(|&z| bin_of(z).abs_diff(chosen) <= 1).collect();
-    let face = upper_median(&mut face_heights)?;
-    Some((face, around[chosen]))
+    Some((face_height(heights, &bin_of, chosen)?, around[chosen]))
+}
+
+/// The median height of the points in bin `face` and its two neighbours.
+fn face_height(heights: &[f32], bin_of: &impl Fn(f32) -> usize, face: usize) -> Option<f32> {
+    let mut face_heights: Vec<f32> = heights.iter().copied().filter(|&z| bin_of(z).abs_diff(face) <= 1).collect();
+    upper_median(&mut face_heights)
 }
 
 /// The [`MEASURED_BIN_M`] histogram of `heights` from `low` to `high`: the bin of a height, and per bin
@@ -332,9 +354,7 @@ fn fullest_bin(around: &[usize]) -> Option<usize> {
 fn fullest_face(heights: &[f32], low: f32, high: f32) -> Option<(f32, usize)> {
     let (bin_of, around) = face_histogram(heights, low, high);
     let peak = fullest_bin(&around)?;
-    let mut face_heights: Vec<f32> = heights.iter().copied().filter(|&z| bin_of(z).abs_diff(peak) <= 1).collect();
-    let face = upper_median(&mut face_heights)?;
-    Some((face, around[peak]))
+    Some((face_height(heights, &bin_of, peak)?, around[peak]))
 }
 
 /// The surface under a cover of [`measured_surface_height`], `None` when there is none: in

@@ -108,3 +108,23 @@ pub fn random_weights(layout: &cog_gpu::features::FeatureLayout, count: usize, s
         })
         .collect()
 }
+
+/// The shipped size statistics that the tests' windows take their sizes from.
+#[allow(dead_code)]
+pub const SIZE_STATS: &str = "../shared/data/sunrgbd-size-stats.json";
+
+/// A small synthetic frame (160×120, seed 3, frame 0) and its `category` window at 0.1 m with at least 50
+/// points per box.
+#[allow(dead_code)]
+pub fn synthetic_window(category: &str) -> cog_gpu::features::PreparedWindow {
+    let frame = cog_gpu::synth::generate_frame(3, 0, &cog_gpu::synth::SynthOptions::small(160, 120)).unwrap().frame;
+    let sizes = cog_gpu::features::SizeQuantiles::from_stats_file(Path::new(SIZE_STATS), category).unwrap().sizes();
+    cog_gpu::features::PreparedWindow::new(&frame, sizes, 0.1, 50).unwrap()
+}
+
+/// Up to `count` of `window`'s kept hypotheses, evenly spread (so all yaws and sizes appear).
+#[allow(dead_code)]
+pub fn spread_sample(window: &cog_gpu::features::PreparedWindow, count: usize) -> Vec<cog_gpu::features::Hypothesis> {
+    let kept = &window.set.hypotheses;
+    kept.iter().step_by((kept.len() / count).max(1)).take(count).copied().collect()
+}
