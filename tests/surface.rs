@@ -522,3 +522,66 @@ fn a_beds_mattress_is_found_deeper_under_its_duvet() {
     assert!(near(category_surface_height(&scene(0.50), &bed, "bed"), 0.50));
     assert!(near(measured_surface_height(&scene(0.50), &bed), 0.50));
 }
+
+/// A dresser taller than the camera: its front face is seen up to its top at 1.0 m, its top not at all, and
+/// a TV stands 0.4 m behind the front, its screen up to 1.5 m. A top-surface category then reports the
+/// front face's upper edge if it is a dresser or nightstand (the TV's face is not in the front's slab); so
+/// does a window box 0.2 m lower than the dresser; a bed, table, desk or sofa (no fallback) reports none; a face of upward points still wins over the edge; a face too
+/// sparse to tell gives none.
+#[test]
+fn an_unseen_top_is_the_upper_edge_of_the_front_face() {
+    use cog_gpu::features::surface::{
+        category_surface_height, front_edge_height, top_surface_height, FRONT_EDGE_CATEGORIES, FRONT_MIN_MEDIAN,
+        MEASURED_MIN_POINTS,
+    };
+    let dresser = Cuboid::new(Vec3::new(0.3, 3.0, 0.5), Vec3::new(0.9, 0.5, 1.0), 25f32.to_radians());
+    let toward = |local: Vec3| dresser.from_local(local) - dresser.from_local(Vec3::ZERO);
+    // The front (local y = −0.25, normals −y): 9 columns × 100 rows at z = 0.005, 0.015, …, 0.995; the TV's
+    // screen (local y = +0.15, normals −y) from 1.0 to 1.5 m; the side (local x = +0.45, normals +x).
+    let scene = |columns: usize, top_points: usize| {
+        let mut points = Vec::new();
+        let mut normals = Vec::new();
+        let mut add = |x: f32, y: f32, z: f32, n: Vec3| {
+            points.push(dresser.from_local(Vec3::new(x, y, z - 0.5)));
+            normals.push(n);
+        };
+        for i in 0..columns {
+            for k in 0..100 {
+                add(-0.4 + 0.1 * i as f32, -0.25, 0.005 + 0.01 * k as f32, toward(-Vec3::Y));
+            }
+        }
+        for i in 0..5 {
+            for k in 0..50 {
+                add(-0.2 + 0.1 * i as f32, 0.15, 1.005 + 0.01 * k as f32, toward(-Vec3::Y));
+            }
+        }
+        for k in 0..30 {
+            add(0.45, 0.0, 0.03 * k as f32, toward(Vec3::X));
+        }
+        for k in 0..top_points {
+            add(-0.4 + 0.8 * k as f32 / top_points as f32, -0.1, 0.97, Vec3::Z);
+        }
+        let gradients = vec![Vec2::ZERO; points.len()];
+        let camera = Camera::new([500.0, 500.0, 320.5, 240.5], Mat3::IDENTITY);
+        Preprocessed { camera, image_size: [640, 480], points, normals, gradients, floor: 0.0 }
+    };
+    let near = |z: Option<f32>, want: f32| z.is_some_and(|z| (z - want).abs() < 1e-4);
+    let unseen = scene(9, 0);
+    assert_eq!(top_surface_height(&unseen, &dresser), None, "no upward face");
+    assert!(near(front_edge_height(&unseen, &dresser), 1.0), "{:?}", front_edge_height(&unseen, &dresser));
+    for category in FRONT_EDGE_CATEGORIES {
+        assert!(near(category_surface_height(&unseen, &dresser, category), 1.0), "{category}");
+    }
+    for category in ["bed", "table", "desk", "sofa"] {
+        assert_eq!(category_surface_height(&unseen, &dresser, category), None, "{category} has no fallback");
+    }
+    // A window box 0.2 m lower than the dresser (top at 0.8 m) follows the front up to the same edge.
+    let low_box = Cuboid::new(Vec3::new(0.3, 3.0, 0.4), Vec3::new(0.9, 0.5, 0.8), dresser.yaw);
+    assert!(near(category_surface_height(&unseen, &low_box, "dresser"), 1.0));
+    // A face of enough upward points (at 0.97 m, 3 cm under the edge, to tell them apart) wins over the edge.
+    let seen = scene(9, 2 * MEASURED_MIN_POINTS);
+    assert!(near(category_surface_height(&seen, &dresser, "dresser"), 0.97));
+    // One column: two points per 2 cm bin, under FRONT_MIN_MEDIAN — no edge, no surface.
+    const { assert!(2.0 < FRONT_MIN_MEDIAN) };
+    assert_eq!(category_surface_height(&scene(1, 0), &dresser, "dresser"), None);
+}
