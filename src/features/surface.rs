@@ -288,28 +288,35 @@ pub const FRONT_SLAB_M: f32 = 0.05;
 pub const FRONT_EDGE_SHARE: f32 = 0.3;
 /// Fewest face points per bin (the median over the face's body) for [`front_edge_height`] to report an edge.
 pub const FRONT_MIN_MEDIAN: f32 = 3.0;
+/// The face's body, whose median points per bin [`front_edge_height`] compares with, runs from this far
+/// (metres) above the box's bottom to this far under its top (a plinth, a top's overhang).
+pub const FRONT_BODY_MARGIN_M: f32 = 0.1;
+/// [`front_edge_height`] walks up the face from this far (metres) under the box's top.
+pub const FRONT_WALK_FROM_M: f32 = 0.3;
 /// A point's normal faces a direction when their cosine exceeds this (about 37°).
 const FRONT_FACING_COS: f32 = 0.8;
 /// A point belongs to a vertical face when its normal's vertical component is under this in magnitude.
 const FRONT_SIDE_SIN: f32 = 0.4;
 
 /// The support surface of a dresser or nightstand whose top the camera does not see (since 2026-12-06, our
-/// addition; [`FRONT_EDGE_CATEGORIES`]): the **upper edge of its front face**. A dresser taller than the camera's height shows no
-/// upward point on its top, so [`top_surface_height`] finds no face (7 of the 24 correctly detected
-/// dressers of the selection set, seeds 2500–2506), but its front — the vertical face toward the camera —
-/// ends where the top begins. Among the points within [`FRONT_MARGIN_M`] of the box's footprint, from its
-/// bottom to [`FRONT_REACH_M`] above its top: the plane of the front is the [`MEASURED_BIN_M`] bin of the
-/// coordinate along one of the box's four horizontal directions (±width, ±depth axis) that holds the most
-/// points whose normal faces that direction (cosine > 0.8; ties: the first direction of +x, −x, +y, −y,
-/// then the lowest bin); the face is the points within [`FRONT_SLAB_M`] of that plane whose normal is
-/// near horizontal (|n_z| < 0.4), histogrammed by height in [`MEASURED_BIN_M`] bins from the box's bottom;
-/// its median per bin over the body (from 0.1 m above the bottom to 0.1 m under the top) must be at least
-/// [`FRONT_MIN_MEDIAN`]; walking up from 0.3 m under the box's top, the face ends at the first bin with
-/// fewer than [`FRONT_EDGE_SHARE`] of that median, and the edge is that bin's bottom. Things on the top
-/// (a TV, a lamp) stand back from the front and leave its slab. The constants were chosen on the
-/// selection set's dressers (margins 0, 0.05, 0.1 m × slabs 0.02, 0.03, 0.05 m × shares 0.2, 0.3, 0.5:
-/// 19–21 of 24 within 5 cm against 17 without the fallback), then measured once on the test set (README,
-/// "Surfaces measured from the points"). `None` when no face is found.
+/// addition; [`FRONT_EDGE_CATEGORIES`]): the **upper edge of its front face**. A dresser taller than the
+/// camera's height shows no upward point on its top, so [`top_surface_height`] finds no face (5 of the 24
+/// correctly detected dressers of the selection set, seeds 2500–2506; 7 of the test set's 25), but its
+/// front — the vertical face toward the camera — ends where the top begins. Among the points within
+/// [`FRONT_MARGIN_M`] of the box's footprint, from its bottom to [`FRONT_REACH_M`] above its top: the plane
+/// of the front is the [`MEASURED_BIN_M`] bin of the coordinate along one of the box's four horizontal
+/// directions (±width, ±depth axis) that holds the most points whose normal faces that direction (a
+/// cosine over 0.8; ties: the first direction of +x, −x, +y, −y, then the lowest bin); the face is the points within
+/// [`FRONT_SLAB_M`] of that plane whose normal is near horizontal (|n_z| < 0.4), histogrammed by height in
+/// [`MEASURED_BIN_M`] bins from the box's bottom; its median per bin over the body
+/// ([`FRONT_BODY_MARGIN_M`] above the bottom to as far under the top) must be at least
+/// [`FRONT_MIN_MEDIAN`]; walking up from [`FRONT_WALK_FROM_M`] under the box's top, the face ends at the
+/// first bin with fewer than [`FRONT_EDGE_SHARE`] of that median, and the edge is that bin's bottom. Things
+/// on the top (a TV, a lamp) stand back from the front and leave its slab. The constants were chosen on
+/// the selection set's dressers (margins 0, 0.05, 0.1 m × slabs 0.02, 0.03, 0.05 m × shares 0.2, 0.3, 0.5:
+/// 19–21 of 24 within 5 cm against 17 without the fallback; an early variant had been looked at on the
+/// test set's dressers too), then measured on the test set (README, "Surfaces measured from the points").
+/// `None` when no face is found.
 pub fn front_edge_height(pre: &Preprocessed, cuboid: &Cuboid) -> Option<f32> {
     let half = 0.5 * cuboid.size.truncate() + Vec2::splat(FRONT_MARGIN_M);
     let (bottom, reach) = (cuboid.bottom(), cuboid.top() + FRONT_REACH_M);
@@ -336,8 +343,9 @@ pub fn front_edge_height(pre: &Preprocessed, cuboid: &Cuboid) -> Option<f32> {
         }
     }
     let count = |b: i64| if b >= 0 && (b as usize) < per_bin.len() { per_bin[b as usize] } else { 0 };
-    let body_end = ((cuboid.top() - 0.1 - bottom) / MEASURED_BIN_M) as i64;
-    let mut body: Vec<usize> = (5..body_end).map(count).collect();
+    let body_start = (FRONT_BODY_MARGIN_M / MEASURED_BIN_M).round() as i64;
+    let body_end = ((cuboid.top() - FRONT_BODY_MARGIN_M - bottom) / MEASURED_BIN_M) as i64;
+    let mut body: Vec<usize> = (body_start..body_end).map(count).collect();
     if body.is_empty() {
         return None;
     }
@@ -347,7 +355,7 @@ pub fn front_edge_height(pre: &Preprocessed, cuboid: &Cuboid) -> Option<f32> {
     if median < FRONT_MIN_MEDIAN {
         return None;
     }
-    let mut b = ((cuboid.top() - 0.3 - bottom) / MEASURED_BIN_M) as i64;
+    let mut b = ((cuboid.top() - FRONT_WALK_FROM_M - bottom) / MEASURED_BIN_M) as i64;
     while count(b + 1) as f32 >= FRONT_EDGE_SHARE * median {
         b += 1;
     }
