@@ -80,6 +80,34 @@ impl<'a> Backend<'a> {
         }
     }
 
+    /// Exact-path scores (`hypotheses.len() × weights.len()`) of a few boxes that no table serves — the
+    /// context cascade's cross scores ([`crate::detect::cross_scores`]): where the kernels run
+    /// ([`use_kernel_on`]: a hardware adapter, or `COG_GPU_FAST_KERNEL=always`) by the exact kernel
+    /// ([`crate::gpu::features::scores_gpu`]), else by the CPU's exact path ([`cpu::scores`]; on a software
+    /// adapter the kernel is about 5× slower than the CPU). A GPU failure is logged and the CPU scores them,
+    /// as in [`Backend::fast_scores`]. The two give the same scores within 1e-5 of Σ|wᵢφᵢ| (float sums in
+    /// another order).
+    pub fn box_scores(
+        &self,
+        scene: &FeatureScene,
+        layout: &FeatureLayout,
+        hypotheses: &[Hypothesis],
+        weights: &[Vec<f32>],
+    ) -> Vec<f32> {
+        match self {
+            Backend::Gpu(ctx) if use_kernel_on(ctx) => {
+                match crate::gpu::features::scores_gpu(ctx, scene, layout, hypotheses, weights) {
+                    Ok((scores, _)) => scores,
+                    Err(e) => {
+                        log::warn!("box scores on the GPU failed ({e}): scoring on the CPU");
+                        cpu::scores(scene, layout, hypotheses, weights).0
+                    }
+                }
+            }
+            _ => cpu::scores(scene, layout, hypotheses, weights).0,
+        }
+    }
+
     /// Fast-path scores: the GPU kernel with [`Backend::Gpu`], [`FastEngine::scores`] with
     /// [`Backend::Cpu`]. A GPU failure (e.g. a table over the binding limit) is logged and the CPU path is
     /// taken, so the caller always gets scores.

@@ -35,7 +35,6 @@ use crate::draw::{
 use crate::error::{Error, Result};
 use crate::eval::{Detection, FrameDetections};
 use crate::features::budget;
-use crate::features::cpu;
 use crate::features::fast::FastEngine;
 use crate::features::hypotheses::{
     free_bottoms, windows, FrameYaws, HypothesisSet, Support, SupportSurface, WindowOptions, WindowRequest,
@@ -598,13 +597,13 @@ pub fn detect_preprocessed_timed(
         lap();
     }
     stages.tables_thread_s += engines.table_thread_seconds();
-    backend.end_frame();
     calibrate(&mut detections, models);
     stages.add(Stage::Nms, lap());
     if options.cross_scores {
-        cross_scores(&pre, models, &mut detections);
+        cross_scores(&pre, models, &mut detections, backend);
         stages.add(Stage::CrossScores, lap());
     }
+    backend.end_frame();
     Ok(FrameDetections { frame: name.to_string(), detections })
 }
 
@@ -614,17 +613,19 @@ pub fn detect_preprocessed_timed(
 /// like a desk to the two models — the first stage's diagnosis finds most of the high-scoring false
 /// positives of the large categories on objects of another one, and each model only ever scores boxes of
 /// its own sizes. Choices:
-/// * The **exact** feature path ([`crate::features::cpu`]) on the CPU, whatever the model's own path and
-///   the backend: a detection's box — voted, so neither on a model's lattice nor of its sizes — is no
-///   hypothesis of the fast path's tables, and a frame has only a few hundred such boxes. The box's own model scores it too
-///   (its exact-path score, next to the fast-path `raw_score`).
+/// * The **exact** feature path, whatever the model's own path: a detection's box — voted, so neither on a
+///   model's lattice nor of its sizes — is no hypothesis of the fast path's tables, and a frame has only a
+///   few hundred such boxes. The box's own model scores it too (its exact-path score, next to the
+///   fast-path `raw_score`). On `backend` ([`Backend::box_scores`], since 2026-12-06): the exact kernel
+///   where the GPU's kernels run, the CPU's exact path elsewhere (before, the CPU on every backend) — the
+///   two within 1e-5 of Σ|wᵢφᵢ| of each other.
 /// * The **cuboid** weights alone: a model with latent support surfaces (the table) is scored without its
 ///   surface part.
 /// * Models of other categories are not used; a category of [`CROSS_SCORE_CATEGORIES`](crate::category::CROSS_SCORE_CATEGORIES) without a model in
 ///   `models` is missing from the maps (the cascade's v7 refuses such detections).
 ///
 /// Each box's score is computed on its own, so the scores are the same on any number of threads.
-pub fn cross_scores(pre: &Preprocessed, models: &[Model], detections: &mut [Detection]) {
+pub fn cross_scores(pre: &Preprocessed, models: &[Model], detections: &mut [Detection], backend: Backend) {
     let scorers: Vec<&Model> = models.iter().filter(|m| is_cross_score_category(&m.category)).collect();
     let chosen: Vec<usize> =
         (0..detections.len()).filter(|&i| is_cross_score_category(&detections[i].category)).collect();
@@ -655,7 +656,7 @@ pub fn cross_scores(pre: &Preprocessed, models: &[Model], detections: &mut [Dete
         let group: Vec<usize> =
             (first..scorers.len()).filter(|&m| scorers[m].layout == scorers[first].layout).collect();
         let weights: Vec<Vec<f32>> = group.iter().map(|&m| scorers[m].weights.clone()).collect();
-        let (scores, _) = cpu::scores(&scene, &scorers[first].layout, &hypotheses, &weights);
+        let scores = backend.box_scores(&scene, &scorers[first].layout, &hypotheses, &weights);
         for (w, &m) in group.iter().enumerate() {
             per_model[m] = (0..hypotheses.len()).map(|h| scores[h * group.len() + w] + scorers[m].bias).collect();
             done[m] = true;

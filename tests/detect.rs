@@ -740,7 +740,7 @@ fn cross_scores_are_each_models_score_of_the_box() {
     detections.push(cog_gpu::eval::Detection::new("table", &turned, 0.1));
     detections.push(cog_gpu::eval::Detection::new("lamp", &first, 0.1));
     let pre = Preprocessed::from_frame(&frame).unwrap();
-    cog_gpu::detect::cross_scores(&pre, &[bed, lamp, table], &mut detections);
+    cog_gpu::detect::cross_scores(&pre, &[bed, lamp, table], &mut detections, Backend::Cpu);
     let camera = Camera::new(frame.intrinsics(), frame.rtilt());
     for d in &detections {
         if d.category == "lamp" {

@@ -9,7 +9,7 @@
 //! A replaced category of [`cog_gpu::category::CROSS_SCORE_CATEGORIES`] changes the cross scores of every
 //! cross-category box (the new model scores the kept boxes too): with `--data DIR` (the frames' dataset)
 //! each merged frame is read and preprocessed as `detect --cpu` does and the cross scores are computed
-//! again ([`cog_gpu::detect::cross_scores`]), so the files equal a full detection's; without it they are
+//! again on the CPU ([`cog_gpu::detect::cross_scores`]), so the files equal a full `detect --cpu`'s; without it they are
 //! dropped (a cascade with a v7 stage then refuses the files), with a warning.
 //!
 //! Refused: cascaded files (merge the first stage, then `rescore`); a replaced category on whose detections
@@ -20,6 +20,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
+use cog_gpu::backend::Backend;
 use cog_gpu::category::normalise_name;
 use cog_gpu::detect::{cross_scores, replace_categories, replacement_problem};
 use cog_gpu::eval::{Detection, FrameDetections};
@@ -159,7 +160,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
             })?;
             let frame = Frame::read(dir, DepthSource::Raw)?;
             let pre = Preprocessed::from_frame_with(&frame, search)?;
-            cross_scores(&pre, &models, &mut detections);
+            cross_scores(&pre, &models, &mut detections, Backend::Cpu);
         }
         let file = super::options::with_detections(&base_text, &base_path, &detections)?;
         merged_files.push((name.clone(), file));
