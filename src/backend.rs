@@ -84,9 +84,9 @@ impl<'a> Backend<'a> {
     /// context cascade's cross scores ([`crate::detect::cross_scores`]): where the kernels run
     /// ([`use_kernel_on`]: a hardware adapter, or `COG_GPU_FAST_KERNEL=always`) by the exact kernel
     /// ([`crate::gpu::features::scores_gpu`]), else by the CPU's exact path ([`cpu::scores`]; on a software
-    /// adapter the kernel is about 5× slower than the CPU). A GPU failure is logged and the CPU scores them,
-    /// as in [`Backend::fast_scores`]. The two give the same scores within 1e-5 of Σ|wᵢφᵢ| (float sums in
-    /// another order).
+    /// adapter the kernel is about 4× slower than the CPU: README, "Detection"). A GPU failure is logged and
+    /// the CPU scores them, as in [`Backend::fast_scores`]. The two give the same scores within 1e-5 of
+    /// Σ|wᵢφᵢ| (float sums in another order).
     pub fn box_scores(
         &self,
         scene: &FeatureScene,
