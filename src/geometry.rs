@@ -88,7 +88,12 @@ impl Cuboid {
 
     /// Coordinates (s, t, u) of an upright point in the cuboid's local frame (see the module doc).
     pub fn to_local(&self, p: Vec3) -> Vec3 {
-        let d = p - self.centre;
+        self.direction_to_local(p - self.centre)
+    }
+
+    /// A direction (a normal, an offset) in the cuboid's local axes: [`Cuboid::to_local`] without the
+    /// centre, the same rotation.
+    pub fn direction_to_local(&self, d: Vec3) -> Vec3 {
         let (sin, cos) = self.yaw.sin_cos();
         Vec3::new(d.x * cos + d.y * sin, -d.x * sin + d.y * cos, d.z)
     }

@@ -34,7 +34,7 @@ use super::hypotheses::{Hypothesis, SupportSurface};
 use super::preprocess::{normal_bin, Preprocessed};
 use super::scene::FeatureScene;
 use crate::error::{Error, Result};
-use crate::frame::upper_median;
+use crate::frame::{quantile_of_unsorted, upper_median};
 use crate::geometry::Cuboid;
 use glam::{Vec2, Vec3};
 
@@ -320,7 +320,6 @@ const FRONT_SIDE_SIN: f32 = 0.4;
 pub fn front_edge_height(pre: &Preprocessed, cuboid: &Cuboid) -> Option<f32> {
     let half = 0.5 * cuboid.size.truncate() + Vec2::splat(FRONT_MARGIN_M);
     let (bottom, reach) = (cuboid.bottom(), cuboid.top() + FRONT_REACH_M);
-    let (sin, cos) = cuboid.yaw.sin_cos();
     // (local x, local y, z, local normal) of the points around the box.
     let around: Vec<(Vec2, f32, Vec3)> = pre
         .points
@@ -329,8 +328,7 @@ pub fn front_edge_height(pre: &Preprocessed, cuboid: &Cuboid) -> Option<f32> {
         .filter_map(|(p, n)| {
             let l = cuboid.to_local(*p);
             let inside = l.x.abs() <= half.x && l.y.abs() <= half.y && p.z >= bottom && p.z <= reach;
-            let local_normal = Vec3::new(n.x * cos + n.y * sin, -n.x * sin + n.y * cos, n.z);
-            inside.then_some((l.truncate(), p.z, local_normal))
+            inside.then(|| (l.truncate(), p.z, cuboid.direction_to_local(*n)))
         })
         .collect();
     let (axis, plane) = front_plane(&around, half)?;
@@ -345,13 +343,10 @@ pub fn front_edge_height(pre: &Preprocessed, cuboid: &Cuboid) -> Option<f32> {
     let count = |b: i64| if b >= 0 && (b as usize) < per_bin.len() { per_bin[b as usize] } else { 0 };
     let body_start = (FRONT_BODY_MARGIN_M / MEASURED_BIN_M).round() as i64;
     let body_end = ((cuboid.top() - FRONT_BODY_MARGIN_M - bottom) / MEASURED_BIN_M) as i64;
-    let mut body: Vec<usize> = (body_start..body_end).map(count).collect();
-    if body.is_empty() {
-        return None;
-    }
-    body.sort_unstable();
-    let m = body.len() / 2;
-    let median = if body.len() % 2 == 1 { body[m] as f32 } else { 0.5 * (body[m - 1] + body[m]) as f32 };
+    let mut body: Vec<f32> = (body_start..body_end).map(|b| count(b) as f32).collect();
+    // The interpolated median (the mean of the two middle counts for an even number of bins; exact, the
+    // counts being small integers).
+    let median = quantile_of_unsorted(&mut body, 0.5)?;
     if median < FRONT_MIN_MEDIAN {
         return None;
     }
