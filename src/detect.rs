@@ -42,7 +42,7 @@ use crate::features::hypotheses::{
 };
 use crate::features::preprocess::NormalSearch;
 use crate::features::scene::rotate;
-use crate::features::surface::{best_slice, category_surface_height, refined_surface_height, SurfaceEngine};
+use crate::features::surface::{best_slice, category_surface, refined_surface_height, SurfaceEngine, SurfaceSource};
 use crate::features::{FeatureScene, Hypothesis, Preprocessed};
 use crate::frame::Frame;
 use crate::geometry::{Camera, Cuboid};
@@ -766,9 +766,12 @@ fn detect_windows<'a>(
         let cuboid = d.cuboid();
         let measured = SURFACE_CATEGORIES
             .contains(&d.category.as_str())
-            .then(|| category_surface_height(pre, &cuboid, &d.category))
+            .then(|| category_surface(pre, &cuboid, &d.category))
             .flatten();
-        d.surface_z = measured.or_else(|| d.latent_slice.map(|h| refined_surface_height(pre, &cuboid, h as usize)));
+        let surface = measured.or_else(|| {
+            d.latent_slice.map(|h| (refined_surface_height(pre, &cuboid, h as usize), SurfaceSource::LatentSlice))
+        });
+        (d.surface_z, d.surface_source) = (surface.map(|(z, _)| z), surface.map(|(_, source)| source));
     });
     stages.add(Stage::Nms, lap());
     Ok(detections)

@@ -22,6 +22,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::category::{category_index, normalise_name, CATEGORIES};
 use crate::error::{Error, Result};
+use crate::features::surface::SurfaceSource;
 use crate::geometry::{iou_3d, Cuboid};
 use crate::limits::{MAX_COORDINATE_M, MAX_OBJECT_SIZE_M};
 
@@ -55,6 +56,10 @@ pub struct Detection {
     /// the other models with latent surfaces, measured in the chosen slice ([`Detection::latent_slice`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub surface_z: Option<f32>,
+    /// Which rule gave `surface_z` (written as `"face"`, `"front-edge"` or `"latent-slice"`; absent with
+    /// `surface_z`, and in files written before 2026-12-07).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub surface_source: Option<SurfaceSource>,
     /// For a model with latent support surfaces ([`crate::features::surface`]): the best-scoring of the
     /// cuboid's seven horizontal slices, `h` = 0 (bottom) … 6, the latent variable of its score.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -91,6 +96,7 @@ impl Detection {
             first_stage_score: None,
             context_score: None,
             surface_z: None,
+            surface_source: None,
             latent_slice: None,
             cross_scores: None,
             score_before_exclusion: None,
@@ -668,6 +674,16 @@ pub struct SurfaceAccuracy {
     /// written to JSON).
     #[serde(skip)]
     pub errors_m: Vec<f32>,
+    /// `measured` and `within_main` split by the rule that gave the surface
+    /// ([`Detection::surface_source`]; `"unknown"` for files written before it was recorded).
+    pub by_source: BTreeMap<String, SourceAccuracy>,
+}
+
+/// One surface rule's share of a [`SurfaceAccuracy`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct SourceAccuracy {
+    pub measured: usize,
+    pub within_main: usize,
 }
 
 impl SurfaceAccuracy {
@@ -683,6 +699,11 @@ impl SurfaceAccuracy {
             all.within_main += part.within_main;
             all.tolerance_m = part.tolerance_m;
             all.errors_m.extend(&part.errors_m);
+            for (source, counts) in &part.by_source {
+                let sum = all.by_source.entry(source.clone()).or_default();
+                sum.measured += counts.measured;
+                sum.within_main += counts.within_main;
+            }
         }
         all.median_error_m = crate::frame::upper_median(&mut all.errors_m);
         all
@@ -701,8 +722,10 @@ pub fn surface_accuracy(
     tolerance_m: f32,
 ) -> SurfaceAccuracy {
     let boxes = scored_boxes(detections, category);
-    let surfaces: Vec<Option<f32>> =
-        detections.iter().flat_map(|d| d.iter().filter(|d| d.category == category).map(|d| d.surface_z)).collect();
+    let surfaces: Vec<(Option<f32>, Option<SurfaceSource>)> = detections
+        .iter()
+        .flat_map(|d| d.iter().filter(|d| d.category == category).map(|d| (d.surface_z, d.surface_source)))
+        .collect();
     // Each image's true surfaces of the category's objects, in category_truth's order.
     let true_surfaces: Vec<Vec<&[f32]>> = truth
         .iter()
@@ -719,15 +742,19 @@ pub fn surface_accuracy(
     let matched = matched_truth_in_input_order(&boxes, &category_truth(truth, category), iou_threshold);
     let mut result = SurfaceAccuracy { category: category.to_string(), tolerance_m, ..Default::default() };
     let mut errors = Vec::new();
-    for ((b, hit), surface) in boxes.iter().zip(&matched).zip(&surfaces) {
+    for ((b, hit), (surface, source)) in boxes.iter().zip(&matched).zip(&surfaces) {
         let Some(g) = hit else { continue };
         result.true_positives += 1;
         let heights = true_surfaces[b.image][*g];
         let (Some(z), Some(&main)) = (surface, heights.first()) else { continue };
         result.measured += 1;
         let nearest = heights.iter().map(|h| (h - z).abs()).fold(f32::INFINITY, f32::min);
+        let main_within = (main - z).abs() <= tolerance_m;
         result.within_nearest += (nearest <= tolerance_m) as usize;
-        result.within_main += ((main - z).abs() <= tolerance_m) as usize;
+        result.within_main += main_within as usize;
+        let by_source = result.by_source.entry(source.map_or("unknown", SurfaceSource::name).to_string()).or_default();
+        by_source.measured += 1;
+        by_source.within_main += main_within as usize;
         errors.push(nearest);
     }
     result.median_error_m = crate::frame::upper_median(&mut errors);

@@ -267,6 +267,9 @@ fn surface_accuracy_by_hand() {
     assert_eq!((s.within_nearest, s.within_main), (1, 0));
     // Errors 0.02 and 0.10: the median of two is the upper one (index len / 2).
     assert!((s.median_error_m.unwrap() - 0.10).abs() < 1e-6);
+    // No detection says which rule gave its surface: both measured ones count as "unknown".
+    let unknown = cog_gpu::eval::SourceAccuracy { measured: 2, within_main: 0 };
+    assert_eq!(s.by_source.into_iter().collect::<Vec<_>>(), vec![("unknown".to_string(), unknown)]);
 }
 
 /// The pooled report of several categories: the hand-made tables above and a desk in image 1 (true surface
@@ -275,13 +278,16 @@ fn surface_accuracy_by_hand() {
 #[test]
 fn pooled_surface_accuracy_by_hand() {
     use cog_gpu::eval::{surface_accuracy, SurfaceAccuracy};
+    use cog_gpu::features::surface::SurfaceSource;
     use cog_gpu::frame::Object;
     let object = |category: &str, x: f32| Object { category: category.into(), label: None, cuboid: unit_box(x, 0.0) };
     let truth = vec![vec![object("table", 0.0), object("table", 5.0)], vec![object("table", 0.0), object("desk", 3.0)]];
     let supports = vec![vec![vec![0.75, 0.30], vec![0.70]], vec![vec![], vec![0.72]]];
+    // The tables' surfaces from a face, the desks' from a front edge (`by_source`).
     let with = |category: &str, x: f32, score: f32, z: Option<f32>| {
         let mut d = Detection::new(category, &unit_box(x, 0.0), score);
         d.surface_z = z;
+        d.surface_source = Some(if category == "table" { SurfaceSource::Face } else { SurfaceSource::FrontEdge });
         d
     };
     let detections = vec![
@@ -296,6 +302,11 @@ fn pooled_surface_accuracy_by_hand() {
     assert_eq!((all.category.as_str(), all.tolerance_m), ("all", 0.05));
     assert_eq!((all.true_positives, all.measured, all.within_nearest, all.within_main), (4, 3, 2, 1));
     assert!((all.median_error_m.unwrap() - 0.02).abs() < 1e-6, "{:?}", all.median_error_m);
+    // By rule: the tables' two measured surfaces (main 0.75 against 0.32, 0.70 against 0.80) none within
+    // 5 cm, the desk's one (0.72 against 0.73) within; the sums are the totals.
+    let by: Vec<(&str, usize, usize)> =
+        all.by_source.iter().map(|(k, c)| (k.as_str(), c.measured, c.within_main)).collect();
+    assert_eq!(by, vec![("face", 2, 0), ("front-edge", 1, 1)]);
 }
 
 /// PASCAL VOC's devkit matching with "difficult" objects (VOCevaldet.m, written from its description, not
@@ -427,4 +438,23 @@ fn ignored_boxes_follow_vocs_difficult_rule() {
         checked_with_dropped += (bed.detections > 0 && reference.is_some()) as usize;
     }
     assert!(checked_with_dropped > 50, "the random scenes exercise dropped detections ({checked_with_dropped})");
+}
+
+/// `surface_source` in the detections JSON: the three rules by the names `SurfaceSource::name` prints (so
+/// `eval --surfaces` and the files agree), written only with a surface, and absent in older files.
+#[test]
+fn surface_source_in_json() {
+    use cog_gpu::features::surface::SurfaceSource;
+    for source in [SurfaceSource::Face, SurfaceSource::FrontEdge, SurfaceSource::LatentSlice] {
+        assert_eq!(serde_json::to_string(&source).unwrap(), format!("\"{}\"", source.name()));
+    }
+    let mut d = Detection::new("dresser", &unit_box(1.0, 0.0), 0.5);
+    assert!(!serde_json::to_string(&d).unwrap().contains("surface_source"));
+    (d.surface_z, d.surface_source) = (Some(0.9), Some(SurfaceSource::FrontEdge));
+    let text = serde_json::to_string(&d).unwrap();
+    assert!(text.contains(r#""surface_source":"front-edge""#), "{text}");
+    let back: Detection = serde_json::from_str(&text).unwrap();
+    assert_eq!(back.surface_source, Some(SurfaceSource::FrontEdge));
+    let older: Detection = serde_json::from_str(&text.replace(r#","surface_source":"front-edge""#, "")).unwrap();
+    assert_eq!((older.surface_z, older.surface_source), (Some(0.9), None));
 }

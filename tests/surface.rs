@@ -531,8 +531,8 @@ fn a_beds_mattress_is_found_deeper_under_its_duvet() {
 #[test]
 fn an_unseen_top_is_the_upper_edge_of_the_front_face() {
     use cog_gpu::features::surface::{
-        category_surface_height, front_edge_height, top_surface_height, FRONT_EDGE_CATEGORIES, FRONT_MIN_MEDIAN,
-        MEASURED_MIN_POINTS,
+        category_surface, category_surface_height, front_edge_height, top_surface_height, SurfaceSource,
+        FRONT_EDGE_CATEGORIES, FRONT_MIN_MEDIAN, MEASURED_MIN_POINTS,
     };
     let dresser = Cuboid::new(Vec3::new(0.3, 3.0, 0.5), Vec3::new(0.9, 0.5, 1.0), 25f32.to_radians());
     let toward = |local: Vec3| dresser.from_local(local) - dresser.from_local(Vec3::ZERO);
@@ -584,4 +584,9 @@ fn an_unseen_top_is_the_upper_edge_of_the_front_face() {
     // One column: two points per 2 cm bin, under FRONT_MIN_MEDIAN — no edge, no surface.
     const { assert!(2.0 < FRONT_MIN_MEDIAN) };
     assert_eq!(category_surface_height(&scene(1, 0), &dresser, "dresser"), None);
+    // The rule that answered, as the detections record it.
+    let source = |pre: &Preprocessed| category_surface(pre, &dresser, "dresser").map(|(_, s)| s);
+    assert_eq!(source(&unseen), Some(SurfaceSource::FrontEdge));
+    assert_eq!(source(&seen), Some(SurfaceSource::Face));
+    assert_eq!(source(&scene(1, 0)), None);
 }

@@ -542,6 +542,18 @@ fn print_surfaces(surfaces: &[SurfaceAccuracy], pooled: Option<&SurfaceAccuracy>
             s.median_error_m.map_or("-".into(), |e| format!("{:.1} cm", 100.0 * e))
         );
     }
+    // The rules that gave the surfaces, where more than one did: a front edge or a latent slice is a guess
+    // where the points show no face.
+    for s in surfaces.iter().chain(pooled).filter(|s| s.by_source.len() > 1) {
+        let parts: Vec<String> = s
+            .by_source
+            .iter()
+            .map(|(source, c)| {
+                format!("{source} {} of {} ({})", c.within_main, c.measured, share(c.within_main, c.measured))
+            })
+            .collect();
+        println!("  {}: main ≤ tol by rule: {}", s.category, parts.join(", "));
+    }
 }
 
 fn percent(ap: Option<f32>) -> String {
