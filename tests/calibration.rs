@@ -217,18 +217,28 @@ fn detection_reports_calibrated_scores_and_keeps_the_raw_ones() {
     assert!((detections[2].score - 0.5).abs() < 1e-6 && detections[2].raw_score == Some(0.0));
 }
 
+/// The overlay draws one box per object: a better box of another category at IoU ≥ 0.4, or of its own at
+/// IoU ≥ the NMS's, hides a box; boxes beside each other (the hand-computed IoUs below) are all drawn.
 #[test]
 fn overlay_draws_one_category_per_object() {
     let detections = vec![
         detection("bed", [0.0, 2.0, 0.5], [2.0, 1.5, 1.0], 0.9),
         detection("sofa", [0.05, 2.0, 0.5], [2.0, 1.5, 1.0], 0.8), // same furniture, other category: skipped
-        detection("bed", [0.3, 2.0, 0.5], [2.0, 1.5, 1.0], 0.7),   // same category: NMS's business, kept
-        detection("nightstand", [1.4, 1.6, 0.3], [0.5, 0.4, 0.6], 0.6), // beside the bed (IoU < 0.4): kept
+        // Same category, 0.3 m over: IoU 2.55 / 3.45 = 0.74 ≥ the NMS's 0.15 (a demoted duplicate): skipped.
+        detection("bed", [0.3, 2.0, 0.5], [2.0, 1.5, 1.0], 0.75),
+        // Same category, 1.8 m over: IoU 0.3 / 5.7 = 0.053 < 0.15 (two beds side by side): kept.
+        detection("bed", [1.8, 2.0, 0.5], [2.0, 1.5, 1.0], 0.7),
+        detection("nightstand", [1.4, 0.9, 0.3], [0.5, 0.4, 0.6], 0.6), // beside the bed (IoU < 0.4): kept
         detection("chair", [4.0, 2.0, 0.4], [0.5, 0.5, 0.8], 0.5),
     ];
     let chosen = overlay_selection(&detections, 3, 0.0);
     let names: Vec<(&str, f32)> = chosen.iter().map(|d| (d.category.as_str(), d.score)).collect();
     assert_eq!(names, vec![("bed", 0.9), ("bed", 0.7), ("nightstand", 0.6)]);
+    // The hand-computed IoUs, and where they lie against the overlay's same-category limit (the NMS's).
+    let iou = |a: usize, b: usize| cog_gpu::geometry::iou_3d(&detections[a].cuboid(), &detections[b].cuboid());
+    assert!((iou(0, 2) - 2.55 / 3.45).abs() < 1e-5 && (iou(0, 3) - 0.3 / 5.7).abs() < 1e-5);
+    let limit = cog_gpu::detect::OVERLAY_SAME_CATEGORY_IOU;
+    assert!(limit == cog_gpu::nms::DEFAULT_NMS_IOU && iou(0, 3) < limit && limit <= iou(0, 2));
 }
 
 /// The overlay's probability floor drops calibrated detections below it (wherever they rank) and never an
