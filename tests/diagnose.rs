@@ -125,25 +125,29 @@ fn overlay_precision_by_hand() {
             object("chair", unit_box(0.0, 6.0)),
             object("sofa", unit_box(9.0, 9.0)),
         ],
-        // f1: two overlapping beds, k = 2.
-        vec![object("bed", unit_box(0.0, 3.0)), object("bed", unit_box(0.5, 3.0))],
+        // f1: two beds side by side (x = 0 and 1.05), k = 2.
+        vec![object("bed", unit_box(0.0, 3.0)), object("bed", unit_box(1.05, 3.0))],
         // f2: k = 1, no detections.
         vec![object("chair", unit_box(0.0, 6.0))],
         // f3: k = 0.
         vec![],
     ];
     let detections = vec![
-        // The sofa is not evaluated (ignored, even though it scores best); top 2: bed 0.9 (TP), its
-        // duplicate 0.8 (FP: no free bed left); the exact chair at 0.7 is the third, not shown.
+        // The sofa is not evaluated (ignored, even though it scores best); top 2: bed 0.9 (TP), then its
+        // duplicate 0.8 is skipped (the same object: IoU 1 ≥ the overlay's same-category limit, the NMS's
+        // 0.15), so the chair 0.7 is shown, 0.8 m off its box (IoU 0.2/1.8 = 0.11): FP; the exact chair
+        // at 0.6 is the third, not shown.
         vec![
             det("sofa", unit_box(9.0, 9.0), 0.99),
             det("bed", unit_box(0.0, 3.0), 0.9),
             det("bed", unit_box(0.0, 3.0), 0.8),
-            det("chair", unit_box(0.0, 6.0), 0.7),
+            det("chair", unit_box(0.0, 6.8), 0.7),
+            det("chair", unit_box(0.0, 6.0), 0.6),
         ],
-        // Bed at x = 0 (0.9) takes the bed at x = 0 (IoU 1); bed at x = 0.1 (0.8): its best box is taken,
-        // the free one at x = 0.5 overlaps it by 0.6/1.4 = 0.43 ≥ 0.25 → TP as well.
-        vec![det("bed", unit_box(0.0, 3.0), 0.9), det("bed", unit_box(0.1, 3.0), 0.8)],
+        // Bed at x = −0.3 (0.9) takes the bed at x = 0 (IoU 0.7/1.3 = 0.54); bed at x = 0.5 (0.8; IoU
+        // 0.2/1.8 = 0.11 with the first, under 0.15: shown): its best box, x = 0 (0.5/1.5 = 0.33), is
+        // taken, the free one at x = 1.05 overlaps it by 0.45/1.55 = 0.29 ≥ 0.25 → TP as well.
+        vec![det("bed", unit_box(-0.3, 3.0), 0.9), det("bed", unit_box(0.5, 3.0), 0.8)],
         vec![],
         vec![det("bed", unit_box(0.0, 3.0), 0.9)],
     ];
@@ -151,7 +155,7 @@ fn overlay_precision_by_hand() {
     let o = overlay_precision(&truth, &detections, &categories, 0.25, OverlayRule::GroundTruthCount);
     assert_eq!((o.true_positives, o.shown), (3, 4));
     assert!(close(o.precision, 0.75));
-    // At IoU 0.5 the second bed of f1 misses (0.43): 2 of 4.
+    // At IoU 0.5 the second bed of f1 misses (0.29): 2 of 4.
     let o = overlay_precision(&truth, &detections, &categories, 0.5, OverlayRule::GroundTruthCount);
     assert_eq!((o.true_positives, o.shown), (2, 4));
     // A detection of another category on the box does not count: a chair on f1's bed.
