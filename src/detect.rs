@@ -961,8 +961,9 @@ pub const DEFAULT_OVERLAY_TOP: usize = 8;
 pub const DEFAULT_OVERLAY_MIN_PROBABILITY: f32 = 0.5;
 
 /// The 3D IoU from which the overlay skips a detection overlapping an already chosen one **of its own
-/// category** ([`overlay_selection`]): the NMS's default, [`DEFAULT_NMS_IOU`] — a box the NMS would have
-/// dropped. Since 2026-12-06 the NMS run again after box voting demotes such boxes instead of dropping them
+/// category** ([`overlay_selection`]) where the detection's NMS IoU is not known (`eval --diagnose`): the
+/// NMS's default, [`DEFAULT_NMS_IOU`] — a box the NMS would have dropped; `detect` passes its own
+/// `--nms-iou`. Since 2026-12-06 the NMS run again after box voting demotes such boxes instead of dropping them
 /// (for the AP, "Demoted, not dropped"), and the context cascade can lift one back above its keeper, so one
 /// object could be drawn twice (on the selection set, seeds 2500–2506, one of the 388 drawn boxes).
 pub const OVERLAY_SAME_CATEGORY_IOU: f32 = DEFAULT_NMS_IOU;
@@ -970,11 +971,17 @@ pub const OVERLAY_SAME_CATEGORY_IOU: f32 = DEFAULT_NMS_IOU;
 /// The detections an overlay draws: in score order over all categories (calibrated scores compare across
 /// categories), each skipped when it overlaps an already chosen detection of another category with 3D
 /// IoU ≥ [`CROSS_CATEGORY_IOU`] (one object is not drawn as two categories) or one of its own category
-/// with 3D IoU ≥ [`OVERLAY_SAME_CATEGORY_IOU`] (nor twice), until `count` are chosen. A calibrated
+/// with 3D IoU ≥ `same_category_iou` (nor twice: the NMS's IoU, [`OVERLAY_SAME_CATEGORY_IOU`] by
+/// default), until `count` are chosen. A calibrated
 /// detection (one with a `raw_score`, whose `score` is a probability) whose score is below
 /// `min_probability` is not drawn; an uncalibrated one's score is raw, on no common scale, so the floor does
 /// not apply to it (0 draws the best `count` whatever they are).
-pub fn overlay_selection(detections: &[Detection], count: usize, min_probability: f32) -> Vec<Detection> {
+pub fn overlay_selection(
+    detections: &[Detection],
+    count: usize,
+    min_probability: f32,
+    same_category_iou: f32,
+) -> Vec<Detection> {
     let mut order: Vec<&Detection> = detections.iter().collect();
     order.sort_by(|a, b| b.score.total_cmp(&a.score));
     let mut chosen: Vec<Detection> = Vec::new();
@@ -987,7 +994,7 @@ pub fn overlay_selection(detections: &[Detection], count: usize, min_probability
         }
         let cuboid = d.cuboid();
         let clash = chosen.iter().any(|c| {
-            let limit = if c.category == d.category { OVERLAY_SAME_CATEGORY_IOU } else { CROSS_CATEGORY_IOU };
+            let limit = if c.category == d.category { same_category_iou } else { CROSS_CATEGORY_IOU };
             crate::geometry::iou_3d(&c.cuboid(), &cuboid) >= limit
         });
         if !clash {

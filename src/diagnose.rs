@@ -41,7 +41,7 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
-use crate::detect::overlay_selection;
+use crate::detect::{overlay_selection, OVERLAY_SAME_CATEGORY_IOU};
 use crate::eval::{
     average_precision, category_truth, interpolated_ap, scored_boxes, Detection, PrecisionRecall, ScoredBox,
 };
@@ -304,8 +304,12 @@ pub fn overlay_precision(
         let dets = detections.get(image).map(Vec::as_slice).unwrap_or(&[]);
         let candidates: Vec<Detection> = dets.iter().filter(|d| evaluated(&d.category)).cloned().collect();
         let order = match rule {
-            OverlayRule::GroundTruthCount => overlay_selection(&candidates, truths.len(), 0.0),
-            OverlayRule::Drawn { top, min_probability } => overlay_selection(&candidates, top, min_probability),
+            OverlayRule::GroundTruthCount => {
+                overlay_selection(&candidates, truths.len(), 0.0, OVERLAY_SAME_CATEGORY_IOU)
+            }
+            OverlayRule::Drawn { top, min_probability } => {
+                overlay_selection(&candidates, top, min_probability, OVERLAY_SAME_CATEGORY_IOU)
+            }
         };
         if order.is_empty() {
             out.frames_without_boxes += 1;

@@ -2,7 +2,7 @@
 //! of detections, storage in model files, and how detection and the overlay use calibrated scores.
 
 use cog_gpu::calibration::{fit_logistic, label_detections, Calibration, MIN_SLOPE};
-use cog_gpu::detect::{calibrate, overlay_selection};
+use cog_gpu::detect::{calibrate, overlay_selection, OVERLAY_SAME_CATEGORY_IOU};
 use cog_gpu::eval::Detection;
 use cog_gpu::features::LatticePhase;
 use cog_gpu::features::Support;
@@ -231,14 +231,18 @@ fn overlay_draws_one_category_per_object() {
         detection("nightstand", [1.4, 0.9, 0.3], [0.5, 0.4, 0.6], 0.6), // beside the bed (IoU < 0.4): kept
         detection("chair", [4.0, 2.0, 0.4], [0.5, 0.5, 0.8], 0.5),
     ];
-    let chosen = overlay_selection(&detections, 3, 0.0);
+    let chosen = overlay_selection(&detections, 3, 0.0, OVERLAY_SAME_CATEGORY_IOU);
     let names: Vec<(&str, f32)> = chosen.iter().map(|d| (d.category.as_str(), d.score)).collect();
     assert_eq!(names, vec![("bed", 0.9), ("bed", 0.7), ("nightstand", 0.6)]);
     // The hand-computed IoUs, and where they lie against the overlay's same-category limit (the NMS's).
     let iou = |a: usize, b: usize| cog_gpu::geometry::iou_3d(&detections[a].cuboid(), &detections[b].cuboid());
     assert!((iou(0, 2) - 2.55 / 3.45).abs() < 1e-5 && (iou(0, 3) - 0.3 / 5.7).abs() < 1e-5);
-    let limit = cog_gpu::detect::OVERLAY_SAME_CATEGORY_IOU;
+    let limit = OVERLAY_SAME_CATEGORY_IOU;
     assert!(limit == cog_gpu::nms::DEFAULT_NMS_IOU && iou(0, 3) < limit && limit <= iou(0, 2));
+    // `detect --nms-iou 0.8` draws what its NMS would keep: the duplicate at 0.74 too.
+    let loose = overlay_selection(&detections, 3, 0.0, 0.8);
+    let names: Vec<(&str, f32)> = loose.iter().map(|d| (d.category.as_str(), d.score)).collect();
+    assert_eq!(names, vec![("bed", 0.9), ("bed", 0.75), ("bed", 0.7)]);
 }
 
 /// The overlay's probability floor drops calibrated detections below it (wherever they rank) and never an
@@ -259,9 +263,12 @@ fn overlay_floor_applies_to_calibrated_probabilities_only() {
         calibrated("desk", 12.0, 0.1),
     ];
     let names = |chosen: Vec<Detection>| -> Vec<String> { chosen.iter().map(|d| d.category.clone()).collect() };
-    assert_eq!(names(overlay_selection(&detections, 8, 0.5)), ["bed", "sofa", "chair"]);
-    assert_eq!(names(overlay_selection(&detections, 2, 0.5)), ["bed", "sofa"]);
-    assert_eq!(names(overlay_selection(&detections, 8, 0.0)), ["bed", "sofa", "table", "chair", "desk"]);
+    assert_eq!(names(overlay_selection(&detections, 8, 0.5, OVERLAY_SAME_CATEGORY_IOU)), ["bed", "sofa", "chair"]);
+    assert_eq!(names(overlay_selection(&detections, 2, 0.5, OVERLAY_SAME_CATEGORY_IOU)), ["bed", "sofa"]);
+    assert_eq!(
+        names(overlay_selection(&detections, 8, 0.0, OVERLAY_SAME_CATEGORY_IOU)),
+        ["bed", "sofa", "table", "chair", "desk"]
+    );
 }
 
 /// The raw score at a probability: the closed form (logit(p) − b) / a, and exactly the boundary of the

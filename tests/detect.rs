@@ -256,6 +256,7 @@ fn the_cli_writes_detections_and_overlays() {
 fn the_overlay_draws_only_calibrated_detections_above_its_floor() {
     use cog_gpu::calibration::Calibration;
     use cog_gpu::detect::{overlay_selection, DEFAULT_OVERLAY_MIN_PROBABILITY};
+    use cog_gpu::nms::DEFAULT_NMS_IOU;
     let dir = tempfile::tempdir().unwrap();
     let models = dir.path().join("models");
     std::fs::create_dir_all(&models).unwrap();
@@ -292,8 +293,8 @@ fn the_overlay_draws_only_calibrated_detections_above_its_floor() {
         (image::open(out.join(format!("{name}.png"))).unwrap().to_rgb8(), detections)
     };
     let (png, detections) = picture(None);
-    let drawn = overlay_selection(&detections.detections, 8, DEFAULT_OVERLAY_MIN_PROBABILITY);
-    let unfloored = overlay_selection(&detections.detections, 8, 0.0);
+    let drawn = overlay_selection(&detections.detections, 8, DEFAULT_OVERLAY_MIN_PROBABILITY, DEFAULT_NMS_IOU);
+    let unfloored = overlay_selection(&detections.detections, 8, 0.0, DEFAULT_NMS_IOU);
     assert!(!drawn.is_empty() && drawn.len() < unfloored.len(), "{} against {}", drawn.len(), unfloored.len());
     let expected = overlay(&frame, &FrameDetections { frame: name.into(), detections: drawn });
     assert!(png == expected, "the default floor's picture");

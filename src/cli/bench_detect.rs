@@ -249,7 +249,7 @@ impl Bench<'_> {
         let text = serde_json::to_string_pretty(&report)?;
         let picture = overlay_picture(
             &frame,
-            &best_of(&report, DEFAULT_OVERLAY_TOP, DEFAULT_OVERLAY_MIN_PROBABILITY),
+            &best_of(&report, DEFAULT_OVERLAY_TOP, DEFAULT_OVERLAY_MIN_PROBABILITY, detect_options.nms_iou),
             layout.as_ref().map(|(p, _)| &p.room),
         );
         std::hint::black_box((text, picture));

@@ -575,7 +575,7 @@ fn detect_one(dir: &Path, run: &DetectRun) -> anyhow::Result<FrameReport> {
     std::fs::write(&partial, serde_json::to_string_pretty(&report)?)
         .with_context(|| format!("writing {}", partial.display()))?;
     std::fs::rename(&partial, &json_path).with_context(|| format!("renaming {} into place", partial.display()))?;
-    let best = best_of(&report, args.overlay_top, args.overlay_min_score);
+    let best = best_of(&report, args.overlay_top, args.overlay_min_score, args.nms_iou);
     let room = layout.as_ref().map(|(predicted, _)| &predicted.room);
     if !args.no_overlay {
         let png_path = args.out.join(format!("{}.png", frame.name));
@@ -620,12 +620,13 @@ pub(super) fn rescore_in_room(
     Ok(())
 }
 
-/// The best `top` detections over all categories, one category per object, none of them a calibrated one
-/// below `min_probability` (what the overlay draws: [`overlay_selection`]).
-pub(super) fn best_of(report: &FrameReport, top: usize, min_probability: f32) -> FrameDetections {
+/// The best `top` detections over all categories, one box per object (a box within `nms_iou` of a better
+/// one of its category, or within the cross-category IoU of one of another, is not drawn), none of them a
+/// calibrated one below `min_probability` (what the overlay draws: [`overlay_selection`]).
+pub(super) fn best_of(report: &FrameReport, top: usize, min_probability: f32, nms_iou: f32) -> FrameDetections {
     FrameDetections {
         frame: report.detections.frame.clone(),
-        detections: overlay_selection(&report.detections.detections, top, min_probability),
+        detections: overlay_selection(&report.detections.detections, top, min_probability, nms_iou),
     }
 }
 
@@ -655,7 +656,7 @@ fn print_summary(results: &[FrameReport], args: &Args, seconds: f64) {
         let drawn = if args.no_overlay {
             String::new()
         } else {
-            let boxes = best_of(report, args.overlay_top, args.overlay_min_score).detections.len();
+            let boxes = best_of(report, args.overlay_top, args.overlay_min_score, args.nms_iou).detections.len();
             format!("; overlay: {boxes} box(es) (calibrated score ≥ {})", args.overlay_min_score)
         };
         println!("{}: {} detections: {}{drawn}", r.frame, r.detections.len(), text.join(", "));
