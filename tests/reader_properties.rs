@@ -11,7 +11,7 @@ use cog_gpu::limits::{MAX_COORDINATE_M, MAX_OBJECT_SIZE_M};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use proptest::prelude::*;
-use proptest::test_runner::{TestCaseError, TestRunner};
+use proptest::test_runner::{RngAlgorithm, TestCaseError, TestRng, TestRunner};
 use serde_json::json;
 
 /// A number as an annotator's tool (or a corrupted file) might write it: ordinary, tiny, huge or zero.
@@ -65,14 +65,19 @@ proptest! {
 }
 
 /// Runs `check` on `cases` values of `strategy` and returns how many it accepted (`Ok(true)`), so that a
-/// test can also show that its property is not vacuous (some inputs must get through the reader).
+/// test can also show that its property is not vacuous (some inputs must get through the reader). The
+/// values come from proptest's deterministic RNG: the same ones on every run, so the count that the
+/// vacuity check compares is a fixed fact, not a draw (with a fresh seed per run, the intrinsics' count
+/// once fell to 4 of 96 in a CI run, 2026-12-07, under its floor of 5; with this RNG the three tests
+/// accept 38 of 256, 12 of 96 and 16 of 256).
 fn accepted_count<S: Strategy>(
     cases: u32,
     strategy: S,
     check: impl Fn(S::Value) -> Result<bool, TestCaseError>,
 ) -> usize {
     let accepted = AtomicUsize::new(0);
-    let mut runner = TestRunner::new(ProptestConfig::with_cases(cases));
+    let rng = TestRng::deterministic_rng(RngAlgorithm::default());
+    let mut runner = TestRunner::new_with_rng(ProptestConfig::with_cases(cases), rng);
     let result = runner.run(&strategy, |value| {
         if check(value)? {
             accepted.fetch_add(1, Ordering::Relaxed);
