@@ -771,7 +771,7 @@ fn detect_windows<'a>(
         let surface = measured.or_else(|| {
             d.latent_slice.map(|h| (refined_surface_height(pre, &cuboid, h as usize), SurfaceSource::LatentSlice))
         });
-        (d.surface_z, d.surface_source) = (surface.map(|(z, _)| z), surface.map(|(_, source)| source));
+        (d.surface_z, d.surface_source) = surface.unzip();
     });
     stages.add(Stage::Nms, lap());
     Ok(detections)
@@ -963,19 +963,18 @@ pub const DEFAULT_OVERLAY_MIN_PROBABILITY: f32 = 0.5;
 /// The 3D IoU from which the overlay skips a detection overlapping an already chosen one **of its own
 /// category** ([`overlay_selection`]) where the detection's NMS IoU is not known (`eval --diagnose`): the
 /// NMS's default, [`DEFAULT_NMS_IOU`] — a box the NMS would have dropped; `detect` passes its own
-/// `--nms-iou`. Since 2026-12-06 the NMS run again after box voting demotes such boxes instead of dropping them
-/// (for the AP, "Demoted, not dropped"), and the context cascade can lift one back above its keeper, so one
-/// object could be drawn twice (on the selection set, seeds 2500–2506, one of the 388 drawn boxes).
+/// `--nms-iou`. Since 2026-12-06 the NMS run again after box voting demotes such boxes instead of dropping
+/// them (for the AP, "Demoted, not dropped"), and the context cascade can lift one back above its keeper,
+/// so one object could be drawn twice (on the selection set, seeds 2500–2506, one of the 388 drawn boxes).
 pub const OVERLAY_SAME_CATEGORY_IOU: f32 = DEFAULT_NMS_IOU;
 
 /// The detections an overlay draws: in score order over all categories (calibrated scores compare across
 /// categories), each skipped when it overlaps an already chosen detection of another category with 3D
 /// IoU ≥ [`CROSS_CATEGORY_IOU`] (one object is not drawn as two categories) or one of its own category
 /// with 3D IoU ≥ `same_category_iou` (nor twice: the NMS's IoU, [`OVERLAY_SAME_CATEGORY_IOU`] by
-/// default), until `count` are chosen. A calibrated
-/// detection (one with a `raw_score`, whose `score` is a probability) whose score is below
-/// `min_probability` is not drawn; an uncalibrated one's score is raw, on no common scale, so the floor does
-/// not apply to it (0 draws the best `count` whatever they are).
+/// default), until `count` are chosen. A calibrated detection (one with a `raw_score`, whose `score` is a
+/// probability) whose score is below `min_probability` is not drawn; an uncalibrated one's score is raw,
+/// on no common scale, so the floor does not apply to it (0 draws the best `count` whatever they are).
 pub fn overlay_selection(
     detections: &[Detection],
     count: usize,
