@@ -94,18 +94,11 @@ impl<'a> Backend<'a> {
         hypotheses: &[Hypothesis],
         weights: &[Vec<f32>],
     ) -> Vec<f32> {
-        match self {
-            Backend::Gpu(ctx) if use_kernel_on(ctx) => {
-                match crate::gpu::features::scores_gpu(ctx, scene, layout, hypotheses, weights) {
-                    Ok((scores, _)) => scores,
-                    Err(e) => {
-                        log::warn!("box scores on the GPU failed ({e}): scoring on the CPU");
-                        cpu::scores(scene, layout, hypotheses, weights).0
-                    }
-                }
-            }
-            _ => cpu::scores(scene, layout, hypotheses, weights).0,
-        }
+        self.kernel_or_cpu(
+            "box scores",
+            |ctx| crate::gpu::features::scores_gpu(ctx, scene, layout, hypotheses, weights).map(|(scores, _)| scores),
+            || cpu::scores(scene, layout, hypotheses, weights).0,
+        )
     }
 
     /// Fast-path scores: the GPU kernel with [`Backend::Gpu`], [`FastEngine::scores`] with
@@ -118,17 +111,11 @@ impl<'a> Backend<'a> {
     /// used unless the environment sets `COG_GPU_FAST_KERNEL=always` ([`use_kernel_on`]; said once, at
     /// info level).
     pub fn fast_scores(&self, engine: &FastEngine, hypotheses: &[Hypothesis], weights: &[Vec<f32>]) -> Vec<f32> {
-        match self {
-            Backend::Gpu(ctx) if !use_kernel_on(ctx) => engine.scores(hypotheses, weights),
-            Backend::Gpu(ctx) => match fast_scores_gpu(ctx, engine, hypotheses, weights) {
-                Ok(scores) => scores,
-                Err(e) => {
-                    log::warn!("fast_scores on the GPU failed ({e}): scoring on the CPU");
-                    engine.scores(hypotheses, weights)
-                }
-            },
-            Backend::Cpu => engine.scores(hypotheses, weights),
-        }
+        self.kernel_or_cpu(
+            "fast_scores",
+            |ctx| fast_scores_gpu(ctx, engine, hypotheses, weights),
+            || engine.scores(hypotheses, weights),
+        )
     }
 
     /// The latent support surfaces' slice scores (`w_sliceᵀφ_surface(I, B, h) + u_h`, [`SLICES`] per
@@ -141,16 +128,11 @@ impl<'a> Backend<'a> {
         hypotheses: &[Hypothesis],
         weights: &SurfaceWeights,
     ) -> Vec<[f32; SLICES]> {
-        match self {
-            Backend::Gpu(ctx) if use_kernel_on(ctx) => match slice_scores_gpu(ctx, engine, hypotheses, weights) {
-                Ok(scores) => scores,
-                Err(e) => {
-                    log::warn!("slice scores on the GPU failed ({e}): scoring on the CPU");
-                    engine.slice_scores(hypotheses, weights)
-                }
-            },
-            _ => engine.slice_scores(hypotheses, weights),
-        }
+        self.kernel_or_cpu(
+            "slice scores",
+            |ctx| slice_scores_gpu(ctx, engine, hypotheses, weights),
+            || engine.slice_scores(hypotheses, weights),
+        )
     }
 
     /// [`Backend::fast_scores`] of several jobs on one engine (one per model whose fast-path settings the
@@ -158,19 +140,11 @@ impl<'a> Backend<'a> {
     /// lattice points uploaded once and tables that several jobs use built once; on the CPU one after the
     /// other. Returns each job's scores.
     pub fn fast_scores_jobs(&self, engine: &FastEngine, jobs: &[FastJob]) -> Vec<Vec<f32>> {
-        let on_cpu = || jobs.iter().map(|job| engine.scores(job.hypotheses, job.weights)).collect();
-        match self {
-            Backend::Gpu(ctx) if use_kernel_on(ctx) => {
-                match fast_scores_gpu_jobs(ctx, engine, jobs, FastChunking::default()) {
-                    Ok(scores) => scores,
-                    Err(e) => {
-                        log::warn!("fast_scores on the GPU failed ({e}): scoring on the CPU");
-                        on_cpu()
-                    }
-                }
-            }
-            _ => on_cpu(),
-        }
+        self.kernel_or_cpu(
+            "fast_scores",
+            |ctx| fast_scores_gpu_jobs(ctx, engine, jobs, FastChunking::default()),
+            || jobs.iter().map(|job| engine.scores(job.hypotheses, job.weights)).collect(),
+        )
     }
 
     /// Integer scores of room-layout hypotheses: [`voxels::scores_cpu`] or its kernel
@@ -179,6 +153,25 @@ impl<'a> Backend<'a> {
         match self {
             Backend::Cpu => Ok(voxels::scores_cpu(cells, tables, boxes)),
             Backend::Gpu(ctx) => crate::gpu::room_layout::scores_gpu(ctx, cells, tables, boxes),
+        }
+    }
+
+    /// The one fallback rule of the scoring steps that have a kernel: where the kernels run
+    /// ([`use_kernel_on`]: a hardware adapter, or `COG_GPU_FAST_KERNEL=always`) `on_gpu`, and if it fails
+    /// (e.g. a table over the binding limit) a warning naming `what` and `on_cpu`; elsewhere (the CPU, or a
+    /// software adapter without the override) `on_cpu`. So the caller always gets scores.
+    fn kernel_or_cpu<T>(
+        &self,
+        what: &str,
+        on_gpu: impl FnOnce(&GpuContext) -> Result<T>,
+        on_cpu: impl FnOnce() -> T,
+    ) -> T {
+        match self {
+            Backend::Gpu(ctx) if use_kernel_on(ctx) => on_gpu(ctx).unwrap_or_else(|e| {
+                log::warn!("{what} on the GPU failed ({e}): scoring on the CPU");
+                on_cpu()
+            }),
+            _ => on_cpu(),
         }
     }
 }

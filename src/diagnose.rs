@@ -41,7 +41,7 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
-use crate::detect::{overlay_selection, OVERLAY_SAME_CATEGORY_IOU};
+use crate::detect::overlay_selection;
 use crate::eval::{
     average_precision, category_truth, interpolated_ap, scored_boxes, Detection, PrecisionRecall, ScoredBox,
 };
@@ -289,13 +289,16 @@ pub enum OverlayRule {
 /// `categories`). They are matched greedily in that order: a shown detection takes, among the not yet
 /// matched ground-truth boxes of its own category in the image, the one with the highest 3D IoU, and is a
 /// true positive (and marks that box matched) when that IoU is ≥ `iou_threshold`. (Unlike the benchmark's
-/// AP rule, a detection whose best box is taken may still match a second, free box.)
+/// AP rule, a detection whose best box is taken may still match a second, free box.) `same_category_iou`
+/// is [`overlay_selection`]'s: the IoU at which a box gives way to a better one of its own category — the
+/// detection's NMS IoU (`detect --nms-iou`; [`crate::detect::OVERLAY_SAME_CATEGORY_IOU`] for `detect`'s default).
 pub fn overlay_precision(
     truth: &[Vec<Object>],
     detections: &[Vec<Detection>],
     categories: &[String],
     iou_threshold: f32,
     rule: OverlayRule,
+    same_category_iou: f32,
 ) -> OverlayPrecision {
     let evaluated = |category: &str| categories.iter().any(|c| c == category);
     let mut out = OverlayPrecision { frames: truth.len(), ..OverlayPrecision::default() };
@@ -304,11 +307,9 @@ pub fn overlay_precision(
         let dets = detections.get(image).map(Vec::as_slice).unwrap_or(&[]);
         let candidates: Vec<Detection> = dets.iter().filter(|d| evaluated(&d.category)).cloned().collect();
         let order = match rule {
-            OverlayRule::GroundTruthCount => {
-                overlay_selection(&candidates, truths.len(), 0.0, OVERLAY_SAME_CATEGORY_IOU)
-            }
+            OverlayRule::GroundTruthCount => overlay_selection(&candidates, truths.len(), 0.0, same_category_iou),
             OverlayRule::Drawn { top, min_probability } => {
-                overlay_selection(&candidates, top, min_probability, OVERLAY_SAME_CATEGORY_IOU)
+                overlay_selection(&candidates, top, min_probability, same_category_iou)
             }
         };
         if order.is_empty() {

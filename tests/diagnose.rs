@@ -6,6 +6,7 @@ use std::process::Command;
 
 mod common;
 
+use cog_gpu::detect::OVERLAY_SAME_CATEGORY_IOU;
 use cog_gpu::diagnose::{
     best_window_ious, diagnose_categories, false_positive_kinds, frame_window_best_ious, in_frame_ranking,
     object_outcomes, oracle_aps, overlay_precision, rank_average_precision, ObjectSummary, OverlayRule, WindowRecall,
@@ -151,22 +152,37 @@ fn overlay_precision_by_hand() {
         vec![],
         vec![det("bed", unit_box(0.0, 3.0), 0.9)],
     ];
+    // Under the ground-truth count with `detect`'s default same-category limit.
+    let by_count = |detections: &[Vec<Detection>], iou: f32| {
+        overlay_precision(
+            &truth,
+            detections,
+            &categories,
+            iou,
+            OverlayRule::GroundTruthCount,
+            OVERLAY_SAME_CATEGORY_IOU,
+        )
+    };
     // Shown 2 + 2 + 0 + 0 = 4, true positives 1 + 2 = 3.
-    let o = overlay_precision(&truth, &detections, &categories, 0.25, OverlayRule::GroundTruthCount);
+    let o = by_count(&detections, 0.25);
     assert_eq!((o.true_positives, o.shown), (3, 4));
     assert!(close(o.precision, 0.75));
     // At IoU 0.5 the second bed of f1 misses (0.29): 2 of 4.
-    let o = overlay_precision(&truth, &detections, &categories, 0.5, OverlayRule::GroundTruthCount);
+    let o = by_count(&detections, 0.5);
     assert_eq!((o.true_positives, o.shown), (2, 4));
+    // With `detect --nms-iou 0.1` (the same-category limit under f1's beds' IoU of 0.11) f1's second bed
+    // gives way to its first and nothing replaces it: f0 as before (1 of 2), f1 1 of 1.
+    let o = overlay_precision(&truth, &detections, &categories, 0.25, OverlayRule::GroundTruthCount, 0.1);
+    assert_eq!((o.true_positives, o.shown), (2, 3));
     // A detection of another category on the box does not count: a chair on f1's bed.
     let chair_on_bed = vec![vec![], vec![det("chair", unit_box(0.0, 3.0), 0.9)]];
-    let o = overlay_precision(&truth, &chair_on_bed, &categories, 0.25, OverlayRule::GroundTruthCount);
+    let o = by_count(&chair_on_bed, 0.25);
     assert_eq!((o.true_positives, o.shown, o.precision), (0, 1, Some(0.0)));
-    let none = overlay_precision(&truth, &[], &categories, 0.25, OverlayRule::GroundTruthCount);
+    let none = by_count(&[], 0.25);
     assert_eq!((none.shown, none.precision), (0, None));
     assert_eq!((none.frames, none.frames_without_boxes), (4, 4));
     // Under the ground-truth count, f2 (no detections) and f3 (k = 0) show nothing.
-    let o = overlay_precision(&truth, &detections, &categories, 0.25, OverlayRule::GroundTruthCount);
+    let o = by_count(&detections, 0.25);
     assert_eq!((o.frames, o.frames_without_boxes), (4, 2));
 }
 
@@ -200,7 +216,7 @@ fn drawn_overlay_precision_by_hand() {
     ];
     let drawn = |top: usize, min_probability: f32| {
         let rule = OverlayRule::Drawn { top, min_probability };
-        let o = overlay_precision(&truth, &detections, &categories, 0.25, rule);
+        let o = overlay_precision(&truth, &detections, &categories, 0.25, rule, OVERLAY_SAME_CATEGORY_IOU);
         (o.true_positives, o.shown, o.frames_without_boxes)
     };
     // Floor 0.5, top 8: f0 shows bed, chair 0.6, bed 0.55 (1 TP of 3); f1 none; f2 one false.

@@ -45,6 +45,7 @@ use cog_gpu::features::Preprocessed;
 use cog_gpu::frame::{frame_name, read_annotations, unique_frame_names, Dataset, DepthSource, Frame, Object};
 use cog_gpu::geometry::{in_view_share, Camera};
 use cog_gpu::model::{read_models_dir, Model};
+use cog_gpu::nms::DEFAULT_NMS_IOU;
 use cog_gpu::synth::{read_support_heights, SUPPORT_FILE};
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
@@ -105,6 +106,10 @@ pub struct Args {
     /// `--overlay-min-score` (the same default as `detect`'s).
     #[arg(long, requires = "diagnose", default_value_t = DEFAULT_OVERLAY_MIN_PROBABILITY, value_parser = options::probability)]
     pub overlay_min_score: f32,
+    /// With --diagnose: both overlay lines skip a box overlapping a better one of its own category at 3D IoU
+    /// at least this — the detections' `detect --nms-iou` (the same default as `detect`'s).
+    #[arg(long, requires = "diagnose", default_value_t = DEFAULT_NMS_IOU, value_parser = options::iou)]
+    pub nms_iou: f32,
     /// With --diagnose: also list every ground-truth box of the evaluated categories — its frame, size,
     /// distance from the camera and share of its volume in the picture (reads each such frame's camera),
     /// the true positive that found it (score, IoU, the precision and the false positives before it in the
@@ -390,9 +395,9 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
             None => None,
         };
         let diagnosis = diagnose_categories(&truth, &detections, &categories, args.iou, window.as_ref());
-        let overlay = overlay_precision(&truth, &detections, &categories, args.iou, OverlayRule::GroundTruthCount);
-        let drawn_rule = OverlayRule::Drawn { top: args.overlay_top, min_probability: args.overlay_min_score };
-        let drawn = overlay_precision(&truth, &detections, &categories, args.iou, drawn_rule);
+        let overlay_of = |rule| overlay_precision(&truth, &detections, &categories, args.iou, rule, args.nms_iou);
+        let overlay = overlay_of(OverlayRule::GroundTruthCount);
+        let drawn = overlay_of(OverlayRule::Drawn { top: args.overlay_top, min_probability: args.overlay_min_score });
         let objects = if args.objects {
             Some(named_outcomes(&frames, &truth, &detections, &categories, args.iou)?)
         } else {
