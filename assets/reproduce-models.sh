@@ -8,6 +8,9 @@
 #                                             # evaluated
 #   bash assets/reproduce-models.sh exclusion # after `cascade`: its cross-category exclusion, fitted on the
 #                                             # selection set and evaluated
+#   bash assets/reproduce-models.sh shipped   # nothing trained: the shipped pipeline (assets/models as they
+#                                             # are) on the test set, both annotation rules -- the figures of
+#                                             # the README's status table, in WORK/shipped/summary.txt
 #
 # BIN (default target/release/cog-gpu, built first) is the binary that runs: point it at a copy to keep
 # rebuilding the checkout while the script runs. WORK (default /tmp/cog-gpu-repro) receives the data
@@ -162,6 +165,51 @@ train_and_eval() {
 }
 
 case "$mode" in
+    shipped)
+        # The README's status table ("Where it stands") and "The shipped pipeline today": the shipped models,
+        # calibrations and cascade, detected on the test set (about 36 min on the 2-core machine; a rerun
+        # keeps the first-stage files), rescored, and evaluated against both annotation rules of the same
+        # frames; the support surfaces of the first stage; the sample frames' best detections.
+        dir="$WORK/shipped"
+        mkdir -p "$dir"
+        started=$SECONDS
+        if [ "$(cat "$dir/first/.done" 2>/dev/null)" != "$CROSS_MARK" ]; then
+            rm -rf "$dir/first"
+            "$BIN" detect "$WORK/test" --models assets/models --out "$dir/first" --min-score -3 --no-overlay \
+                --no-cascade > /dev/null
+            echo "$CROSS_MARK" > "$dir/first/.done"
+            echo "shipped detect $((SECONDS - started)) s" >> "$dir/times.txt"
+        fi
+        rm -rf "$dir/rescored"
+        "$BIN" rescore --detections "$dir/first" --out "$dir/rescored" --cascade assets/models/cascade.json
+        for rule in visible:test depth:test-depth; do
+            IFS=: read -r name data <<< "$rule"
+            for stage in first rescored; do
+                "$BIN" eval --data "$WORK/$data" --detections "$dir/$stage" --bootstrap 1000 \
+                    > "$dir/ap-ten-$name-$stage.txt"
+                "$BIN" eval --data "$WORK/$data" --detections "$dir/$stage" --categories all --bootstrap 1000 \
+                    > "$dir/ap-all-$name-$stage.txt"
+            done
+            "$BIN" eval --data "$WORK/$data" --detections "$dir/rescored" --diagnose > "$dir/diagnosis-$name.txt"
+        done
+        "$BIN" eval --data "$WORK/test" --detections "$dir/first" --surfaces \
+            --categories bed,table,desk,dresser,nightstand > "$dir/surfaces.txt"
+        "$BIN" detect assets/sample --models assets/models --out "$dir/sample" > "$dir/sample.txt"
+        {
+            echo "The shipped pipeline on WORK/test ($(find "$WORK/test" -mindepth 2 -maxdepth 2 -type d | wc -l) frames),"
+            echo "AP@0.25 with 90 % bootstrap intervals; first stage, then with the cascade."
+            for name in visible depth; do
+                for stage in first rescored; do
+                    echo "$name, $stage: ten large $(grep '^mAP' "$dir/ap-ten-$name-$stage.txt" | tail -1 | tr -s " ")"
+                    echo "$name, $stage: 19 categories $(grep '^mAP' "$dir/ap-all-$name-$stage.txt" | tail -1 | tr -s " ")"
+                done
+                echo "$name $(grep '^overlay precision' "$dir/diagnosis-$name.txt")"
+            done
+            echo "first stage, $(sed -n '/^support surfaces/,$p' "$dir/surfaces.txt")"
+            echo "sample frames:"
+            cat "$dir/sample.txt"
+        } | tee "$dir/summary.txt"
+        ;;
     models)
         # `train`'s defaults are the shipped models' settings, with more examples for the categories in
         # CATEGORY_ARGS; detection uses the models' own step (0.2 m; 0.1 m for the nightstand, whose
