@@ -258,7 +258,7 @@ pub fn rank_average_precision(
 // 4. Overlay precision
 
 /// The overlay precision over all evaluated categories.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct OverlayPrecision {
     /// Shown detections that are true positives.
     pub true_positives: usize,
@@ -269,6 +269,53 @@ pub struct OverlayPrecision {
     /// Frames evaluated, and of them those where nothing is shown.
     pub frames: usize,
     pub frames_without_boxes: usize,
+    /// What the shown detections that are not true positives are.
+    pub false_kinds: OverlayFalseKinds,
+}
+
+/// The kinds of an overlay's false boxes, by the rules of [`FalsePositiveKinds`] (the first that applies;
+/// "duplicate": the box of its category it overlaps at the IoU threshold was taken by a better shown box).
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct OverlayFalseKinds {
+    pub duplicate: usize,
+    pub localisation: usize,
+    pub confusion: usize,
+    /// The confusions by the shown box's category and the annotated object's, most frequent first (ties in
+    /// name order).
+    pub confused: Vec<Confusion>,
+    pub background_in_frame: usize,
+    pub background_elsewhere: usize,
+}
+
+/// `count` shown boxes of category `shown` on annotated objects of category `object`.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize)]
+pub struct Confusion {
+    pub shown: String,
+    pub object: String,
+    pub count: usize,
+}
+
+impl OverlayFalseKinds {
+    fn add(&mut self, shown: &str, kind: FalsePositiveKind) {
+        match kind {
+            FalsePositiveKind::Duplicate => self.duplicate += 1,
+            FalsePositiveKind::Localisation => self.localisation += 1,
+            FalsePositiveKind::Confusion(object) => {
+                self.confusion += 1;
+                match self.confused.iter_mut().find(|c| c.shown == shown && c.object == object) {
+                    Some(c) => c.count += 1,
+                    None => self.confused.push(Confusion { shown: shown.into(), object: object.into(), count: 1 }),
+                }
+            }
+            FalsePositiveKind::BackgroundInFrame => self.background_in_frame += 1,
+            FalsePositiveKind::BackgroundElsewhere => self.background_elsewhere += 1,
+        }
+    }
+
+    fn sort(&mut self) {
+        self.confused
+            .sort_by(|a, b| b.count.cmp(&a.count).then_with(|| (&a.shown, &a.object).cmp(&(&b.shown, &b.object))));
+    }
 }
 
 /// How many detections a frame's overlay shows, for [`overlay_precision`].
@@ -292,6 +339,7 @@ pub enum OverlayRule {
 /// AP rule, a detection whose best box is taken may still match a second, free box.) `same_category_iou`
 /// is [`overlay_selection`]'s: the IoU at which a box gives way to a better one of its own category — the
 /// detection's NMS IoU (`detect --nms-iou`; [`crate::detect::OVERLAY_SAME_CATEGORY_IOU`] for `detect`'s default).
+/// The shown detections that are not true positives are counted by kind ([`OverlayFalseKinds`]).
 pub fn overlay_precision(
     truth: &[Vec<Object>],
     detections: &[Vec<Detection>],
@@ -328,14 +376,21 @@ pub fn overlay_precision(
                     Some((_, b)) if b >= iou => best,
                     _ => Some((g, iou)),
                 });
-            if let Some((g, iou)) = best {
-                if iou >= iou_threshold {
+            match best {
+                Some((g, iou)) if iou >= iou_threshold => {
                     matched[g] = true;
                     out.true_positives += 1;
+                }
+                _ => {
+                    let own: Vec<Cuboid> =
+                        truths.iter().filter(|t| t.category == d.category).map(|t| t.cuboid).collect();
+                    out.false_kinds
+                        .add(&d.category, false_positive_kind(objects, &own, &cuboid, &d.category, iou_threshold));
                 }
             }
         }
     }
+    out.false_kinds.sort();
     out.precision = (out.shown > 0).then(|| out.true_positives as f32 / out.shown as f32);
     out
 }
@@ -430,37 +485,41 @@ fn ranked_kinds<'a>(
         .iter()
         .zip(&pr.true_positive)
         .map(|(&d, &hit)| {
-            (!hit).then(|| false_positive_kind(truth, &ground_truth, &scored[d], category, iou_threshold))
+            let det = &scored[d];
+            (!hit).then(|| {
+                let (objects, own) = (&truth[det.image], &ground_truth[det.image]);
+                false_positive_kind(objects, own, &det.cuboid, category, iou_threshold)
+            })
         })
         .collect();
     (pr.positives, ranked)
 }
 
-/// The kind of the false positive `det` of `category` (`ground_truth`: the category's boxes per image,
-/// `truth`: every object per image).
+/// The kind of a false positive of `category` with box `cuboid` in an image whose objects (any category)
+/// are `objects` and whose boxes of `category` are `own`.
 fn false_positive_kind<'a>(
-    truth: &'a [Vec<Object>],
-    ground_truth: &[Vec<Cuboid>],
-    det: &ScoredBox,
+    objects: &'a [Object],
+    own: &[Cuboid],
+    cuboid: &Cuboid,
     category: &str,
     iou_threshold: f32,
 ) -> FalsePositiveKind<'a> {
-    let own = ground_truth[det.image].iter().map(|t| iou_3d(&det.cuboid, t)).fold(0.0f32, f32::max);
-    let other = truth[det.image]
+    let best_own = own.iter().map(|t| iou_3d(cuboid, t)).fold(0.0f32, f32::max);
+    let other = objects
         .iter()
         .filter(|o| o.category != category)
-        .map(|o| (o.category.as_str(), iou_3d(&det.cuboid, &o.cuboid)))
+        .map(|o| (o.category.as_str(), iou_3d(cuboid, &o.cuboid)))
         .fold(None, |best: Option<(&str, f32)>, (c, iou)| match best {
             Some((_, b)) if b >= iou => best,
             _ => Some((c, iou)),
         });
-    if own >= iou_threshold {
+    if best_own >= iou_threshold {
         FalsePositiveKind::Duplicate
-    } else if own >= TOUCH_IOU {
+    } else if best_own >= TOUCH_IOU {
         FalsePositiveKind::Localisation
     } else if let Some((other_category, _)) = other.filter(|(_, iou)| *iou >= TOUCH_IOU) {
         FalsePositiveKind::Confusion(other_category)
-    } else if ground_truth[det.image].is_empty() {
+    } else if own.is_empty() {
         FalsePositiveKind::BackgroundElsewhere
     } else {
         FalsePositiveKind::BackgroundInFrame

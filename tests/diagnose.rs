@@ -186,6 +186,61 @@ fn overlay_precision_by_hand() {
     assert_eq!((o.frames, o.frames_without_boxes), (4, 2));
 }
 
+/// The overlay's false boxes by kind, each kind once, by hand (the rules of `false_positive_kinds`).
+#[test]
+fn overlay_false_kinds_by_hand() {
+    let categories = vec!["bed".to_string(), "chair".to_string(), "desk".to_string()];
+    let truth = vec![
+        // f0: k = 3.
+        vec![
+            object("bed", unit_box(0.0, 3.0)),
+            object("chair", unit_box(0.0, 6.0)),
+            object("desk", unit_box(5.0, 0.0)),
+        ],
+        // f1: k = 2.
+        vec![object("chair", unit_box(0.0, 0.0)), object("bed", unit_box(10.0, 10.0))],
+        // f2: k = 1.
+        vec![object("chair", unit_box(0.0, 0.0))],
+        // f3: two desks, k = 2.
+        vec![object("desk", unit_box(0.0, 0.0)), object("desk", unit_box(3.0, 0.0))],
+    ];
+    let detections = vec![
+        vec![
+            // IoU 0.7/1.3 = 0.54 with the bed: true positive.
+            det("bed", unit_box(-0.3, 3.0), 0.9),
+            // IoU 0.15/1.85 = 0.08 with the first (under the same-category limit 0.15: shown), 0.45/1.55 =
+            // 0.29 with the bed, which the first took: a duplicate.
+            det("bed", unit_box(0.55, 3.0), 0.8),
+            // On the desk (IoU 1), nowhere near the chair: a chair on a desk.
+            det("chair", unit_box(5.0, 0.0), 0.7),
+        ],
+        vec![
+            // 0.8 m off the chair: IoU 0.2/1.8 = 0.11, poorly placed.
+            det("chair", unit_box(0.8, 0.0), 0.9),
+            // No desk in f1, nothing near: background elsewhere.
+            det("desk", unit_box(20.0, 20.0), 0.8),
+        ],
+        // A chair far from f2's chair: background in a frame with its category.
+        vec![det("chair", unit_box(FAR, FAR), 0.9)],
+        // Beds on both desks: two beds on desks.
+        vec![det("bed", unit_box(0.0, 0.0), 0.9), det("bed", unit_box(3.0, 0.0), 0.8)],
+    ];
+    let o = overlay_precision(&truth, &detections, &categories, 0.25, OverlayRule::GroundTruthCount, 0.15);
+    assert_eq!((o.true_positives, o.shown), (1, 8));
+    let k = &o.false_kinds;
+    assert_eq!(
+        (k.duplicate, k.localisation, k.confusion, k.background_in_frame, k.background_elsewhere),
+        (1, 1, 3, 1, 1)
+    );
+    // Most frequent first.
+    let pairs: Vec<(&str, &str, usize)> =
+        k.confused.iter().map(|c| (c.shown.as_str(), c.object.as_str(), c.count)).collect();
+    assert_eq!(pairs, [("bed", "desk", 2), ("chair", "desk", 1)]);
+    // At IoU 0.5 f0's first bed (0.54) still hits and the second (0.29) is poorly placed, no duplicate.
+    let o = overlay_precision(&truth, &detections, &categories, 0.5, OverlayRule::GroundTruthCount, 0.15);
+    assert_eq!((o.false_kinds.duplicate, o.false_kinds.localisation), (0, 2));
+}
+
 /// What `detect` draws: at most `top` a frame, calibrated detections below the floor left out (wherever
 /// they rank), by hand.
 #[test]
@@ -511,6 +566,13 @@ fn cli_diagnose_json_and_table() {
     assert_eq!((drawn["top"].as_u64(), num(&drawn["min_probability"])), (Some(8), 0.5));
     let counts = |d: &Value| ["true_positives", "shown", "frames", "frames_without_boxes"].map(|k| d[k].as_u64());
     assert_eq!(counts(drawn), [Some(2), Some(3), Some(2), Some(0)]);
+    // Its false one, a's far box, is background in a frame with a bed; the top-k line has none.
+    let kinds = |d: &Value| {
+        ["duplicate", "localisation", "confusion", "background_in_frame", "background_elsewhere"]
+            .map(|k| d["false_kinds"][k].as_u64())
+    };
+    assert_eq!(kinds(drawn), [Some(0), Some(0), Some(0), Some(1), Some(0)]);
+    assert_eq!(kinds(overlay), [Some(0); 5]);
     let out = run(&["--json", "--overlay-top", "1"]);
     let report: Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(counts(&report["overlay_drawn"]), [Some(2), Some(2), Some(2), Some(0)]);
@@ -518,6 +580,13 @@ fn cli_diagnose_json_and_table() {
     let out = run(&[]);
     assert!(out.status.success());
     let table = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        table.contains(
+            "false ones: 0 duplicates, 0 poorly placed (IoU 0.1–0.25 with one of their category), 0 on \
+                        another category's object, 1 on background (1 in frames with their category, 0 without)"
+        ),
+        "the drawn line's false boxes by kind: {table}"
+    );
     let bed_line = table.lines().find(|l| l.starts_with("bed ")).expect("a bed row");
     assert_eq!(
         bed_line.split_whitespace().collect::<Vec<_>>(),

@@ -34,7 +34,7 @@ use cog_gpu::category::{CATEGORIES, LARGE_CATEGORIES};
 use cog_gpu::detect::{DEFAULT_OVERLAY_MIN_PROBABILITY, DEFAULT_OVERLAY_TOP};
 use cog_gpu::diagnose::{
     diagnose_categories, frame_window_best_ious, object_outcomes, overlay_precision, CategoryDiagnosis, ObjectOutcome,
-    OverlayPrecision, OverlayRule, FOUND_AHEAD_PRECISION, MOSTLY_OUT_OF_VIEW, TOUCH_IOU,
+    OverlayFalseKinds, OverlayPrecision, OverlayRule, FOUND_AHEAD_PRECISION, MOSTLY_OUT_OF_VIEW, TOUCH_IOU,
 };
 use cog_gpu::draw::category_colour;
 use cog_gpu::eval::{
@@ -1040,6 +1040,7 @@ fn print_diagnosis(
         overlay.shown,
         percent(overlay.precision)
     );
+    println!("  {}", false_kinds_line(&overlay.false_kinds, args.iou));
     let per_frame = |n: usize| if drawn.frames > 0 { n as f32 / drawn.frames as f32 } else { 0.0 };
     println!(
         "overlay as drawn (at most {} boxes, calibrated ones with probability ≥ {}): {}/{} = {}; {:.2} boxes per \
@@ -1053,4 +1054,27 @@ fn print_diagnosis(
         drawn.frames_without_boxes,
         drawn.frames
     );
+    println!("  {}", false_kinds_line(&drawn.false_kinds, args.iou));
+}
+
+/// The overlay's false boxes by kind (`iou`: the true positives' IoU), on one line: the three most frequent
+/// confusions named.
+fn false_kinds_line(k: &OverlayFalseKinds, iou: f32) -> String {
+    let named: Vec<String> =
+        k.confused.iter().take(3).map(|c| format!("{} on {} {}", c.shown, c.object, c.count)).collect();
+    let confused = if named.is_empty() {
+        String::new()
+    } else {
+        format!(" ({}{})", named.join(", "), if k.confused.len() > 3 { ", …" } else { "" })
+    };
+    format!(
+        "false ones: {} duplicates, {} poorly placed (IoU {TOUCH_IOU}–{iou} with one of their category), {} on another \
+         category's object{confused}, {} on background ({} in frames with their category, {} without)",
+        k.duplicate,
+        k.localisation,
+        k.confusion,
+        k.background_in_frame + k.background_elsewhere,
+        k.background_in_frame,
+        k.background_elsewhere
+    )
 }
