@@ -167,7 +167,7 @@ train_and_eval() {
 case "$mode" in
     shipped)
         # The README's status table ("Where it stands") and "The shipped pipeline today": the shipped models,
-        # calibrations and cascade, detected on the test set (about 36 min on the 2-core machine; a rerun
+        # calibrations and cascade, detected on the test set (about 30 min on the 2-core machine; a rerun
         # keeps the first-stage files), rescored, and evaluated against both annotation rules of the same
         # frames; the support surfaces of the first stage; the sample frames' best detections.
         dir="$WORK/shipped"

@@ -270,13 +270,14 @@ pub struct OverlayPrecision {
     pub frames: usize,
     pub frames_without_boxes: usize,
     /// What the shown detections that are not true positives are.
-    pub false_kinds: OverlayFalseKinds,
+    pub false_kinds: FalseKindCounts,
 }
 
-/// The kinds of an overlay's false boxes, by the rules of [`FalsePositiveKinds`] (the first that applies;
-/// "duplicate": the box of its category it overlaps at the IoU threshold was taken by a better shown box).
+/// False boxes counted by kind, by the rules of [`FalsePositiveKinds`] (the first that applies; "duplicate":
+/// the box of its category it overlaps at the IoU threshold was taken by a better box): an overlay's false
+/// boxes ([`OverlayPrecision::false_kinds`]), and the tally behind [`false_positive_kinds`].
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
-pub struct OverlayFalseKinds {
+pub struct FalseKindCounts {
     pub duplicate: usize,
     pub localisation: usize,
     pub confusion: usize,
@@ -295,7 +296,7 @@ pub struct Confusion {
     pub count: usize,
 }
 
-impl OverlayFalseKinds {
+impl FalseKindCounts {
     fn add(&mut self, shown: &str, kind: FalsePositiveKind) {
         match kind {
             FalsePositiveKind::Duplicate => self.duplicate += 1,
@@ -339,7 +340,7 @@ pub enum OverlayRule {
 /// AP rule, a detection whose best box is taken may still match a second, free box.) `same_category_iou`
 /// is [`overlay_selection`]'s: the IoU at which a box gives way to a better one of its own category — the
 /// detection's NMS IoU (`detect --nms-iou`; [`crate::detect::OVERLAY_SAME_CATEGORY_IOU`] for `detect`'s default).
-/// The shown detections that are not true positives are counted by kind ([`OverlayFalseKinds`]).
+/// The shown detections that are not true positives are counted by kind ([`FalseKindCounts`]).
 pub fn overlay_precision(
     truth: &[Vec<Object>],
     detections: &[Vec<Detection>],
@@ -433,30 +434,23 @@ pub fn false_positive_kinds(
     iou_threshold: f32,
 ) -> FalsePositiveKinds {
     let (positives, ranked) = ranked_kinds(truth, detections, category, iou_threshold);
-    let mut out = FalsePositiveKinds::default();
-    let mut confused: BTreeMap<&str, usize> = BTreeMap::new();
+    let mut tally = FalseKindCounts::default();
+    let mut examined = 0;
     for kind in ranked.into_iter().flatten().take(positives) {
-        out.examined += 1;
-        match kind {
-            FalsePositiveKind::Duplicate => out.duplicate += 1,
-            FalsePositiveKind::Localisation => out.localisation += 1,
-            FalsePositiveKind::Confusion(other) => {
-                out.confusion += 1;
-                *confused.entry(other).or_default() += 1;
-            }
-            FalsePositiveKind::BackgroundInFrame => out.background_in_frame += 1,
-            FalsePositiveKind::BackgroundElsewhere => out.background_elsewhere += 1,
-        }
+        examined += 1;
+        tally.add(category, kind);
     }
-    // Largest count; among equal counts the first name (iteration is in name order, `>` keeps the first).
-    let mut most: Option<(&str, usize)> = None;
-    for (c, n) in confused {
-        if most.is_none_or(|(_, m)| n > m) {
-            most = Some((c, n));
-        }
+    // Most frequent first, ties in name order: the first pair is the most confused-with category.
+    tally.sort();
+    FalsePositiveKinds {
+        examined,
+        duplicate: tally.duplicate,
+        localisation: tally.localisation,
+        confusion: tally.confusion,
+        most_confused_with: tally.confused.first().map(|c| c.object.clone()),
+        background_in_frame: tally.background_in_frame,
+        background_elsewhere: tally.background_elsewhere,
     }
-    out.most_confused_with = most.map(|(c, _)| c.to_string());
-    out
 }
 
 /// The kind of one false positive ([`FalsePositiveKinds`]' rules: the first that applies).

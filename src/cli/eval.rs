@@ -33,8 +33,9 @@ use anyhow::{bail, Context};
 use cog_gpu::category::{CATEGORIES, LARGE_CATEGORIES};
 use cog_gpu::detect::{DEFAULT_OVERLAY_MIN_PROBABILITY, DEFAULT_OVERLAY_TOP};
 use cog_gpu::diagnose::{
-    diagnose_categories, frame_window_best_ious, object_outcomes, overlay_precision, CategoryDiagnosis, ObjectOutcome,
-    OverlayFalseKinds, OverlayPrecision, OverlayRule, FOUND_AHEAD_PRECISION, MOSTLY_OUT_OF_VIEW, TOUCH_IOU,
+    diagnose_categories, frame_window_best_ious, object_outcomes, overlay_precision, CategoryDiagnosis,
+    FalseKindCounts, ObjectOutcome, OverlayPrecision, OverlayRule, FOUND_AHEAD_PRECISION, MOSTLY_OUT_OF_VIEW,
+    TOUCH_IOU,
 };
 use cog_gpu::draw::category_colour;
 use cog_gpu::eval::{
@@ -1059,7 +1060,7 @@ fn print_diagnosis(
 
 /// The overlay's false boxes by kind (`iou`: the true positives' IoU), on one line: the three most frequent
 /// confusions named.
-fn false_kinds_line(k: &OverlayFalseKinds, iou: f32) -> String {
+fn false_kinds_line(k: &FalseKindCounts, iou: f32) -> String {
     let named: Vec<String> =
         k.confused.iter().take(3).map(|c| format!("{} on {} {}", c.shown, c.object, c.count)).collect();
     let confused = if named.is_empty() {
