@@ -105,7 +105,7 @@ declare -A CATEGORY_DATA=()
 FIT=(--box-voting off)
 FIT_MARK=unvoted
 # First-stage files (`detect --no-cascade`) carry the cross scores since 2026-12-05, which the shipped
-# cascade's v7 stages read (README, "Feature set v7, the cross scores"): the cascade and test detections'
+# cascade's v7 stages read (docs/measurements.md, "Feature set v7, the cross scores"): the cascade and test detections'
 # markers say so, and a WORK detected before (files without them) is detected again by `cascade`.
 CROSS_MARK=cross-scores
 # train_and_eval NAME CATEGORIES TEST CALIBRATE TRAIN_ARGS...: trains each category into WORK/NAME/models/;
@@ -216,10 +216,10 @@ case "$mode" in
         # model is trained as the others and detects with the finer window: README, "The shipped models").
         CATEGORY_ARGS[chair]="--positives 320 --negatives 200"
         # 200 frames without a dresser instead of 60 (every usable instance is already taken):
-        # chosen on the calibration set (README, "More negatives for the dresser and the bookshelf").
+        # chosen on the calibration set (docs/measurements.md, "More negatives for the dresser and the bookshelf").
         CATEGORY_ARGS[dresser]="--negatives 200"
         # The bookshelf on twice the training frames, every usable instance (254) and 200 frames without
-        # one: chosen on a 1 500-frame selection set (README, "The bookshelf on twice the frames").
+        # one: chosen on a 1 500-frame selection set (docs/measurements.md, "The bookshelf on twice the frames").
         synth_set "$WORK/train-more" "$all_rooms" 1000 1001 more
         mkdir -p "$WORK/train2000"
         ln -sfn ../train "$WORK/train2000/a"
@@ -227,15 +227,15 @@ case "$mode" in
         CATEGORY_DATA[bookshelf]="$WORK/train2000"
         CATEGORY_ARGS[bookshelf]="--positives 300 --negatives 200"
         # The toilet on the same 2 000 frames with `train`'s defaults: chosen on a 300-bathroom selection
-        # set (README, "The toilet on twice the frames, shipped").
+        # set (docs/measurements.md, "The toilet on twice the frames, shipped").
         CATEGORY_DATA[toilet]="$WORK/train2000"
         # The sofa on the same 2 000 frames, every usable instance (288) and 200 frames without one:
-        # chosen on the 1 500-frame selection set (README, "The sofa on twice the frames, shipped").
+        # chosen on the 1 500-frame selection set (docs/measurements.md, "The sofa on twice the frames, shipped").
         CATEGORY_DATA[sofa]="$WORK/train2000"
         CATEGORY_ARGS[sofa]="--positives 300 --negatives 200"
         # The table with latent support surfaces (paper §4), trained by CCCP from its cuboid model, which
-        # is trained first with the same defaults: chosen on the 1 500-frame selection set (README, "The
-        # table's latent surfaces, shipped").
+        # is trained first with the same defaults: chosen on the 1 500-frame selection set
+        # (docs/measurements.md, "The table's latent surfaces, shipped").
         mkdir -p "$WORK/cuboid"
         if [ ! -f "$WORK/cuboid/table.json" ]; then
             cuboid_resume=()
@@ -388,7 +388,7 @@ case "$mode" in
         # Since 2026-11-28 the measured support surfaces find the surface under a cover (a bed's mattress
         # under its duvet), and the surface models train on those surfaces, so the monitor and sink this
         # mode trains differ from the shipped ones (equal within the noise on the test set; the shipped
-        # files stay because the cascade is tied to them: README, "Small objects: numbers"). Likewise since
+        # files stay because the cascade is tied to them: docs/measurements.md, "Small objects: numbers"). Likewise since
         # 2026-12-06 a table's, desk's, dresser's or nightstand's surface is its highest face with a fifth
         # of the fullest face's points (`top_surface_height`), which moves some desks' surfaces and so the
         # monitor's training examples (README, "Surfaces measured from the points").

@@ -3,7 +3,7 @@
 //! category's.
 //!
 //! The first stage and the cascade score each category on its own, and their diagnosis (`eval --diagnose`,
-//! README "Where the detector goes wrong") finds most of the remaining false positives of the confusable
+//! README "Diagnosis: `cog-gpu eval --diagnose`") finds most of the remaining false positives of the confusable
 //! categories on objects of another one: tables on desks, dressers on counters, garbage bins on boxes. The
 //! cascade's overlap features see the other category's detection, but a linear stage cannot say "the
 //! other one is *more* confident than I am". This step does, after the cascade:

@@ -1,8 +1,10 @@
-//! The README's table of contents lists every `##` and `###` heading, in order, with the anchor GitHub
-//! gives it, and every in-page link (`](#anchor)`) points at a heading: a renamed section cannot leave a
-//! dead entry behind. The README's command lines and the binary's flags agree: every flag a `cog-gpu`
-//! command line of a code block uses is one its subcommand's `--help` lists, and every flag a
-//! subcommand's `--help` lists is written in the README (a renamed or new flag cannot go unnoticed).
+//! The README and the measurement log (`docs/measurements.md`) each list every `##` and `###` heading in
+//! their table of contents, in order, with the anchor GitHub gives it, and every link to a heading
+//! (`](#anchor)` within a file, `](docs/measurements.md#anchor)` and `](../README.md#anchor)` between the
+//! two) points at one: a renamed or moved section cannot leave a dead entry behind. The command lines of
+//! both files and the binary's flags agree: every flag a `cog-gpu` command line of a code block uses is one
+//! its subcommand's `--help` lists, and every flag a subcommand's `--help` lists is written in the README
+//! (the usage document: a renamed or new flag cannot go unnoticed).
 
 use std::collections::{BTreeSet, HashMap};
 use std::process::Command;
@@ -10,6 +12,12 @@ use std::process::Command;
 fn readme() -> String {
     let path = concat!(env!("CARGO_MANIFEST_DIR"), "/README.md");
     std::fs::read_to_string(path).expect("README.md beside Cargo.toml")
+}
+
+/// The measurement log the README links to.
+fn measurements() -> String {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/docs/measurements.md");
+    std::fs::read_to_string(path).expect("docs/measurements.md beside Cargo.toml")
 }
 
 /// GitHub's anchor of a heading: lower case; letters, digits, `_`, `-` and spaces kept, everything else
@@ -62,10 +70,9 @@ fn slug_follows_githubs_rule() {
     assert_eq!(twice.iter().map(|h| h.2.as_str()).collect::<Vec<_>>(), ["commands", "commands-1"]);
 }
 
-#[test]
-fn contents_lists_every_section_in_order() {
-    let text = readme();
-    let all = headings(&text);
+/// The `## Contents` list of `text` equals its `##` and `###` headings with their anchors.
+fn assert_contents_lists_every_section(text: &str, file: &str) {
+    let all = headings(text);
     let contents: Vec<&str> = text
         .split("## Contents\n")
         .nth(1)
@@ -79,17 +86,46 @@ fn contents_lists_every_section_in_order() {
         .filter(|(level, title, _)| (2..=3).contains(level) && title != "Contents")
         .map(|(level, title, anchor)| format!("{}- [{title}](#{anchor})", "  ".repeat(level - 2)))
         .collect();
-    assert_eq!(contents, expected, "README's Contents differs from its headings");
+    assert_eq!(contents, expected, "{file}'s Contents differs from its headings");
 }
 
 #[test]
-fn in_page_links_point_at_headings() {
-    let text = readme();
-    let anchors: Vec<String> = headings(&text).into_iter().map(|h| h.2).collect();
-    for piece in text.split("](#").skip(1) {
+fn contents_lists_every_section_in_order() {
+    assert_contents_lists_every_section(&readme(), "README.md");
+    assert_contents_lists_every_section(&measurements(), "docs/measurements.md");
+}
+
+/// Every link of `text` written as `prefix` + `anchor)` names a heading of `target_text`; returns how many
+/// links it checked.
+fn assert_links_point_at_headings(text: &str, prefix: &str, target_text: &str, what: &str) -> usize {
+    let anchors: Vec<String> = headings(target_text).into_iter().map(|h| h.2).collect();
+    let mut checked = 0;
+    for piece in text.split(prefix).skip(1) {
         let target = piece.split(')').next().unwrap_or_default();
-        assert!(anchors.iter().any(|a| a == target), "README links to #{target}, which no heading has");
+        assert!(anchors.iter().any(|a| a == target), "{what} links to #{target}, which no heading has");
+        checked += 1;
     }
+    checked
+}
+
+#[test]
+fn links_point_at_headings() {
+    let (readme, log) = (readme(), measurements());
+    assert_links_point_at_headings(&readme, "](#", &readme, "README.md");
+    assert_links_point_at_headings(&log, "](#", &log, "docs/measurements.md");
+    // The README points into the log where it moved a section's measurements; the log back at the README.
+    let into_log = assert_links_point_at_headings(&readme, "](docs/measurements.md#", &log, "README.md");
+    assert!(into_log >= 8, "only {into_log} links from the README into docs/measurements.md");
+    assert_links_point_at_headings(&log, "](../README.md#", &readme, "docs/measurements.md");
+    assert!(readme.contains("](docs/measurements.md)"), "the README names the measurement log");
+}
+
+#[test]
+fn link_check_finds_a_dead_anchor() {
+    let text = "## Here\n[a](#here) [b](#gone)\n";
+    let caught = std::panic::catch_unwind(|| assert_links_point_at_headings(text, "](#", text, "case"));
+    assert!(caught.is_err(), "a link to #gone must fail the check");
+    assert_eq!(assert_links_point_at_headings("## Here\n[a](#here)\n", "](#", "## Here\n", "case"), 1);
 }
 
 /// The binary's output for `args` (stdout; it must succeed).
@@ -173,23 +209,25 @@ fn readme_command_lines(text: &str, subcommands: &[String]) -> Vec<(usize, Strin
 
 #[test]
 fn readme_command_lines_use_only_flags_the_binary_accepts() {
-    let text = readme();
     let subcommands = subcommands();
     let global = help_flags(&cog_gpu(&["--help"]));
+    let mut accepted: HashMap<String, BTreeSet<String>> = HashMap::new();
     let mut problems = Vec::new();
-    let mut checked = 0;
-    for (line, sub, flags) in readme_command_lines(&text, &subcommands) {
-        let accepted = help_flags(&cog_gpu(&[&sub, "--help"]));
-        for flag in flags {
-            checked += 1;
-            if !accepted.contains(&flag) && !global.contains(&flag) {
-                problems.push(format!("README line {line}: `cog-gpu {sub}` has no {flag}"));
+    for (file, text) in [("README", readme()), ("docs/measurements.md", measurements())] {
+        let mut checked = 0;
+        for (line, sub, flags) in readme_command_lines(&text, &subcommands) {
+            let accepted = accepted.entry(sub.clone()).or_insert_with(|| help_flags(&cog_gpu(&[&sub, "--help"])));
+            for flag in flags {
+                checked += 1;
+                if !accepted.contains(&flag) && !global.contains(&flag) {
+                    problems.push(format!("{file} line {line}: `cog-gpu {sub}` has no {flag}"));
+                }
             }
         }
+        // The scan found each file's command lines (it cannot pass by finding none).
+        assert!(checked > 100, "only {checked} flags found in {file}'s command lines");
     }
     assert!(problems.is_empty(), "{}", problems.join("\n"));
-    // The scan found the README's command lines (it cannot pass by finding none).
-    assert!(checked > 300, "only {checked} flags found in the README's command lines");
 }
 
 #[test]

@@ -55,7 +55,7 @@ fn the_nineteen_shipped_models_load_with_this_builds_layout() {
         let norm: f32 = model.weights.iter().map(|w| w * w).sum::<f32>().sqrt();
         assert!(norm > 0.1, "{}: |w| = {norm}", model.category);
         assert!(model.training.get("converged").is_some(), "{}: training provenance missing", model.category);
-        // The table alone ships with latent support surfaces (README, "The table's latent surfaces, shipped").
+        // The table alone ships with latent support surfaces (docs/measurements.md, "The table's latent surfaces, shipped").
         assert_eq!(model.surface.is_some(), model.category == "table", "{}: latent surfaces", model.category);
     }
     assert!(LARGE_CATEGORIES.iter().all(|c| categories.contains(c)));

@@ -167,7 +167,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         log::warn!(
             "--keep nested-gain on {frames} frames: its inner fits see a quarter of them; on a 500-frame cascade set \
              it dropped five stages that helped on the test set (19-class mAP -1.3 against any-gain), on 2 000 \
-             frames only the one that hurt (README, \"Nested cross-validation\")"
+             frames only the one that hurt (docs/measurements.md, \"Nested cross-validation\")"
         );
     }
     let (cascade, results, resumed) = train_cascade_resumable(

@@ -203,7 +203,7 @@ pub struct LayerTable {
 /// is exact in any order), so a group of hypotheses whose voxels all lie in a small part of the lattice —
 /// pillows on a bed, lamps on nightstands, the far end of a room — scores from a table of that part alone,
 /// bit for bit as from the whole one: the tables were a fifth to a quarter of a frame's scoring time on
-/// the CPU, and on the standard frame (README, "Tables over their boxes' region") more than half of that
+/// the CPU, and on the standard frame (docs/measurements.md, "Tables over their boxes' region") more than half of that
 /// went to cells no hypothesis of the group reads.
 ///
 /// The GPU path builds its tables over the same regions (`gpu::fast`'s packer).
