@@ -500,7 +500,8 @@ impl Cascade {
     /// Reads and checks a cascade file.
     pub fn read(path: &Path) -> Result<Cascade> {
         let text = crate::frame::read_text(path)?;
-        let cascade: Cascade = serde_json::from_str(&text).map_err(|e| Error::invalid(path, e.to_string()))?;
+        let cascade: Cascade = serde_json::from_str(&text)
+            .map_err(|e| Error::invalid(path, format!("not a cog-gpu cascade file: {e}")))?;
         cascade.check().map_err(|problem| Error::invalid(path, problem))?;
         Ok(cascade)
     }

@@ -364,6 +364,12 @@ fn cascade_files_round_trip_and_are_checked() {
     write_unchecked(&older, &path);
     assert_eq!(Cascade::read(&path).unwrap(), older);
     assert!(!std::fs::read_to_string(&path).unwrap().contains("cv_gain_interval"));
+    // Not a cascade at all (another JSON file, or no JSON): the file named and what it is not.
+    for text in ["{\"format\": \"cog-gpu-model\"}", "hello"] {
+        std::fs::write(&path, text).unwrap();
+        let err = Cascade::read(&path).unwrap_err().to_string();
+        assert!(err.contains("cascade.json") && err.contains("not a cog-gpu cascade file"), "{err}");
+    }
     // The nested gain (`--keep nested-gain`): round-trips; outside [−1, 1] (not a difference of two APs),
     // refused.
     let mut nested = cascade.clone();
