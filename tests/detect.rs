@@ -249,6 +249,34 @@ fn the_cli_writes_detections_and_overlays() {
     assert_eq!(printed, vec![read]);
 }
 
+/// `detect` warns, naming the model, when an uncalibrated model's detections are voted (their demoted boxes
+/// fall [`cog_gpu::detect::REVOTE_DEMOTION`] raw units, mostly under the cut), and not with `--box-voting off`
+/// nor for a calibrated model.
+#[test]
+fn detect_warns_of_voting_with_an_uncalibrated_model() {
+    use cog_gpu::calibration::Calibration;
+    let dir = tempfile::tempdir().unwrap();
+    let models = models_dir(dir.path());
+    let warned = |extra: &[&str]| {
+        let out = dir.path().join("out");
+        let mut args = vec!["--cpu", "detect", SAMPLE, "--models", models.to_str().unwrap()];
+        args.extend(["--out", out.to_str().unwrap(), "--no-overlay", "--max-per-category", "1"]);
+        args.extend(extra);
+        let output = run(&args);
+        let stderr = String::from_utf8_lossy(&output.stderr).to_string();
+        assert!(output.status.success(), "{stderr}");
+        stderr.contains("not calibrated: bed;")
+    };
+    assert!(warned(&[]), "voting (the default) with the uncalibrated bed");
+    assert!(!warned(&["--box-voting", "off"]), "no voting");
+    let mut model = density_model(FeaturePath::Fast, 0.2);
+    let (a, b) = (2.0, -1.0);
+    model.calibration =
+        Some(Calibration { a, b, detections: 0, true_positives: 0, iou: 0.25, data: String::new(), frames: 0 });
+    model.write(&models.join("bed.json")).unwrap();
+    assert!(!warned(&[]), "a calibrated bed");
+}
+
 /// `detect --overlay-min-score` reaches the picture: the PNG is exactly the library's overlay of the
 /// detections `overlay_selection` keeps at that floor (by default 0.5, left out wherever they rank), and with
 /// a floor of 1 no box is drawn at all (the picture is the RGB image).

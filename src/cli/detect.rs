@@ -21,7 +21,7 @@ use cog_gpu::cascade::Cascade;
 use cog_gpu::category::{normalise_name, SURFACE_CATEGORIES};
 use cog_gpu::detect::{
     detect_frame, overlay, overlay_selection, DetectOptions, DEFAULT_OVERLAY_MIN_PROBABILITY, DEFAULT_OVERLAY_TOP,
-    DEFAULT_SUPPORT_MIN_SCORE,
+    DEFAULT_SUPPORT_MIN_SCORE, REVOTE_DEMOTION,
 };
 use cog_gpu::draw::category_colour;
 use cog_gpu::eval::FrameDetections;
@@ -212,6 +212,26 @@ pub(super) fn warn_if_no_supporters(models_dir: &Path, models: &[Model]) {
     }
 }
 
+/// Why an uncalibrated model's detections under box voting are not comparable with a calibrated one's, or
+/// `None` when voting is off or every model is calibrated. The NMS after the vote demotes a box it would
+/// drop by [`REVOTE_DEMOTION`] log-odds, i.e. that many raw units over the model's calibration slope — 1
+/// without a calibration, so an uncalibrated model's demoted boxes fall 6 raw units, mostly under the cut,
+/// where a calibrated model's (slopes 5.9–20.7 for the shipped ones) fall 0.3–1.0 and are kept.
+pub(super) fn uncalibrated_voting_warning(models: &[Model], box_voting: Option<f32>) -> Option<String> {
+    box_voting?;
+    let uncalibrated: Vec<&str> =
+        models.iter().filter(|m| m.calibration.is_none()).map(|m| m.category.as_str()).collect();
+    (!uncalibrated.is_empty()).then(|| {
+        format!(
+            "not calibrated: {}; box voting demotes the boxes its second NMS would drop by {REVOTE_DEMOTION} raw \
+             units for such a model (by {REVOTE_DEMOTION} log-odds for a calibrated one), so they mostly fall \
+             under the cut: calibrate it (cog-gpu calibrate) before comparing its detections with a calibrated \
+             model's, or detect both with --box-voting off",
+            uncalibrated.join(", ")
+        )
+    })
+}
+
 /// The normal search a run preprocesses with: `flag` (`--normals`) when given — with a warning when a model
 /// was trained with another —, else the one the models share ([`common_normal_search`]; an error when they
 /// differ).
@@ -295,6 +315,9 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         detect_options
             .threshold(model)
             .with_context(|| models_dir.join(format!("{}.json", model.category)).display().to_string())?;
+    }
+    if let Some(warning) = uncalibrated_voting_warning(&models, detect_options.box_voting) {
+        log::warn!("{}: {warning}", models_dir.display());
     }
     let cascade = cascade_for(&models_dir, &models, args.no_cascade)?;
     // First-stage files may train a cascade; a cascade with a cross stage reads them.
