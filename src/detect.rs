@@ -27,7 +27,7 @@ use image::RgbImage;
 use rayon::prelude::*;
 
 use crate::backend::{Backend, FastJob};
-use crate::category::{is_cross_score_category, SurfaceCategories, SURFACE_CATEGORIES};
+use crate::category::{category_index, is_cross_score_category, SurfaceCategories, CATEGORIES, SURFACE_CATEGORIES};
 use crate::draw::{
     category_colour, contrasting, draw_cuboid_with, draw_label, label_size, place_labels, shade_convex_polygon, Colour,
     LabelBox,
@@ -413,6 +413,9 @@ pub struct DetectStages {
     pub cross_scores_s: f64,
     /// Hypotheses scored, over all models.
     pub hypotheses: usize,
+    /// Hypotheses scored per category, in [`CATEGORIES`] order (a category without a model: 0): which
+    /// model's window costs what (`cog-gpu bench --detect` prints them per frame).
+    pub hypotheses_per_category: [usize; CATEGORIES.len()],
     /// Process CPU seconds (user + system, summed over all threads, the GPU driver's included) during each
     /// stage, as [`process_cpu_seconds`] counts them: against the wall-clock seconds times the threads,
     /// how busy the stage keeps the cores; on the GPU path, the CPU work left beside the GPU's. Only
@@ -740,6 +743,11 @@ fn detect_windows<'a>(
     // Each model's candidates, models in parallel, gathered in model order (the first error in model order
     // wins, as in a sequential loop).
     stages.hypotheses += all_hypotheses.iter().map(|h| h.len()).sum::<usize>();
+    for (model, hypotheses) in models.iter().zip(&all_hypotheses) {
+        if let Some(index) = category_index(&model.category) {
+            stages.hypotheses_per_category[index] += hypotheses.len();
+        }
+    }
     let per_model: Vec<Result<Vec<Detection>>> = models
         .par_iter()
         .zip(&model_scenes)

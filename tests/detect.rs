@@ -477,6 +477,37 @@ fn the_cli_names_bad_inputs() {
 
 /// `detect_preprocessed_timed` detects exactly what `detect_frame` does, and its stage record adds up: every
 /// stage non-negative, the fast path's tables counted only for fast models, a second call adding its own.
+/// `DetectStages::hypotheses_per_category` gives each model its own window's hypotheses: with two models
+/// (a bed, and the same weights as a chair on a finer step), each category's count is what that model
+/// scores alone (`hypotheses` of a run with it alone), the others are 0, and they add up to the total.
+#[test]
+fn timed_detection_counts_each_models_hypotheses() {
+    use cog_gpu::category::category_index;
+    use cog_gpu::detect::{detect_preprocessed_timed, DetectStages};
+    let frame = Frame::read(SAMPLE, DepthSource::Raw).unwrap();
+    let pre = Preprocessed::from_frame(&frame).unwrap();
+    let options = DetectOptions::default();
+    let bed = density_model(FeaturePath::Fast, 0.3);
+    let mut chair = density_model(FeaturePath::Fast, 0.2);
+    chair.category = "chair".into();
+    let alone = |model: &Model| {
+        let mut stages = DetectStages::default();
+        let models = std::slice::from_ref(model);
+        detect_preprocessed_timed(&frame.name, pre.clone(), models, Backend::Cpu, &options, &mut stages).unwrap();
+        stages.hypotheses
+    };
+    let (bed_alone, chair_alone) = (alone(&bed), alone(&chair));
+    assert!(bed_alone > 0 && chair_alone > bed_alone, "{bed_alone} {chair_alone}: the finer step has more");
+    let mut stages = DetectStages::default();
+    let models = [bed, chair];
+    detect_preprocessed_timed(&frame.name, pre, &models, Backend::Cpu, &options, &mut stages).unwrap();
+    let per = stages.hypotheses_per_category;
+    let (b, c) = (category_index("bed").unwrap(), category_index("chair").unwrap());
+    assert_eq!((per[b], per[c]), (bed_alone, chair_alone));
+    assert_eq!(per.iter().sum::<usize>(), stages.hypotheses);
+    assert!(per.iter().enumerate().all(|(i, &n)| i == b || i == c || n == 0));
+}
+
 #[test]
 fn timed_detection_is_detection_and_accumulates_its_stages() {
     use cog_gpu::detect::{detect_preprocessed_timed, DetectStages};

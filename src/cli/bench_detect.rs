@@ -316,6 +316,15 @@ fn mean_times(times: &[FrameTimes]) -> serde_json::Value {
     let hypotheses: f64 = times.iter().map(|t| t.stages.hypotheses as f64).sum();
     let score_s: f64 = times.iter().map(|t| t.stages.score_s).sum();
     mean.insert("hypotheses_per_s".into(), json!(hypotheses / score_s.max(f64::MIN_POSITIVE)));
+    // Each model's window per frame (categories without a model left out), as `hypotheses` is.
+    let per_category: serde_json::Map<String, serde_json::Value> = cog_gpu::category::CATEGORIES
+        .iter()
+        .enumerate()
+        .map(|(c, name)| (name, times.iter().map(|t| t.stages.hypotheses_per_category[c] as f64).sum::<f64>()))
+        .filter(|&(_, total)| total > 0.0)
+        .map(|(name, total)| (name.to_string(), json!(total / times.len().max(1) as f64)))
+        .collect();
+    mean.insert("hypotheses_per_category".into(), serde_json::Value::Object(per_category));
     serde_json::Value::Object(mean)
 }
 
@@ -392,6 +401,15 @@ fn print_report(report: &serde_json::Value) {
             path["fast_kernel"],
             path["adapter"].as_str().unwrap_or("?")
         );
+    }
+    for (name, path) in &paths {
+        if let Some(per_category) = path["mean"]["hypotheses_per_category"].as_object() {
+            let mut counts: Vec<(&String, f64)> =
+                per_category.iter().map(|(category, n)| (category, n.as_f64().unwrap_or(0.0))).collect();
+            counts.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(b.0)));
+            let listed: Vec<String> = counts.iter().map(|(category, n)| format!("{category} {n:.0}")).collect();
+            println!("{name:>5}: hypotheses per frame by model, most first: {}", listed.join(", "));
+        }
     }
     for (name, path) in &paths {
         if let Some(pooled) = path["pooled_mb"].as_object() {
