@@ -475,8 +475,6 @@ fn the_cli_names_bad_inputs() {
     }
 }
 
-/// `detect_preprocessed_timed` detects exactly what `detect_frame` does, and its stage record adds up: every
-/// stage non-negative, the fast path's tables counted only for fast models, a second call adding its own.
 /// `DetectStages::hypotheses_per_category` gives each model its own window's hypotheses: with two models
 /// (a bed, and the same weights as a chair on a finer step), each category's count is what that model
 /// scores alone (`hypotheses` of a run with it alone), the others are 0, and they add up to the total.
@@ -508,6 +506,8 @@ fn timed_detection_counts_each_models_hypotheses() {
     assert!(per.iter().enumerate().all(|(i, &n)| i == b || i == c || n == 0));
 }
 
+/// `detect_preprocessed_timed` detects exactly what `detect_frame` does, and its stage record adds up: every
+/// stage non-negative, the fast path's tables counted only for fast models, a second call adding its own.
 #[test]
 fn timed_detection_is_detection_and_accumulates_its_stages() {
     use cog_gpu::detect::{detect_preprocessed_timed, DetectStages};
