@@ -20,6 +20,7 @@
 //! [`SURFACE_CATEGORIES`] whose calibrated score is at least [`DetectOptions::support_min_score`]
 //! ([`detected_surfaces`], [`surface_window`](crate::features::hypotheses::surface_window)), scored, selected and suppressed the same way.
 
+use std::collections::BTreeMap;
 use std::time::Instant;
 
 use glam::Vec3;
@@ -45,7 +46,7 @@ use crate::features::scene::rotate;
 use crate::features::surface::{best_slice, category_surface, refined_surface_height, SurfaceEngine, SurfaceSource};
 use crate::features::{FeatureScene, Hypothesis, Preprocessed};
 use crate::frame::Frame;
-use crate::geometry::{Camera, Cuboid};
+use crate::geometry::{iou_3d, Camera, Cuboid};
 use crate::model::{window_scenes, FeaturePath, Model, SceneKey};
 use crate::nms::{suppress_in_order, vote, NmsOptions, VoteOptions, DEFAULT_NMS_IOU, DEFAULT_VOTE_IOU};
 
@@ -84,6 +85,11 @@ pub struct DetectOptions {
     /// `false`: the CLI turns it on for first-stage files (`detect --no-cascade`, on which a cascade may be
     /// trained) and when the cascade it applies reads them.
     pub cross_scores: bool,
+    /// Whether the floor's models search a second floor where the camera does not see the floor
+    /// ([`Preprocessed::unseen_floor`], since 2026-12-07; README, "The floor where it is not seen"): their
+    /// window then runs on both floors and each model's detections of the two go through its NMS together
+    /// ([`merge_floors`]). Default `true`; `false`: the lowest points' floor alone, as before.
+    pub unseen_floor: bool,
 }
 
 impl Default for DetectOptions {
@@ -98,6 +104,7 @@ impl Default for DetectOptions {
             normals: NormalSearch::default(),
             box_voting: Some(DEFAULT_VOTE_IOU),
             cross_scores: false,
+            unseen_floor: true,
         }
     }
 }
@@ -548,43 +555,86 @@ pub fn detect_preprocessed_timed(
     // Each model's window (the surface models' on the surfaces `surfaces_of` gives them): the models of
     // one scene in one call of `windows` (their yaws and models in parallel; each yaw's count tables built
     // once for all of them), the scenes one after the other, gathered in model order.
-    let windows_of =
-        |models: &[&Model], surfaces_of: &(dyn Fn(&Model) -> Vec<SupportSurface> + Sync)| -> Vec<HypothesisSet> {
-            let options: Vec<WindowOptions> = models
+    let windows_of = |scenes: &BTreeMap<SceneKey, FeatureScene>,
+                      models: &[&Model],
+                      surfaces_of: &(dyn Fn(&Model) -> Vec<SupportSurface> + Sync)|
+     -> Vec<HypothesisSet> {
+        let options: Vec<WindowOptions> = models
+            .iter()
+            .map(|model| WindowOptions { sizes: model.sizes(), min_points: model.window.min_points })
+            .collect();
+        let surfaces: Vec<Vec<SupportSurface>> = models.iter().map(|model| surfaces_of(model)).collect();
+        let mut sets: Vec<Option<HypothesisSet>> = models.iter().map(|_| None).collect();
+        let mut keys: Vec<SceneKey> = models.iter().map(|model| model.window.scene_key()).collect();
+        keys.sort();
+        keys.dedup();
+        for key in keys {
+            let members: Vec<usize> = (0..models.len()).filter(|&m| models[m].window.scene_key() == key).collect();
+            let requests: Vec<WindowRequest> = members
                 .iter()
-                .map(|model| WindowOptions { sizes: model.sizes(), min_points: model.window.min_points })
+                .map(|&m| WindowRequest {
+                    support: models[m].window.support,
+                    options: &options[m],
+                    surfaces: &surfaces[m],
+                })
                 .collect();
-            let surfaces: Vec<Vec<SupportSurface>> = models.iter().map(|model| surfaces_of(model)).collect();
-            let mut sets: Vec<Option<HypothesisSet>> = models.iter().map(|_| None).collect();
-            let mut keys: Vec<SceneKey> = models.iter().map(|model| model.window.scene_key()).collect();
-            keys.sort();
-            keys.dedup();
-            for key in keys {
-                let members: Vec<usize> = (0..models.len()).filter(|&m| models[m].window.scene_key() == key).collect();
-                let requests: Vec<WindowRequest> = members
-                    .iter()
-                    .map(|&m| WindowRequest {
-                        support: models[m].window.support,
-                        options: &options[m],
-                        surfaces: &surfaces[m],
-                    })
-                    .collect();
-                for (m, set) in members.iter().zip(windows(&scenes[&key], &requests)) {
-                    sets[*m] = Some(set);
-                }
+            for (m, set) in members.iter().zip(windows(&scenes[&key], &requests)) {
+                sets[*m] = Some(set);
             }
-            sets.into_iter().map(|set| set.expect("every model's scene is searched")).collect()
-        };
-    let windows = windows_of(&floor_models, &|_| Vec::new());
+        }
+        sets.into_iter().map(|set| set.expect("every model's scene is searched")).collect()
+    };
+    let windows = windows_of(&scenes, &floor_models, &|_| Vec::new());
     stages.add(Stage::Window, lap());
     let mut detections =
         detect_windows(name, &pre, &floor_models, &windows, scene_of, backend, options, &mut engines, stages)?;
     lap(); // detect_windows timed its own stages
+           // The same models on the second floor where the floor is not seen: the frame's points with the floor
+           // moved (the yaws, from the normals, are the same), their own scenes, tables and window. A second floor
+           // beyond the memory budget (its boxes reach more layers) is skipped with a warning, not an error: the
+           // frame is still detected as without it.
+    let second_floor = pre.unseen_floor().filter(|_| options.unseen_floor && !floor_models.is_empty());
+    let lower = second_floor.and_then(|floor| {
+        let lower = Preprocessed { floor, ..pre.clone() };
+        match check_budget_with(&lower, &frame_yaws, models) {
+            Ok(()) => Some(lower),
+            Err(e) => {
+                log::warn!(
+                    "frame '{name}': the floor is not seen, but a second floor at {floor} m is not searched: {e}"
+                );
+                None
+            }
+        }
+    });
+    if let Some(lower) = lower {
+        log::debug!("frame '{name}': the floor is not seen; its models search a second floor at {} m too", lower.floor);
+        let lower_scenes = window_scenes(&lower, &frame_yaws, floor_models.iter().copied());
+        stages.add(Stage::YawGrids, lap());
+        let windows = windows_of(&lower_scenes, &floor_models, &|_| Vec::new());
+        stages.add(Stage::Window, lap());
+        let lower_scene_of = |m: &Model| &lower_scenes[&m.window.scene_key()];
+        let mut lower_engines = FastEngines::new();
+        let lower_detections = detect_windows(
+            name,
+            &lower,
+            &floor_models,
+            &windows,
+            lower_scene_of,
+            backend,
+            options,
+            &mut lower_engines,
+            stages,
+        )?;
+        lap();
+        stages.tables_thread_s += lower_engines.table_thread_seconds();
+        detections = merge_floors(detections, lower_detections, options);
+        stages.add(Stage::Select, lap());
+    }
     if !surface_models.is_empty() {
         // Each surface model searches the surfaces of its own supporters' detections.
         let surfaces_of =
             |model: &Model| detected_surfaces(&detections, models, options.support_min_score, model.window.supporters);
-        let windows = windows_of(&surface_models, &surfaces_of);
+        let windows = windows_of(&scenes, &surface_models, &surfaces_of);
         stages.add(Stage::Window, lap());
         detections.extend(detect_windows(
             name,
@@ -867,6 +917,30 @@ fn model_detections(
         detections.sort_by(|a, b| b.score.total_cmp(&a.score));
     }
     Ok(detections)
+}
+
+/// The detections of the floor's models on the two floors of a frame whose floor is not seen
+/// ([`DetectOptions::unseen_floor`]): all of them by score, best first (raw scores, one model's on both
+/// floors; ties: the lowest points' floor first, then each list's order), each box dropped when a kept box
+/// of its category *from the other floor* overlaps it by more than `options.nms_iou` — the greedy NMS of
+/// each model's detections (`model_detections`) between the floors, so of two boxes of one object on the
+/// two floors the better one stays, while within a floor its own NMS and box voting have decided (a
+/// demoted box stays demoted, as on one floor) —, at most `options.max_per_category` per category.
+pub fn merge_floors(seen: Vec<Detection>, lower: Vec<Detection>, options: &DetectOptions) -> Vec<Detection> {
+    let mut all: Vec<(bool, Detection)> =
+        seen.into_iter().map(|d| (false, d)).chain(lower.into_iter().map(|d| (true, d))).collect();
+    all.sort_by(|a, b| b.1.score.total_cmp(&a.1.score));
+    let mut kept: Vec<(bool, Detection, Cuboid)> = Vec::with_capacity(all.len());
+    for (on_lower, d) in all {
+        let cuboid = d.cuboid();
+        let same = || kept.iter().filter(|(_, k, _)| k.category == d.category);
+        let full = same().count() >= options.max_per_category;
+        let overlapped = same().any(|(floor, _, k)| *floor != on_lower && iou_3d(&cuboid, k) > options.nms_iou);
+        if !full && !overlapped {
+            kept.push((on_lower, d, cuboid));
+        }
+    }
+    kept.into_iter().map(|(_, d, _)| d).collect()
 }
 
 /// Replaces each detection's raw score by its model's calibrated probability (keeping the raw score in

@@ -91,6 +91,16 @@ pub struct Args {
     /// With --detect: box voting after the NMS (as `detect --box-voting`: an IoU in (0, 1], or `off`).
     #[arg(long, default_value_t, value_parser = options::box_voting, requires = "detect")]
     pub box_voting: options::BoxVoting,
+    /// With --detect: a second floor where the floor is not seen (as `detect --unseen-floor`: `on` or `off`).
+    #[arg(
+        long,
+        default_value = "on",
+        value_name = "on|off",
+        value_parser = options::on_off,
+        action = clap::ArgAction::Set,
+        requires = "detect"
+    )]
+    pub unseen_floor: bool,
     /// With --detect: timed detections of each frame.
     #[arg(long, default_value_t = 1, value_parser = options::at_least_one)]
     pub repeat: usize,

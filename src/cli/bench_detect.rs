@@ -110,6 +110,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     let detect_options = DetectOptions {
         normals,
         box_voting: args.box_voting.0,
+        unseen_floor: args.unseen_floor,
         cross_scores: cascade.as_ref().is_some_and(cog_gpu::cascade::Cascade::reads_cross_scores),
         ..DetectOptions::default()
     };
@@ -180,6 +181,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         "normals": detect_options.normals.name(),
         // The IoU as the option is written ("0.3", not the f32's 0.30000001192092896), null when off.
         "box_voting": detect_options.box_voting.map(|iou| iou.to_string()),
+        "unseen_floor": detect_options.unseen_floor,
         "layout_model": layout_model.is_some(),
         "cascade": cascade.is_some(),
         "paths": paths,

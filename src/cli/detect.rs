@@ -65,6 +65,18 @@ pub struct Args {
     /// `off`: the kept boxes as the window made them. README, "Box voting"
     #[arg(long, default_value_t, value_parser = options::box_voting)]
     pub box_voting: options::BoxVoting,
+    /// Where the camera does not see the floor (the lowest points are no horizontal plane), the floor's
+    /// models also search a second floor 1.3 m below the camera, their boxes of both floors through one
+    /// NMS (`on`), or only the lowest points' floor (`off`, as before 2026-12-07). README, "The floor where
+    /// it is not seen"
+    #[arg(
+        long,
+        default_value = "on",
+        value_name = "on|off",
+        value_parser = options::on_off,
+        action = clap::ArgAction::Set
+    )]
+    pub unseen_floor: bool,
     /// Detections kept per category and frame.
     #[arg(long, default_value_t = 20, value_parser = options::at_least_one)]
     pub max_per_category: usize,
@@ -277,6 +289,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         min_probability: args.min_probability,
         support_min_score: args.support_min_score,
         box_voting: args.box_voting.0,
+        unseen_floor: args.unseen_floor,
         ..DetectOptions::default()
     };
     detect_options.validate()?;
@@ -490,10 +503,20 @@ fn run_fingerprint(
     // So is box voting.
     let earlier = format!(
         "{:?}",
-        DetectOptions { normals: NormalSearch::KdTree, box_voting: None, cross_scores: false, ..*options }
+        DetectOptions {
+            normals: NormalSearch::KdTree,
+            box_voting: None,
+            cross_scores: false,
+            unseen_floor: false,
+            ..*options
+        }
     );
     parts.push(
-        earlier.replace(", normals: KdTree", "").replace(", box_voting: None", "").replace(", cross_scores: false", ""),
+        earlier
+            .replace(", normals: KdTree", "")
+            .replace(", box_voting: None", "")
+            .replace(", cross_scores: false", "")
+            .replace(", unseen_floor: false", ""),
     );
     if options.normals != NormalSearch::KdTree {
         parts.push(format!("normals: {}", options.normals.name()));
@@ -506,6 +529,13 @@ fn run_fingerprint(
     // Since 2026-12-05 first-stage files carry the cross scores: those written before do not resume.
     if options.cross_scores {
         parts.push("cross scores".to_string());
+    }
+    // Since 2026-12-07 a frame whose floor is not seen is searched on a second floor too.
+    if options.unseen_floor {
+        parts.push(format!(
+            "unseen floor: a second floor {} m below the camera",
+            cog_gpu::features::preprocess::UNSEEN_FLOOR_CAMERA_HEIGHT_M
+        ));
     }
     let hash = parts.iter().fold(cog_gpu::learn::checkpoint::FNV_OFFSET, |hash, part| {
         // Each part's length first, so that no two different lists of parts hash the same bytes.

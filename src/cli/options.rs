@@ -81,6 +81,15 @@ pub fn box_voting(text: &str) -> Result<BoxVoting, String> {
     }
 }
 
+/// `detect --unseen-floor` (and `bench --detect --unseen-floor`): `on` or `off`.
+pub fn on_off(text: &str) -> Result<bool, String> {
+    match text {
+        "on" => Ok(true),
+        "off" => Ok(false),
+        _ => Err(format!("'{text}': give `on` or `off`")),
+    }
+}
+
 /// `detect --support-min-score`: a probability in [0, 1].
 pub fn probability(text: &str) -> Result<f32, String> {
     let value = number(text)?;

@@ -128,3 +128,17 @@ pub fn spread_sample(window: &cog_gpu::features::PreparedWindow, count: usize) -
     let kept = &window.set.hypotheses;
     kept.iter().step_by((kept.len() / count).max(1)).take(count).copied().collect()
 }
+
+/// The floor's sliding window (`"support": "floor"`, walls' yaws, the camera's lattice, every supporter) at
+/// `step` metres with at least `min_points` points a box: the window most test models use.
+#[allow(dead_code)]
+pub fn floor_window(step: f32, min_points: u32) -> cog_gpu::model::WindowSettings {
+    cog_gpu::model::WindowSettings {
+        step,
+        min_points,
+        yaw_anchor: cog_gpu::features::YawAnchor::Walls,
+        support: cog_gpu::features::Support::Floor,
+        lattice: cog_gpu::features::LatticePhase::Camera,
+        supporters: cog_gpu::category::SurfaceCategories::ALL,
+    }
+}
