@@ -607,7 +607,12 @@ pub fn detect_preprocessed_timed(
         }
     });
     if let Some(lower) = lower {
-        log::debug!("frame '{name}': the floor is not seen; its models search a second floor at {} m too", lower.floor);
+        log::info!(
+            "frame '{name}': no floor seen (the lowest points, at {:.2} m, hold no horizontal plane); the floor's \
+             models also search a floor at {} m (--unseen-floor)",
+            pre.floor,
+            lower.floor
+        );
         let lower_scenes = window_scenes(&lower, &frame_yaws, floor_models.iter().copied());
         stages.add(Stage::YawGrids, lap());
         let windows = windows_of(&lower_scenes, &floor_models, &|_| Vec::new());
