@@ -96,16 +96,45 @@ pub fn best_window_ious(scene: &FeatureScene, hypotheses: &[Hypothesis], truths:
 /// supporters (`window.supporters`; `annotated_surfaces_by_category`: the window's ceiling given perfect
 /// large-object detections; detection searches the surfaces of its own detections). Categories
 /// without a model, or without ground truth in the frame, are absent from the result; no scene is built
-/// when no model has ground truth.
-pub fn frame_window_best_ious(pre: &Preprocessed, models: &[Model], objects: &[Object]) -> BTreeMap<String, Vec<f32>> {
+/// when no model has ground truth. With `unseen_floor` (detection's default,
+/// [`crate::detect::DetectOptions::unseen_floor`]), where the frame's floor is not seen
+/// ([`Preprocessed::unseen_floor`]) the models that do not search surfaces search the second floor too, as
+/// detection does, and each box's best IoU is the better of the two floors'.
+pub fn frame_window_best_ious(
+    pre: &Preprocessed,
+    models: &[Model],
+    objects: &[Object],
+    unseen_floor: bool,
+) -> BTreeMap<String, Vec<f32>> {
+    let wanted: Vec<&Model> = models.iter().filter(|m| objects.iter().any(|o| o.category == m.category)).collect();
+    let mut out = floor_window_best_ious(pre, &wanted, objects);
+    if let Some(floor) = pre.unseen_floor().filter(|_| unseen_floor) {
+        let lower = Preprocessed { floor, ..pre.clone() };
+        // As detection: a second floor beyond the memory budget is not searched.
+        if let Err(e) = crate::detect::check_budget(&lower, models) {
+            log::warn!("the window recall's second floor at {floor} m is not searched: {e}");
+            return out;
+        }
+        let floor_models: Vec<&Model> = wanted.into_iter().filter(|m| !m.window.support.uses_surfaces()).collect();
+        for (category, best) in floor_window_best_ious(&lower, &floor_models, objects) {
+            let seen = out.get_mut(&category).expect("the same categories on both floors");
+            for (a, b) in seen.iter_mut().zip(best) {
+                *a = a.max(b);
+            }
+        }
+    }
+    out
+}
+
+/// [`frame_window_best_ious`] on `pre`'s floor alone, for the models `wanted` (each with ground truth).
+fn floor_window_best_ious(pre: &Preprocessed, wanted: &[&Model], objects: &[Object]) -> BTreeMap<String, Vec<f32>> {
     let truths_of = |category: &str| -> Vec<Cuboid> {
         objects.iter().filter(|o| o.category == category).map(|o| o.cuboid).collect()
     };
-    let wanted: Vec<&Model> = models.iter().filter(|m| objects.iter().any(|o| o.category == m.category)).collect();
     let frame_yaws = FrameYaws::new(pre);
     let scenes = window_scenes(pre, &frame_yaws, wanted.iter().copied());
     let mut out = BTreeMap::new();
-    for model in wanted {
+    for &model in wanted {
         let scene = &scenes[&model.window.scene_key()];
         let options = WindowOptions { sizes: model.sizes(), min_points: model.window.min_points };
         // The ceiling of the surface search given the true supporting furniture: the surfaces of the

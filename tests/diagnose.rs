@@ -490,13 +490,13 @@ fn window_recall_on_a_synthetic_frame() {
         serde_json::Value::Null,
     )
     .unwrap();
-    let per_frame = frame_window_best_ious(&pre, std::slice::from_ref(&model), &frame.objects);
+    let per_frame = frame_window_best_ious(&pre, std::slice::from_ref(&model), &frame.objects, true);
     assert_eq!(per_frame.keys().collect::<Vec<_>>(), [&category]);
     let own: Vec<Cuboid> = frame.objects.iter().filter(|o| o.category == category).map(|o| o.cuboid).collect();
     assert_eq!(per_frame[&category], best_window_ious(&scene, hypotheses, &own));
     // Without ground truth of the model's category nothing is computed.
     let others: Vec<Object> = frame.objects.iter().filter(|o| o.category != category).cloned().collect();
-    assert!(frame_window_best_ious(&pre, &[model], &others).is_empty());
+    assert!(frame_window_best_ious(&pre, &[model], &others, true).is_empty());
 }
 
 use common::write_tiny_frame as write_frame;
@@ -698,7 +698,7 @@ fn cli_window_recall_with_models() {
     let pre = Preprocessed::from_frame(&frame).unwrap();
     let mut stepped = model.clone();
     stepped.window.step = 0.3;
-    let best = frame_window_best_ious(&pre, &[stepped], &frame.objects);
+    let best = frame_window_best_ious(&pre, &[stepped], &frame.objects, true);
     let expected = WindowRecall::from_best_ious(&best[&category]);
     assert_eq!(entry["gt_boxes"].as_u64(), Some(expected.boxes as u64));
     for (key, value) in [

@@ -283,3 +283,37 @@ fn the_cli_searches_the_second_floor_unless_told_off() {
     let report: serde_json::Value = serde_json::from_slice(&bench.stdout).unwrap();
     assert_eq!(report["unseen_floor"], serde_json::Value::Bool(false));
 }
+
+/// The diagnosis's window recall counts the second floor's boxes as detection searches them: on the
+/// sample bedroom without its floor, each nightstand moved to stand on the assumed floor is reached at
+/// least as well with the second floor as without, one of them better; on the frame as it is (its floor
+/// seen) the two agree.
+#[test]
+fn the_window_recall_counts_the_second_floor() {
+    use cog_gpu::diagnose::frame_window_best_ious;
+    let frame = Frame::read(SAMPLE, DepthSource::Raw).unwrap();
+    let pre = Preprocessed::from_frame(&frame).unwrap();
+    let model = density_model();
+    let models = std::slice::from_ref(&model);
+    let assumed = -UNSEEN_FLOOR_CAMERA_HEIGHT_M;
+    let lowered: Vec<cog_gpu::frame::Object> = frame
+        .objects
+        .iter()
+        .filter(|o| o.category == "nightstand")
+        .map(|o| {
+            let mut o = o.clone();
+            o.cuboid.centre.z = assumed + 0.5 * o.cuboid.size.z;
+            o
+        })
+        .collect();
+    assert!(!lowered.is_empty());
+    let cropped = Preprocessed::from_frame(&without_floor(&frame, pre.floor, 0.2)).unwrap();
+    let with = &frame_window_best_ious(&cropped, models, &lowered, true)["nightstand"];
+    let without = &frame_window_best_ious(&cropped, models, &lowered, false)["nightstand"];
+    assert!(with.iter().zip(without).all(|(a, b)| a >= b), "{with:?} {without:?}");
+    assert!(with.iter().zip(without).any(|(a, b)| a > b), "{with:?} {without:?}");
+    assert_eq!(
+        frame_window_best_ious(&pre, models, &frame.objects, true),
+        frame_window_best_ious(&pre, models, &frame.objects, false)
+    );
+}

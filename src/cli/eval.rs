@@ -99,6 +99,17 @@ pub struct Args {
     /// With --diagnose --models: overrides every model's window step (metres), as `detect --step`.
     #[arg(long, requires = "models", value_parser = options::step)]
     pub step: Option<f32>,
+    /// With --diagnose --models: where a frame's floor is not seen, the window recall counts the second
+    /// floor's boxes too (`on`, as `detect --unseen-floor` by default) or the lowest points' floor alone (`off`).
+    #[arg(
+        long,
+        default_value = "on",
+        value_name = "on|off",
+        value_parser = options::on_off,
+        action = clap::ArgAction::Set,
+        requires = "models"
+    )]
+    pub unseen_floor: bool,
     /// With --diagnose: the "overlay as drawn" line measures the boxes `detect` draws with this
     /// `--overlay-top` (the same default as `detect`'s).
     #[arg(long, requires = "diagnose", default_value_t = DEFAULT_OVERLAY_TOP)]
@@ -392,7 +403,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     };
     if args.diagnose {
         let window = match &models {
-            Some(models) => Some(window_recall(&frames, &truth, models)?),
+            Some(models) => Some(window_recall(&frames, &truth, models, args.unseen_floor)?),
             None => None,
         };
         let diagnosis = diagnose_categories(&truth, &detections, &categories, args.iou, window.as_ref());
@@ -751,6 +762,7 @@ fn window_recall(
     frames: &[PathBuf],
     truth: &[Vec<Object>],
     models: &[Model],
+    unseen_floor: bool,
 ) -> anyhow::Result<BTreeMap<String, Vec<f32>>> {
     let needed: Vec<usize> = (0..frames.len())
         .filter(|&i| truth[i].iter().any(|o| models.iter().any(|m| m.category == o.category)))
@@ -764,7 +776,7 @@ fn window_recall(
             let pre = Preprocessed::from_frame(&frame).with_context(|| format!("{}: preprocessing", dir.display()))?;
             cog_gpu::detect::check_budget(&pre, models)
                 .with_context(|| format!("{}: sliding window", dir.display()))?;
-            let best = frame_window_best_ious(&pre, models, &truth[i]);
+            let best = frame_window_best_ious(&pre, models, &truth[i], unseen_floor);
             bar.inc(1);
             Ok(best)
         })
