@@ -241,7 +241,19 @@ fn info_json_has_the_documented_keys() {
     let out = cog_gpu().args(["info", KV1, "--json"]).output().unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    for key in ["width", "height", "valid_depth", "bounds_min", "bounds_max", "floor", "ceiling", "objects", "layout"] {
+    for key in [
+        "width",
+        "height",
+        "valid_depth",
+        "bounds_min",
+        "bounds_max",
+        "floor",
+        "ceiling",
+        "floor_plane_cells",
+        "unseen_floor",
+        "objects",
+        "layout",
+    ] {
         assert!(v.get(key).is_some(), "missing key {key}");
     }
     assert_eq!(v["width"], 561);

@@ -222,9 +222,10 @@ fn run(args: &[&str]) -> std::process::Output {
         .expect("run cog-gpu")
 }
 
-/// `detect --unseen-floor on|off` (default on) and `bench --detect --unseen-floor`: on the sample bedroom
-/// without its floor, the default puts boxes on the second floor and `off` none, the two runs carry
-/// different fingerprints, and a value other than on/off is refused naming the flag.
+/// `detect --unseen-floor on|off` (default on), `bench --detect --unseen-floor` and `info`: on the sample
+/// bedroom without its floor, the default puts boxes on the second floor and `off` none, the two runs carry
+/// different fingerprints, `info` names the second floor (and none on the sample as it is), and a value
+/// other than on/off is refused naming the flag.
 #[test]
 fn the_cli_searches_the_second_floor_unless_told_off() {
     let dir = tempfile::tempdir().unwrap();
@@ -263,6 +264,18 @@ fn the_cli_searches_the_second_floor_unless_told_off() {
     };
     assert!(on_second(&on) > 0 && on_second(&off) == 0, "{} and {}", on_second(&on), on_second(&off));
     assert_ne!(on["run"], off["run"]);
+    // `info` says the same: no floor seen on the cut frame, the second floor named; seen on the sample.
+    let info = |dir: &str| {
+        let output = run(&["info", dir, "--json"]);
+        assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+        serde_json::from_slice::<serde_json::Value>(&output.stdout).unwrap()
+    };
+    let cut = info(frame_dir.to_str().unwrap());
+    assert!(cut["floor_plane_cells"].as_u64().unwrap() < FLOOR_PLANE_MIN_CELLS as u64);
+    assert!((cut["unseen_floor"].as_f64().unwrap() - assumed as f64).abs() < 1e-6);
+    let whole = info(SAMPLE);
+    assert!(whole["floor_plane_cells"].as_u64().unwrap() >= FLOOR_PLANE_MIN_CELLS as u64);
+    assert!(whole["unseen_floor"].is_null());
     let bad = run(&["--cpu", "detect", frame_dir.to_str().unwrap(), "--unseen-floor", "maybe"]);
     assert!(!bad.status.success());
     assert!(String::from_utf8_lossy(&bad.stderr).contains("--unseen-floor"));

@@ -4,6 +4,7 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
+use cog_gpu::features::preprocess::{Preprocessed, NORMAL_NEIGHBOURS};
 use cog_gpu::frame::{DepthSource, Frame, PointCloud};
 use serde::Serialize;
 
@@ -56,11 +57,18 @@ struct FrameInfo {
     floor: Option<f32>,
     /// 0.999 quantile of point heights (the paper's ceiling estimate).
     ceiling: Option<f32>,
+    /// Ground cells of 0.2 m holding upward-facing points within 0.1 m above `floor`
+    /// (`Preprocessed::floor_plane_cells`): at least 10 for a floor the camera sees; `None` with fewer points
+    /// than the normals need.
+    floor_plane_cells: Option<usize>,
+    /// The second floor `detect` searches because the floor is not seen (`Preprocessed::unseen_floor`);
+    /// `None` where the floor is seen (or the frame has too few points).
+    unseen_floor: Option<f32>,
     objects: Vec<ObjectInfo>,
     layout: Option<LayoutInfo>,
 }
 
-fn describe(frame: &Frame, cloud: &PointCloud) -> FrameInfo {
+fn describe(frame: &Frame, cloud: &PointCloud, pre: Option<&Preprocessed>) -> FrameInfo {
     let bounds = cloud.bounds();
     let objects = frame
         .objects
@@ -96,6 +104,8 @@ fn describe(frame: &Frame, cloud: &PointCloud) -> FrameInfo {
         bounds_max: bounds.map(|b| b.1.to_array()),
         floor: cloud.height_quantile(0.001),
         ceiling: cloud.height_quantile(0.999),
+        floor_plane_cells: pre.map(Preprocessed::floor_plane_cells),
+        unseen_floor: pre.and_then(Preprocessed::unseen_floor),
         objects,
         layout,
     }
@@ -129,6 +139,16 @@ fn print_text(info: &FrameInfo) {
     );
     println!("floor        {}  (0.001 quantile of height)", fmt_opt(info.floor));
     println!("ceiling      {}  (0.999 quantile of height)", fmt_opt(info.ceiling));
+    match (info.floor_plane_cells, info.unseen_floor) {
+        (Some(cells), None) => {
+            println!("floor seen   yes ({cells} cells of 0.2 m of upward points within 0.1 m of it)")
+        }
+        (Some(cells), Some(z)) => println!(
+            "floor seen   no ({cells} cells of 0.2 m of upward points within 0.1 m of the lowest points); `detect` \
+             also searches a floor at {z:.3} m"
+        ),
+        (None, _) => println!("floor seen   - (too few points for normals)"),
+    }
     if info.objects.is_empty() {
         println!("objects      none annotated");
     } else {
@@ -166,7 +186,9 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     let frame =
         Frame::read(&args.frame, source).with_context(|| format!("cannot read frame {}", args.frame.display()))?;
     let cloud = frame.point_cloud();
-    let info = describe(&frame, &cloud);
+    // The floor test needs the normals (as `detect` computes them); a frame with too few points has none.
+    let pre = (cloud.len() >= NORMAL_NEIGHBOURS).then(|| Preprocessed::from_frame(&frame)).transpose()?;
+    let info = describe(&frame, &cloud, pre.as_ref());
     if args.json {
         println!("{}", serde_json::to_string_pretty(&info)?);
     } else {
