@@ -589,10 +589,11 @@ pub fn detect_preprocessed_timed(
     let mut detections =
         detect_windows(name, &pre, &floor_models, &windows, scene_of, backend, options, &mut engines, stages)?;
     lap(); // detect_windows timed its own stages
-           // The same models on the second floor where the floor is not seen: the frame's points with the floor
-           // moved (the yaws, from the normals, are the same), their own scenes, tables and window. A second floor
-           // beyond the memory budget (its boxes reach more layers) is skipped with a warning, not an error: the
-           // frame is still detected as without it.
+
+    // The same models on the second floor where the floor is not seen: the frame's points with the floor
+    // moved (the yaws, from the normals, are the same), their own scenes, tables and window. A second floor
+    // beyond the memory budget (its boxes reach more layers) is skipped with a warning, not an error: the
+    // frame is still detected as without it.
     let second_floor = pre.unseen_floor().filter(|_| options.unseen_floor && !floor_models.is_empty());
     let lower = second_floor.and_then(|floor| {
         let lower = Preprocessed { floor, ..pre.clone() };

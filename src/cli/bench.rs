@@ -92,15 +92,8 @@ pub struct Args {
     #[arg(long, default_value_t, value_parser = options::box_voting, requires = "detect")]
     pub box_voting: options::BoxVoting,
     /// With --detect: a second floor where the floor is not seen (as `detect --unseen-floor`: `on` or `off`).
-    #[arg(
-        long,
-        default_value = "on",
-        value_name = "on|off",
-        value_parser = options::on_off,
-        action = clap::ArgAction::Set,
-        requires = "detect"
-    )]
-    pub unseen_floor: bool,
+    #[arg(long, default_value_t, value_name = "on|off", value_parser = options::unseen_floor, requires = "detect")]
+    pub unseen_floor: options::UnseenFloor,
     /// With --detect: timed detections of each frame.
     #[arg(long, default_value_t = 1, value_parser = options::at_least_one)]
     pub repeat: usize,

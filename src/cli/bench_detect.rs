@@ -110,7 +110,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     let detect_options = DetectOptions {
         normals,
         box_voting: args.box_voting.0,
-        unseen_floor: args.unseen_floor,
+        unseen_floor: args.unseen_floor.0,
         cross_scores: cascade.as_ref().is_some_and(cog_gpu::cascade::Cascade::reads_cross_scores),
         ..DetectOptions::default()
     };

@@ -69,14 +69,8 @@ pub struct Args {
     /// models also search a second floor 1.3 m below the camera, their boxes of both floors through one
     /// NMS (`on`), or only the lowest points' floor (`off`, as before 2026-12-07). README, "The floor where
     /// it is not seen"
-    #[arg(
-        long,
-        default_value = "on",
-        value_name = "on|off",
-        value_parser = options::on_off,
-        action = clap::ArgAction::Set
-    )]
-    pub unseen_floor: bool,
+    #[arg(long, default_value_t, value_name = "on|off", value_parser = options::unseen_floor)]
+    pub unseen_floor: options::UnseenFloor,
     /// Detections kept per category and frame.
     #[arg(long, default_value_t = 20, value_parser = options::at_least_one)]
     pub max_per_category: usize,
@@ -289,7 +283,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         min_probability: args.min_probability,
         support_min_score: args.support_min_score,
         box_voting: args.box_voting.0,
-        unseen_floor: args.unseen_floor,
+        unseen_floor: args.unseen_floor.0,
         ..DetectOptions::default()
     };
     detect_options.validate()?;

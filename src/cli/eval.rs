@@ -101,15 +101,8 @@ pub struct Args {
     pub step: Option<f32>,
     /// With --diagnose --models: where a frame's floor is not seen, the window recall counts the second
     /// floor's boxes too (`on`, as `detect --unseen-floor` by default) or the lowest points' floor alone (`off`).
-    #[arg(
-        long,
-        default_value = "on",
-        value_name = "on|off",
-        value_parser = options::on_off,
-        action = clap::ArgAction::Set,
-        requires = "models"
-    )]
-    pub unseen_floor: bool,
+    #[arg(long, default_value_t, value_name = "on|off", value_parser = options::unseen_floor, requires = "models")]
+    pub unseen_floor: options::UnseenFloor,
     /// With --diagnose: the "overlay as drawn" line measures the boxes `detect` draws with this
     /// `--overlay-top` (the same default as `detect`'s).
     #[arg(long, requires = "diagnose", default_value_t = DEFAULT_OVERLAY_TOP)]
@@ -403,7 +396,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     };
     if args.diagnose {
         let window = match &models {
-            Some(models) => Some(window_recall(&frames, &truth, models, args.unseen_floor)?),
+            Some(models) => Some(window_recall(&frames, &truth, models, args.unseen_floor.0)?),
             None => None,
         };
         let diagnosis = diagnose_categories(&truth, &detections, &categories, args.iou, window.as_ref());

@@ -81,11 +81,30 @@ pub fn box_voting(text: &str) -> Result<BoxVoting, String> {
     }
 }
 
-/// `detect --unseen-floor` (and `bench --detect --unseen-floor`): `on` or `off`.
-pub fn on_off(text: &str) -> Result<bool, String> {
+/// `--unseen-floor on|off` of `detect`, `bench --detect` and `eval --diagnose --models`: whether a frame
+/// whose floor is not seen is searched on a second floor too; by default `on`, as
+/// [`DetectOptions::default`](cog_gpu::detect::DetectOptions), the one place the three commands take it
+/// from. A type of its own rather than `bool`: clap gives a `bool` field the `SetTrue` action, which would
+/// hand the parser "true" instead of the word given.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct UnseenFloor(pub bool);
+
+impl Default for UnseenFloor {
+    fn default() -> Self {
+        UnseenFloor(cog_gpu::detect::DetectOptions::default().unseen_floor)
+    }
+}
+
+impl std::fmt::Display for UnseenFloor {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(if self.0 { "on" } else { "off" })
+    }
+}
+
+pub fn unseen_floor(text: &str) -> Result<UnseenFloor, String> {
     match text {
-        "on" => Ok(true),
-        "off" => Ok(false),
+        "on" => Ok(UnseenFloor(true)),
+        "off" => Ok(UnseenFloor(false)),
         _ => Err(format!("'{text}': give `on` or `off`")),
     }
 }

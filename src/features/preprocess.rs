@@ -524,8 +524,9 @@ impl Preprocessed {
     /// and a top has its sides below it). Otherwise the floor is somewhere below the lowest points, and
     /// the second floor is where a camera usually stands above it, [`UNSEEN_FLOOR_CAMERA_HEIGHT_M`] below
     /// the camera — `None` when the lowest points are already that low (nothing to add). Detection runs
-    /// the window of the floor's models on both floors (`crate::detect::DetectOptions::unseen_floor`);
-    /// training and the diagnosis's window recall use [`Preprocessed::floor`] alone. The thresholds were
+    /// the window of the floor's models on both floors (`crate::detect::DetectOptions::unseen_floor`), and
+    /// the diagnosis's window recall counts both (`crate::diagnose::frame_window_best_ious`); training uses
+    /// [`Preprocessed::floor`] alone. The thresholds were
     /// chosen on the training set's floors and the selection set's AP (README, "The floor where it is not
     /// seen").
     pub fn unseen_floor(&self) -> Option<f32> {
