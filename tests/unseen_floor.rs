@@ -12,7 +12,7 @@ use cog_gpu::backend::Backend;
 use cog_gpu::detect::{compare_paths, detect_frame, merge_floors, DetectOptions};
 use cog_gpu::eval::Detection;
 use cog_gpu::features::preprocess::{
-    FLOOR_PLANE_BAND_M, FLOOR_PLANE_CELL_M, FLOOR_PLANE_MIN_CELLS, UNSEEN_FLOOR_CAMERA_HEIGHT_M,
+    FLOOR_PLANE_BAND_M, FLOOR_PLANE_CELL_M, FLOOR_PLANE_MIN_CELLS, MIN_CAMERA_HEIGHT_M, UNSEEN_FLOOR_CAMERA_HEIGHT_M,
 };
 use cog_gpu::features::{FeatureLayout, Groups, Preprocessed, SizeQuantiles};
 use cog_gpu::frame::{DepthSource, Frame};
@@ -67,6 +67,9 @@ fn the_floor_plane_counts_the_cells_of_upward_points_in_its_band() {
     assert_eq!(scene(points, floor).floor_plane_cells(), 4);
 }
 
+/// The rule's three parts: a plane of enough cells, at least [`MIN_CAMERA_HEIGHT_M`] below the camera, is a
+/// floor seen; fewer cells, or a plane closer to the camera (a top), is not — then the second floor is the
+/// assumed one, unless the lowest points are that low already.
 #[test]
 fn a_second_floor_only_where_the_lowest_points_are_no_plane_and_above_the_assumed_camera_height() {
     let assumed = -UNSEEN_FLOOR_CAMERA_HEIGHT_M;
@@ -79,10 +82,18 @@ fn a_second_floor_only_where_the_lowest_points_are_no_plane_and_above_the_assume
     assert_eq!(scene(cut, assumed - 0.2).unseen_floor(), None);
     // A plane of one cell fewer than the least a seen floor covers, then of exactly that many.
     let side = (min as f64).sqrt().ceil() as usize;
-    let few: Vec<(Vec3, Vec3)> = plane(side, -1.0).into_iter().take(min - 1).collect();
-    assert_eq!(scene(few, -1.0).unseen_floor(), Some(assumed));
-    let enough: Vec<(Vec3, Vec3)> = plane(side, -1.0).into_iter().take(min).collect();
-    assert_eq!(scene(enough, -1.0).unseen_floor(), None);
+    let seen = -1.1;
+    let few: Vec<(Vec3, Vec3)> = plane(side, seen).into_iter().take(min - 1).collect();
+    assert_eq!(scene(few, seen).unseen_floor(), Some(assumed));
+    let enough: Vec<(Vec3, Vec3)> = plane(side, seen).into_iter().take(min).collect();
+    assert_eq!(scene(enough, seen).unseen_floor(), None);
+    // A wide plane (100 cells) exactly the least camera height below the camera is a floor; 5 cm higher it
+    // is a top (a bed filling the picture's bottom), whatever its size.
+    let lowest = -MIN_CAMERA_HEIGHT_M;
+    assert_eq!(scene(plane(10, lowest), lowest).unseen_floor(), None);
+    let top = lowest + 0.05;
+    assert!(scene(plane(10, top), top).floor_plane_cells() >= min);
+    assert_eq!(scene(plane(10, top), top).unseen_floor(), Some(assumed));
 }
 
 fn chair(centre: [f32; 3], score: f32) -> Detection {
@@ -276,6 +287,8 @@ fn the_cli_searches_the_second_floor_unless_told_off() {
     let whole = info(SAMPLE);
     assert!(whole["floor_plane_cells"].as_u64().unwrap() >= FLOOR_PLANE_MIN_CELLS as u64);
     assert!(whole["unseen_floor"].is_null());
+    // Its floor is the one the window stands on, to the bit (an order statistic, not an interpolation).
+    assert_eq!(whole["floor"].as_f64().unwrap() as f32, pre.floor);
     let bad = run(&["--cpu", "detect", frame_dir.to_str().unwrap(), "--unseen-floor", "maybe"]);
     assert!(!bad.status.success());
     assert!(String::from_utf8_lossy(&bad.stderr).contains("--unseen-floor"));

@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use cog_gpu::features::preprocess::{Preprocessed, NORMAL_NEIGHBOURS};
+use cog_gpu::features::preprocess::{floor_height, Preprocessed, MIN_CAMERA_HEIGHT_M, NORMAL_NEIGHBOURS};
 use cog_gpu::frame::{DepthSource, Frame, PointCloud};
 use serde::Serialize;
 
@@ -53,7 +53,8 @@ struct FrameInfo {
     valid_depth: usize,
     bounds_min: Option<[f32; 3]>,
     bounds_max: Option<[f32; 3]>,
-    /// 0.001 quantile of point heights (the paper's floor estimate).
+    /// 0.001 quantile of point heights (the paper's floor estimate), as the sliding window takes it
+    /// (`features::preprocess::floor_height`, an order statistic: the floor `detect` puts its boxes on).
     floor: Option<f32>,
     /// 0.999 quantile of point heights (the paper's ceiling estimate).
     ceiling: Option<f32>,
@@ -102,7 +103,7 @@ fn describe(frame: &Frame, cloud: &PointCloud, pre: Option<&Preprocessed>) -> Fr
         valid_depth: cloud.len(),
         bounds_min: bounds.map(|b| b.0.to_array()),
         bounds_max: bounds.map(|b| b.1.to_array()),
-        floor: cloud.height_quantile(0.001),
+        floor: (!cloud.points.is_empty()).then(|| floor_height(&cloud.points)),
         ceiling: cloud.height_quantile(0.999),
         floor_plane_cells: pre.map(Preprocessed::floor_plane_cells),
         unseen_floor: pre.and_then(Preprocessed::unseen_floor),
@@ -143,10 +144,14 @@ fn print_text(info: &FrameInfo) {
         (Some(cells), None) => {
             println!("floor seen   yes ({cells} cells of 0.2 m of upward points within 0.1 m of it)")
         }
-        (Some(cells), Some(z)) => println!(
-            "floor seen   no ({cells} cells of 0.2 m of upward points within 0.1 m of the lowest points); `detect` \
-             also searches a floor at {z:.3} m"
-        ),
+        (Some(cells), Some(z)) => {
+            let why = if info.floor.is_some_and(|floor| floor > -MIN_CAMERA_HEIGHT_M) {
+                format!("the lowest points less than {MIN_CAMERA_HEIGHT_M} m below the camera: a top, not the floor")
+            } else {
+                format!("{cells} cells of 0.2 m of upward points within 0.1 m of the lowest points")
+            };
+            println!("floor seen   no ({why}); `detect` also searches a floor at {z:.3} m")
+        }
         (None, _) => println!("floor seen   - (too few points for normals)"),
     }
     if info.objects.is_empty() {

@@ -35,6 +35,14 @@ pub const FLOOR_PLANE_MIN_CELLS: usize = 10;
 /// to the camera (`../shared/data/sunrgbd-size-stats.json`, `bottom_z_rel_camera_m`: medians 1.20–1.37 m
 /// over the ten categories, 1.35 m for the chairs, 10 481 of its 17 273 boxes), rounded down.
 pub const UNSEEN_FLOOR_CAMERA_HEIGHT_M: f32 = 1.3;
+/// Least height of the camera above a floor it sees (metres): lowest points less than this below the
+/// camera are a top or the bottom of something the picture cuts, not the floor, however large a plane
+/// they make ([`Preprocessed::unseen_floor`]). SUN RGB-D's cameras stand higher: its floor-standing
+/// objects' bottoms lie at least 1.04–1.20 m below the camera in nine of ten boxes
+/// (`../shared/data/sunrgbd-size-stats.json`, `bottom_z_rel_camera_m`, 0.9 quantiles of the nine
+/// categories that stand on the floor — the bookshelf, often on a table, left out), and a floor lies below
+/// what stands on it; rounded down. Not chosen on synthetic frames (synth's cameras stand 1.0–1.7 m high).
+pub const MIN_CAMERA_HEIGHT_M: f32 = 1.0;
 
 /// Number of bins of the normal orientation code.
 pub const NORMAL_BINS: usize = 25;
@@ -521,7 +529,9 @@ impl Preprocessed {
     /// more than 10 cm below it). The test: the lowest points are a floor when their upward-facing points
     /// ([`FLOOR_PLANE_BAND_M`] above [`Preprocessed::floor`]) cover at least [`FLOOR_PLANE_MIN_CELLS`]
     /// cells of [`FLOOR_PLANE_CELL_M`] (a floor seen is a plane; the bottom edge of a cut object is not,
-    /// and a top has its sides below it). Otherwise the floor is somewhere below the lowest points, and
+    /// and a top has its sides below it) and lie at least [`MIN_CAMERA_HEIGHT_M`] below the camera (a
+    /// bed's, bathtub's or counter's top filling the picture's bottom makes a plane too, since 2026-12-07,
+    /// afternoon). Otherwise the floor is somewhere below the lowest points, and
     /// the second floor is where a camera usually stands above it, [`UNSEEN_FLOOR_CAMERA_HEIGHT_M`] below
     /// the camera — `None` when the lowest points are already that low (nothing to add). Detection runs
     /// the window of the floor's models on both floors (`crate::detect::DetectOptions::unseen_floor`), and
@@ -531,7 +541,8 @@ impl Preprocessed {
     /// seen").
     pub fn unseen_floor(&self) -> Option<f32> {
         let assumed = -UNSEEN_FLOOR_CAMERA_HEIGHT_M;
-        (self.floor > assumed && self.floor_plane_cells() < FLOOR_PLANE_MIN_CELLS).then_some(assumed)
+        let too_high = self.floor > -MIN_CAMERA_HEIGHT_M;
+        (self.floor > assumed && (too_high || self.floor_plane_cells() < FLOOR_PLANE_MIN_CELLS)).then_some(assumed)
     }
 
     pub fn is_empty(&self) -> bool {
