@@ -1,6 +1,6 @@
 //! Diagnosis of where a detector loses average precision (`cog-gpu eval --diagnose`).
 //!
-//! Seven numbers, each isolating one stage of the pipeline or one kind of error:
+//! Eight numbers, each isolating one stage of the pipeline or one kind of error:
 //!
 //! 1. **Window recall ceiling** ([`best_window_ious`], [`frame_window_best_ious`], [`WindowRecall`]): for
 //!    each ground-truth box, the largest 3D IoU ([`crate::geometry::iou_3d`]) of any hypothesis the model's
@@ -33,6 +33,11 @@
 //!    came near it and whether another category's detection sits on it — so that the recall the AP lacks
 //!    can be traced to the objects themselves (their size, their distance from the camera, the share of
 //!    their volume in the picture: [`crate::geometry::in_view_share`]).
+//! 8. **Reliability of the scores as probabilities** ([`reliability`]): every detection of the evaluated
+//!    categories labelled by the benchmark's matching (the AP's true positives), put in ten bins of its
+//!    score; per bin how many true positives the scores expect (their sum) and how many there are — a
+//!    reliability diagram in numbers — and the expected calibration error. Whether a calibrated `score`
+//!    of 0.9 is right nine times in ten.
 //!
 //! Detections are read through [`Detection::score`] only, so other fields a detections file may carry do
 //! not change the diagnosis.
@@ -43,7 +48,8 @@ use serde::Serialize;
 
 use crate::detect::overlay_selection;
 use crate::eval::{
-    average_precision, category_truth, interpolated_ap, scored_boxes, Detection, PrecisionRecall, ScoredBox,
+    average_precision, category_truth, interpolated_ap, scored_boxes, true_positives_in_input_order, Detection,
+    PrecisionRecall, ScoredBox,
 };
 use crate::features::hypotheses::{window, FrameYaws, Support, WindowOptions};
 use crate::features::surface::annotated_surfaces_by_category;
@@ -764,6 +770,90 @@ pub fn object_outcomes(
         }
     }
     outcomes
+}
+
+// ---------------------------------------------------------------------------------------------------------
+// 8. Reliability of the scores as probabilities
+
+/// Bins of [`reliability`]: ten of width 0.1 over [0, 1], each closed below and open above, the last closed.
+pub const RELIABILITY_BINS: usize = 10;
+
+/// The detections whose score falls in `[lower, upper)` ([`reliability`]).
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct ReliabilityBin {
+    pub lower: f32,
+    pub upper: f32,
+    pub detections: usize,
+    /// Of them, true positives by the benchmark's matching.
+    pub true_positives: usize,
+    /// The sum of their scores: the true positives the scores, read as probabilities, expect.
+    pub expected_true_positives: f64,
+}
+
+impl ReliabilityBin {
+    /// Mean score of the bin's detections; `None` for an empty bin.
+    pub fn mean_score(&self) -> Option<f64> {
+        (self.detections > 0).then(|| self.expected_true_positives / self.detections as f64)
+    }
+
+    /// Share of the bin's detections that are true positives; `None` for an empty bin.
+    pub fn precision(&self) -> Option<f64> {
+        (self.detections > 0).then(|| self.true_positives as f64 / self.detections as f64)
+    }
+}
+
+/// How well the detections' scores hold as probabilities of being right ([`reliability`]).
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct Reliability {
+    /// [`RELIABILITY_BINS`] bins, lowest first.
+    pub bins: Vec<ReliabilityBin>,
+    /// Detections whose score is not in [0, 1] (raw, uncalibrated scores), left out of the bins.
+    pub outside_unit_interval: usize,
+    /// Σ over the bins of (detections / all binned) · |precision − mean score|; `None` when nothing is
+    /// binned.
+    pub expected_calibration_error: Option<f64>,
+}
+
+/// The reliability of the detections' scores (number 8 of the module doc): every detection of
+/// `categories` is labelled by [`true_positives_in_input_order`] — the AP's matching, the rule the
+/// calibrations were fitted on (`calibrate`, `calibrate --cascade`) — and counted in its score's bin.
+/// Scores outside [0, 1] are counted apart (a file of raw scores has no probabilities to check).
+pub fn reliability(
+    truth: &[Vec<Object>],
+    detections: &[Vec<Detection>],
+    categories: &[String],
+    iou_threshold: f32,
+) -> Reliability {
+    let width = 1.0 / RELIABILITY_BINS as f32;
+    let mut out = Reliability {
+        bins: (0..RELIABILITY_BINS)
+            .map(|b| ReliabilityBin { lower: b as f32 * width, upper: (b + 1) as f32 * width, ..Default::default() })
+            .collect(),
+        ..Default::default()
+    };
+    for category in categories {
+        let boxes = scored_boxes(detections, category);
+        let labels = true_positives_in_input_order(&boxes, &category_truth(truth, category), iou_threshold);
+        for (scored, hit) in boxes.iter().zip(labels) {
+            if !(0.0..=1.0).contains(&scored.score) {
+                out.outside_unit_interval += 1;
+                continue;
+            }
+            let bin = ((scored.score * RELIABILITY_BINS as f32) as usize).min(RELIABILITY_BINS - 1);
+            let bin = &mut out.bins[bin];
+            bin.detections += 1;
+            bin.true_positives += usize::from(hit);
+            bin.expected_true_positives += f64::from(scored.score);
+        }
+    }
+    let binned: usize = out.bins.iter().map(|b| b.detections).sum();
+    out.expected_calibration_error = (binned > 0).then(|| {
+        out.bins
+            .iter()
+            .filter_map(|b| Some(b.detections as f64 / binned as f64 * (b.precision()? - b.mean_score()?).abs()))
+            .sum()
+    });
+    out
 }
 
 // ---------------------------------------------------------------------------------------------------------

@@ -9,7 +9,8 @@ mod common;
 use cog_gpu::detect::OVERLAY_SAME_CATEGORY_IOU;
 use cog_gpu::diagnose::{
     best_window_ious, diagnose_categories, false_positive_kinds, frame_window_best_ious, in_frame_ranking,
-    object_outcomes, oracle_aps, overlay_precision, rank_average_precision, ObjectSummary, OverlayRule, WindowRecall,
+    object_outcomes, oracle_aps, overlay_precision, rank_average_precision, reliability, ObjectSummary, OverlayRule,
+    WindowRecall, RELIABILITY_BINS,
 };
 use cog_gpu::eval::{Detection, FrameDetections};
 use cog_gpu::features::hypotheses::{sliding_window, window_yaws, WindowOptions};
@@ -499,6 +500,51 @@ fn window_recall_on_a_synthetic_frame() {
     assert!(frame_window_best_ious(&pre, &[model], &others, true).is_empty());
 }
 
+/// The reliability bins on a hand-worked case: labels by the AP's matching (a duplicate is false even on
+/// its object), a score of exactly 1 in the last bin, a score outside [0, 1] matched but not binned, a
+/// category not evaluated ignored; the expected calibration error by hand.
+#[test]
+fn reliability_by_hand() {
+    let truth = vec![
+        vec![object("chair", unit_box(0.0, 0.0)), object("table", unit_box(5.0, 0.0))],
+        vec![object("chair", unit_box(0.0, 0.0))],
+    ];
+    let detections = vec![
+        vec![
+            det("chair", unit_box(0.0, 0.0), 0.95),  // true, bin 9
+            det("chair", unit_box(0.0, 0.0), 0.85),  // its duplicate: false, bin 8
+            det("chair", unit_box(10.0, 0.0), 0.15), // false, bin 1
+            det("chair", unit_box(30.0, 0.0), -0.5), // false, outside [0, 1]
+            det("table", unit_box(5.0, 0.0), 1.0),   // true, bin 9 (the last bin is closed)
+            det("table", unit_box(5.0, 0.0), 0.55),  // duplicate: false, bin 5
+            det("table", unit_box(20.0, 0.0), 0.05), // false, bin 0
+            det("sofa", unit_box(0.0, 0.0), 0.5),    // not evaluated
+        ],
+        vec![det("chair", unit_box(0.0, 0.0), 0.15)], // true, bin 1
+    ];
+    let categories = vec!["chair".to_string(), "table".to_string()];
+    let r = reliability(&truth, &detections, &categories, 0.25);
+    assert_eq!(r.bins.len(), RELIABILITY_BINS);
+    for (n, bin) in r.bins.iter().enumerate() {
+        assert!((bin.lower - n as f32 * 0.1).abs() < 1e-6 && (bin.upper - (n + 1) as f32 * 0.1).abs() < 1e-6);
+    }
+    let counts: Vec<(usize, usize)> = r.bins.iter().map(|b| (b.detections, b.true_positives)).collect();
+    assert_eq!(counts, [(1, 0), (2, 1), (0, 0), (0, 0), (0, 0), (1, 0), (0, 0), (0, 0), (1, 0), (2, 2)]);
+    let expected = [0.05, 0.30, 0.0, 0.0, 0.0, 0.55, 0.0, 0.0, 0.85, 1.95];
+    for (bin, e) in r.bins.iter().zip(expected) {
+        assert!((bin.expected_true_positives - e).abs() < 1e-6, "{bin:?}");
+    }
+    assert!(r.bins[2].mean_score().is_none() && r.bins[2].precision().is_none());
+    assert!((r.bins[1].precision().unwrap() - 0.5).abs() < 1e-12);
+    assert_eq!(r.outside_unit_interval, 1);
+    // Σ n_b/N |precision_b − mean_b| over the 7 binned: (0.05 + 2·0.35 + 0.55 + 0.85 + 2·0.025) / 7.
+    assert!((r.expected_calibration_error.unwrap() - 2.2 / 7.0).abs() < 1e-6);
+    // Nothing binned: no error to report.
+    let raw = vec![vec![det("chair", unit_box(0.0, 0.0), 2.5)], vec![]];
+    let r = reliability(&truth, &raw, &categories, 0.25);
+    assert_eq!((r.outside_unit_interval, r.expected_calibration_error), (1, None));
+}
+
 use common::write_tiny_frame as write_frame;
 
 #[test]
@@ -573,6 +619,13 @@ fn cli_diagnose_json_and_table() {
     };
     assert_eq!(kinds(drawn), [Some(0), Some(0), Some(0), Some(1), Some(0)]);
     assert_eq!(kinds(overlay), [Some(0); 5]);
+    // The scores as probabilities: a's 0.9 (true) and 0.8 (false) in the two top bins, b's 0.3 (true).
+    let bins = report["reliability"]["bins"].as_array().unwrap();
+    let binned: Vec<[Option<u64>; 2]> =
+        bins.iter().map(|b| [b["detections"].as_u64(), b["true_positives"].as_u64()]).collect();
+    let [none, one, hit] = [[Some(0), Some(0)], [Some(1), Some(0)], [Some(1), Some(1)]];
+    assert_eq!(binned, [none, none, none, hit, none, none, none, none, one, hit]);
+    assert!((num(&report["reliability"]["expected_calibration_error"]) - (0.7 + 0.8 + 0.1) / 3.0).abs() < 1e-6);
     let out = run(&["--json", "--overlay-top", "1"]);
     let report: Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(counts(&report["overlay_drawn"]), [Some(2), Some(2), Some(2), Some(0)]);
@@ -593,6 +646,7 @@ fn cli_diagnose_json_and_table() {
         ["bed", "2", "-", "-", "-", "2", "2", "100.0", "83.3", "100.0"]
     );
     assert!(table.contains("2/2 = 100.0"), "{table}");
+    assert!(table.contains("expected calibration error 0.5333 over 3 detections"), "{table}");
     assert!(table.contains("2/3 = 66.7; 1.50 boxes per frame, 0 of 2 frames without a box"), "{table}");
     // The oracle table: a's far box is background; without it both true positives come first.
     let oracle = table.split("AP without the false positives").nth(1).expect("the oracle table");

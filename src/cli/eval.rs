@@ -33,9 +33,9 @@ use anyhow::{bail, Context};
 use cog_gpu::category::{CATEGORIES, LARGE_CATEGORIES};
 use cog_gpu::detect::{DEFAULT_OVERLAY_MIN_PROBABILITY, DEFAULT_OVERLAY_TOP};
 use cog_gpu::diagnose::{
-    diagnose_categories, frame_window_best_ious, object_outcomes, overlay_precision, CategoryDiagnosis,
-    FalseKindCounts, ObjectOutcome, OverlayPrecision, OverlayRule, FOUND_AHEAD_PRECISION, MOSTLY_OUT_OF_VIEW,
-    TOUCH_IOU,
+    diagnose_categories, frame_window_best_ious, object_outcomes, overlay_precision, reliability, CategoryDiagnosis,
+    FalseKindCounts, ObjectOutcome, OverlayPrecision, OverlayRule, Reliability, FOUND_AHEAD_PRECISION,
+    MOSTLY_OUT_OF_VIEW, TOUCH_IOU,
 };
 use cog_gpu::draw::category_colour;
 use cog_gpu::eval::{
@@ -193,6 +193,8 @@ struct DiagnosisReport {
     overlay_precision: OverlayPrecision,
     /// The boxes `detect`'s overlay draws ([`OverlayRule::Drawn`]), with the rule's two numbers.
     overlay_drawn: DrawnOverlay,
+    /// The scores as probabilities, in ten bins ([`reliability`]).
+    reliability: Reliability,
     /// `--objects`: every ground-truth box of the evaluated categories.
     #[serde(skip_serializing_if = "Option::is_none")]
     objects: Option<Vec<NamedOutcome>>,
@@ -403,6 +405,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         let overlay_of = |rule| overlay_precision(&truth, &detections, &categories, args.iou, rule, args.nms_iou);
         let overlay = overlay_of(OverlayRule::GroundTruthCount);
         let drawn = overlay_of(OverlayRule::Drawn { top: args.overlay_top, min_probability: args.overlay_min_score });
+        let reliability = reliability(&truth, &detections, &categories, args.iou);
         let objects = if args.objects {
             Some(named_outcomes(&frames, &truth, &detections, &categories, args.iou)?)
         } else {
@@ -417,12 +420,14 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
                     min_probability: args.overlay_min_score,
                     precision: drawn,
                 },
+                reliability,
                 objects,
                 ignored,
             };
             println!("{}", serde_json::to_string_pretty(&report)?);
         } else {
             print_diagnosis(&args, &diagnosis, &overlay, &drawn, evaluated, missing);
+            print_reliability(&reliability);
             if let Some(ignored) = &ignored {
                 print_ignored(ignored);
             }
@@ -1061,6 +1066,34 @@ fn print_diagnosis(
         drawn.frames
     );
     println!("  {}", false_kinds_line(&drawn.false_kinds, args.iou));
+}
+
+/// The reliability table: per bin of the score its detections, true positives, the true positives its
+/// scores expect, their mean score and the bin's precision; then the expected calibration error.
+fn print_reliability(r: &Reliability) {
+    println!("scores as probabilities (every detection, labelled by the AP's matching), by bin of the score:");
+    println!("{:<12} {:>8} {:>7} {:>9} {:>6} {:>9}", "score", "#dets", "#TP", "expected", "mean", "precision");
+    let last = r.bins.len().saturating_sub(1);
+    for (n, b) in r.bins.iter().enumerate() {
+        let upper = if n == last { ']' } else { ')' };
+        let number = |v: Option<f64>| v.map(|v| format!("{v:.3}")).unwrap_or_else(|| "-".into());
+        println!(
+            "{:<12} {:>8} {:>7} {:>9.1} {:>6} {:>9}",
+            format!("[{:.1}, {:.1}{upper}", b.lower, b.upper),
+            b.detections,
+            b.true_positives,
+            b.expected_true_positives,
+            number(b.mean_score()),
+            number(b.precision())
+        );
+    }
+    let binned: usize = r.bins.iter().map(|b| b.detections).sum();
+    let ece = r.expected_calibration_error.map(|e| format!("{e:.4}")).unwrap_or_else(|| "-".into());
+    println!(
+        "expected calibration error {ece} over {binned} detections ({} with a score outside [0, 1]: raw scores, not \
+         binned)",
+        r.outside_unit_interval
+    );
 }
 
 /// The overlay's false boxes by kind (`iou`: the true positives' IoU), on one line: the three most frequent
