@@ -183,7 +183,8 @@ case "$mode" in
         # The README's status table ("Where it stands") and "The shipped pipeline today": the shipped models,
         # calibrations and cascade, detected on the test set (about 30 min on the 2-core machine; a rerun
         # keeps the first-stage files), rescored, and evaluated against both annotation rules of the same
-        # frames; the support surfaces of the first stage; the sample frames' best detections.
+        # frames; the support surfaces of the first stage; the scores as probabilities (reliability bins) of
+        # the first stage and the cascade; the sample frames' best detections.
         dir="$WORK/shipped"
         mkdir -p "$dir"
         started=$SECONDS
@@ -206,6 +207,12 @@ case "$mode" in
             done
             "$BIN" eval --data "$WORK/$data" --detections "$dir/rescored" --diagnose > "$dir/diagnosis-$name.txt"
         done
+        # The scores as probabilities (`eval --diagnose`'s reliability bins), all 19 categories, `visible`:
+        # the first stage's calibrations and the cascade's.
+        for stage in first rescored; do
+            "$BIN" eval --data "$WORK/test" --detections "$dir/$stage" --categories all --diagnose \
+                > "$dir/diagnosis-all-visible-$stage.txt"
+        done
         "$BIN" eval --data "$WORK/test" --detections "$dir/first" --surfaces \
             --categories bed,table,desk,dresser,nightstand > "$dir/surfaces.txt"
         "$BIN" detect assets/sample --models assets/models --out "$dir/sample" > "$dir/sample.txt"
@@ -218,6 +225,10 @@ case "$mode" in
                     echo "$name, $stage: 19 categories $(grep '^mAP' "$dir/ap-all-$name-$stage.txt" | tail -1 | tr -s " ")"
                 done
                 echo "$name $(grep '^overlay precision' "$dir/diagnosis-$name.txt")"
+            done
+            for stage in first rescored; do
+                echo "visible, $stage, 19 categories, $(sed -n '/^scores as probabilities/,$p' \
+                    "$dir/diagnosis-all-visible-$stage.txt")"
             done
             echo "first stage, $(sed -n '/^support surfaces/,$p' "$dir/surfaces.txt")"
             echo "sample frames:"
