@@ -41,7 +41,7 @@ use crate::features::hypotheses::{
     free_bottoms, windows, FrameYaws, HypothesisSet, Support, SupportSurface, WindowOptions, WindowRequest,
     DEFAULT_STEP,
 };
-use crate::features::preprocess::{NormalSearch, MIN_CAMERA_HEIGHT_M};
+use crate::features::preprocess::NormalSearch;
 use crate::features::scene::rotate;
 use crate::features::surface::{best_slice, category_surface, refined_surface_height, SurfaceEngine, SurfaceSource};
 use crate::features::{FeatureScene, Hypothesis, Preprocessed};
@@ -608,13 +608,9 @@ pub fn detect_preprocessed_timed(
         }
     });
     if let Some(lower) = lower {
-        let why = if pre.floor > -MIN_CAMERA_HEIGHT_M {
-            format!("less than {MIN_CAMERA_HEIGHT_M} m below the camera")
-        } else {
-            "holding no horizontal plane".to_string()
-        };
+        let why = pre.lowest_points_not_floor().map(|why| format!(", {why}")).unwrap_or_default();
         log::info!(
-            "frame '{name}': no floor seen (the lowest points at {:.2} m, {why}); the floor's models also search a \
+            "frame '{name}': no floor seen (the lowest points at {:.2} m{why}); the floor's models also search a \
              floor at {} m (--unseen-floor)",
             pre.floor,
             lower.floor

@@ -1,6 +1,8 @@
 //! Detection: scores against an independent computation, NMS and caps, the overlay, and the CLI.
 
+mod common;
 use cog_gpu::features::Support;
+use common::run_cog_gpu as run;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -193,10 +195,6 @@ fn the_default_cut_is_a_probability_for_a_calibrated_model_and_the_raw_threshold
 
 fn binary() -> &'static str {
     env!("CARGO_BIN_EXE_cog-gpu")
-}
-
-fn run(args: &[&str]) -> std::process::Output {
-    Command::new(binary()).args(args).env("NODEVICE_SELECT", "1").output().expect("run cog-gpu")
 }
 
 fn models_dir(dir: &Path) -> PathBuf {

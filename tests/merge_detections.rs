@@ -2,12 +2,9 @@
 //! detections of the old ones gives exactly what detecting everything with the new models gives — the
 //! reference is that full detection, run here — and the merges that would not are refused.
 
+mod common;
+use common::run_cog_gpu as run;
 use std::path::{Path, PathBuf};
-use std::process::Command;
-
-fn run(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_cog-gpu")).args(args).env("NODEVICE_SELECT", "1").output().expect("run cog-gpu")
-}
 
 fn ok(args: &[&str]) -> String {
     let out = run(args);

@@ -2,10 +2,11 @@
 //! construction, and `cog-gpu train` end to end on a tiny synthetic dataset (model, checkpoint, resume,
 //! errors).
 
+mod common;
 use cog_gpu::features::LatticePhase;
 use cog_gpu::features::Support;
+use common::run_cog_gpu as run;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use cog_gpu::features::fast::{FastEngine, FastOptions};
 use cog_gpu::features::hypotheses::{anchored_yaws, default_yaws, nearest_yaw_index};
@@ -18,14 +19,6 @@ use cog_gpu::learn::detector::{
 };
 
 const FRAME: &str = "../shared/data/sunrgbd/kv1-b3dodata-img_0063";
-
-fn binary() -> &'static str {
-    env!("CARGO_BIN_EXE_cog-gpu")
-}
-
-fn run(args: &[&str]) -> std::process::Output {
-    Command::new(binary()).args(args).env("NODEVICE_SELECT", "1").output().expect("run cog-gpu")
-}
 
 #[test]
 fn nearest_yaw_wraps_around_the_circle() {

@@ -5,6 +5,7 @@
 //! (`COG_GPU_FAST_KERNEL=always`, which this file sets for its GPU test) giving the CPU's boxes.
 
 mod common;
+use common::run_cog_gpu as run;
 
 use glam::{DMat3, Vec2, Vec3};
 
@@ -12,7 +13,8 @@ use cog_gpu::backend::Backend;
 use cog_gpu::detect::{compare_paths, detect_frame, merge_floors, DetectOptions};
 use cog_gpu::eval::Detection;
 use cog_gpu::features::preprocess::{
-    FLOOR_PLANE_BAND_M, FLOOR_PLANE_CELL_M, FLOOR_PLANE_MIN_CELLS, MIN_CAMERA_HEIGHT_M, UNSEEN_FLOOR_CAMERA_HEIGHT_M,
+    NotFloor, FLOOR_PLANE_BAND_M, FLOOR_PLANE_CELL_M, FLOOR_PLANE_MIN_CELLS, MIN_CAMERA_HEIGHT_M,
+    UNSEEN_FLOOR_CAMERA_HEIGHT_M,
 };
 use cog_gpu::features::{FeatureLayout, Groups, Preprocessed, SizeQuantiles};
 use cog_gpu::frame::{DepthSource, Frame};
@@ -78,15 +80,19 @@ fn a_second_floor_only_where_the_lowest_points_are_no_plane_and_above_the_assume
     let mut cut: Vec<(Vec3, Vec3)> = (0..200).map(|k| (Vec3::new(0.01 * k as f32, 1.0, -0.8), SIDEWAYS)).collect();
     cut.extend(plane(8, -0.5));
     assert_eq!(scene(cut.clone(), -0.8).unseen_floor(), Some(assumed));
-    // The same, lower than the assumed floor: nothing to add.
+    assert_eq!(scene(cut.clone(), -0.8).lowest_points_not_floor(), Some(NotFloor::TooHigh));
+    // The same, lower than the assumed floor: no plane, but nothing to add.
+    assert_eq!(scene(cut.clone(), assumed - 0.2).lowest_points_not_floor(), Some(NotFloor::NoPlane));
     assert_eq!(scene(cut, assumed - 0.2).unseen_floor(), None);
     // A plane of one cell fewer than the least a seen floor covers, then of exactly that many.
     let side = (min as f64).sqrt().ceil() as usize;
     let seen = -1.1;
     let few: Vec<(Vec3, Vec3)> = plane(side, seen).into_iter().take(min - 1).collect();
-    assert_eq!(scene(few, seen).unseen_floor(), Some(assumed));
+    assert_eq!(scene(few.clone(), seen).unseen_floor(), Some(assumed));
+    assert_eq!(scene(few, seen).lowest_points_not_floor(), Some(NotFloor::NoPlane));
     let enough: Vec<(Vec3, Vec3)> = plane(side, seen).into_iter().take(min).collect();
-    assert_eq!(scene(enough, seen).unseen_floor(), None);
+    assert_eq!(scene(enough.clone(), seen).unseen_floor(), None);
+    assert_eq!(scene(enough, seen).lowest_points_not_floor(), None);
     // A wide plane (100 cells) exactly the least camera height below the camera is a floor; 5 cm higher it
     // is a top (a bed filling the picture's bottom), whatever its size.
     let lowest = -MIN_CAMERA_HEIGHT_M;
@@ -94,6 +100,7 @@ fn a_second_floor_only_where_the_lowest_points_are_no_plane_and_above_the_assume
     let top = lowest + 0.05;
     assert!(scene(plane(10, top), top).floor_plane_cells() >= min);
     assert_eq!(scene(plane(10, top), top).unseen_floor(), Some(assumed));
+    assert_eq!(scene(plane(10, top), top).lowest_points_not_floor(), Some(NotFloor::TooHigh));
 }
 
 fn chair(centre: [f32; 3], score: f32) -> Detection {
@@ -223,14 +230,6 @@ fn the_gpu_path_searches_the_second_floor_as_the_cpu_does() {
     assert!(cpu.iter().any(|d| (d.cuboid().bottom() - assumed).abs() < 1e-4), "no box on the second floor");
     let agreement = compare_paths(&[cpu], &[gpu]);
     assert!(agreement.same, "{agreement:?}");
-}
-
-fn run(args: &[&str]) -> std::process::Output {
-    std::process::Command::new(env!("CARGO_BIN_EXE_cog-gpu"))
-        .args(args)
-        .env("NODEVICE_SELECT", "1")
-        .output()
-        .expect("run cog-gpu")
 }
 
 /// `detect --unseen-floor on|off` (default on), `bench --detect --unseen-floor` and `info`: on the sample

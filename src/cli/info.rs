@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use cog_gpu::features::preprocess::{floor_height, Preprocessed, MIN_CAMERA_HEIGHT_M, NORMAL_NEIGHBOURS};
+use cog_gpu::features::preprocess::{floor_height, NotFloor, Preprocessed, NORMAL_NEIGHBOURS};
 use cog_gpu::frame::{DepthSource, Frame, PointCloud};
 use serde::Serialize;
 
@@ -65,6 +65,9 @@ struct FrameInfo {
     /// The second floor `detect` searches because the floor is not seen (`Preprocessed::unseen_floor`);
     /// `None` where the floor is seen (or the frame has too few points).
     unseen_floor: Option<f32>,
+    /// Why the lowest points are no floor seen, for the text (`Preprocessed::lowest_points_not_floor`).
+    #[serde(skip)]
+    not_floor: Option<NotFloor>,
     objects: Vec<ObjectInfo>,
     layout: Option<LayoutInfo>,
 }
@@ -107,6 +110,7 @@ fn describe(frame: &Frame, cloud: &PointCloud, pre: Option<&Preprocessed>) -> Fr
         ceiling: cloud.height_quantile(0.999),
         floor_plane_cells: pre.map(Preprocessed::floor_plane_cells),
         unseen_floor: pre.and_then(Preprocessed::unseen_floor),
+        not_floor: pre.and_then(Preprocessed::lowest_points_not_floor),
         objects,
         layout,
     }
@@ -145,12 +149,11 @@ fn print_text(info: &FrameInfo) {
             println!("floor seen   yes ({cells} cells of 0.2 m of upward points within 0.1 m of it)")
         }
         (Some(cells), Some(z)) => {
-            let why = if info.floor.is_some_and(|floor| floor > -MIN_CAMERA_HEIGHT_M) {
-                format!("the lowest points less than {MIN_CAMERA_HEIGHT_M} m below the camera: a top, not the floor")
-            } else {
-                format!("{cells} cells of 0.2 m of upward points within 0.1 m of the lowest points")
-            };
-            println!("floor seen   no ({why}); `detect` also searches a floor at {z:.3} m")
+            let why = info.not_floor.map(|why| format!("the lowest points {why}: ")).unwrap_or_default();
+            println!(
+                "floor seen   no ({why}{cells} cells of 0.2 m of upward points within 0.1 m of them); `detect` also \
+                 searches a floor at {z:.3} m"
+            )
         }
         (None, _) => println!("floor seen   - (too few points for normals)"),
     }

@@ -44,6 +44,25 @@ pub const UNSEEN_FLOOR_CAMERA_HEIGHT_M: f32 = 1.3;
 /// what stands on it; rounded down. Not chosen on synthetic frames (synth's cameras stand 1.0–1.7 m high).
 pub const MIN_CAMERA_HEIGHT_M: f32 = 1.0;
 
+/// Why the lowest points of a frame are not a floor the camera sees ([`Preprocessed::lowest_points_not_floor`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NotFloor {
+    /// Less than [`MIN_CAMERA_HEIGHT_M`] below the camera: a top or a cut object, however large a plane.
+    TooHigh,
+    /// Fewer than [`FLOOR_PLANE_MIN_CELLS`] cells of upward-facing points ([`Preprocessed::floor_plane_cells`]).
+    NoPlane,
+}
+
+impl std::fmt::Display for NotFloor {
+    /// What the lowest points are, as `detect`'s and `info`'s lines say it ("the lowest points …").
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            NotFloor::TooHigh => write!(f, "less than {MIN_CAMERA_HEIGHT_M} m below the camera"),
+            NotFloor::NoPlane => f.write_str("holding no horizontal plane"),
+        }
+    }
+}
+
 /// Number of bins of the normal orientation code.
 pub const NORMAL_BINS: usize = 25;
 
@@ -541,8 +560,17 @@ impl Preprocessed {
     /// seen").
     pub fn unseen_floor(&self) -> Option<f32> {
         let assumed = -UNSEEN_FLOOR_CAMERA_HEIGHT_M;
-        let too_high = self.floor > -MIN_CAMERA_HEIGHT_M;
-        (self.floor > assumed && (too_high || self.floor_plane_cells() < FLOOR_PLANE_MIN_CELLS)).then_some(assumed)
+        (self.floor > assumed && self.lowest_points_not_floor().is_some()).then_some(assumed)
+    }
+
+    /// Why the lowest points are not a floor the camera sees, or `None` when they are: the test of
+    /// [`Preprocessed::unseen_floor`] without its last clause (whether a second floor would add anything).
+    pub fn lowest_points_not_floor(&self) -> Option<NotFloor> {
+        if self.floor > -MIN_CAMERA_HEIGHT_M {
+            Some(NotFloor::TooHigh)
+        } else {
+            (self.floor_plane_cells() < FLOOR_PLANE_MIN_CELLS).then_some(NotFloor::NoPlane)
+        }
     }
 
     pub fn is_empty(&self) -> bool {

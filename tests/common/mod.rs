@@ -142,3 +142,13 @@ pub fn floor_window(step: f32, min_points: u32) -> cog_gpu::model::WindowSetting
         supporters: cog_gpu::category::SurfaceCategories::ALL,
     }
 }
+
+/// Runs the `cog-gpu` binary with `args` (`NODEVICE_SELECT=1`, silencing the loader's warning).
+#[allow(dead_code)]
+pub fn run_cog_gpu(args: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_cog-gpu"))
+        .args(args)
+        .env("NODEVICE_SELECT", "1")
+        .output()
+        .expect("run cog-gpu")
+}
