@@ -494,6 +494,12 @@ pub struct Cascade {
     /// frames (`calibrate --cascade C --exclusion`); absent in files without it (no exclusion).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub exclusion: Option<Exclusion>,
+    /// One map of every detection's score applied last, after the stages and the exclusion
+    /// ([`crate::calibration`], "The cascade's final calibration"), when fitted on held-out frames
+    /// (`calibrate --cascade C --final`); absent in files without it (the scores as the exclusion leaves
+    /// them). Refitting the stages' calibrations or the exclusion drops it (it was fitted on their scores).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub final_calibration: Option<Calibration>,
 }
 
 impl Cascade {
@@ -600,6 +606,9 @@ impl Cascade {
         if let Some(exclusion) = &self.exclusion {
             exclusion.check()?;
         }
+        if let Some(calibration) = &self.final_calibration {
+            calibration.validate().map_err(|e| format!("final {e}"))?;
+        }
         Ok(())
     }
 
@@ -654,6 +663,11 @@ impl Cascade {
                 self.exclusion, other.exclusion
             ));
         }
+        if self.final_calibration != other.final_calibration {
+            return Err("the cascades have different final calibrations: merge cascades without one, then fit it \
+                        on the merged cascade (calibrate --cascade --final)"
+                .to_string());
+        }
         let file_set = self.feature_set().ok_or_else(|| format!("unknown feature set '{}'", self.features))?;
         let mut merged = self.clone();
         for (category, stage) in &other.stages {
@@ -681,9 +695,24 @@ impl Cascade {
 
     /// Rescores one frame's first-stage detections (module doc) in the frame's predicted `room` (floor
     /// polygon; `None` without a layout), applies the cross-category exclusion when the cascade has one
-    /// ([`Cascade::exclusion`]), then sorts them by score, best first (stable). Detections must be the
-    /// first stage's, calibrated (`raw_score` present) and not rescored.
+    /// ([`Cascade::exclusion`]) and then its final calibration when it has one
+    /// ([`Cascade::final_calibration`]), and sorts them by score, best first (stable). Detections must be
+    /// the first stage's, calibrated (`raw_score` present) and not rescored.
     pub fn rescore(&self, detections: &mut [Detection], room: Option<&Room>) -> Result<()> {
+        self.rescore_before_final_calibration(detections, room)?;
+        if let Some(calibration) = &self.final_calibration {
+            for d in detections.iter_mut() {
+                d.score_before_final_calibration = Some(d.score);
+                d.score = calibration.recalibrate(d.score);
+            }
+            detections.sort_by(|a, b| b.score.total_cmp(&a.score));
+        }
+        Ok(())
+    }
+
+    /// [`Cascade::rescore`] without the final calibration: the stages' scores after the exclusion, sorted
+    /// best first (stable) — what the final calibration is fitted on.
+    pub fn rescore_before_final_calibration(&self, detections: &mut [Detection], room: Option<&Room>) -> Result<()> {
         self.rescore_stages(detections, room)?;
         if let Some(exclusion) = &self.exclusion {
             exclusion.apply(detections);
@@ -770,7 +799,9 @@ impl Cascade {
     /// on frames the cascade never saw is what `calibrate` does for the first stage. (Measured on the
     /// shipped cascade, README "The cascade's calibration": its stored calibrations are not too confident
     /// on held-out frames, and a refit gained no overlay precision, so it ships as trained.) Errors (naming the categories) when a category has no true or no false positive among
-    /// the held-out detections: nothing is returned, so no cascade is half recalibrated.
+    /// the held-out detections: nothing is returned, so no cascade is half recalibrated. A final
+    /// calibration ([`Cascade::final_calibration`]) was fitted on the stages' old probabilities: the result
+    /// has none (fit it again: `calibrate --cascade --final`).
     pub fn recalibrated(
         &self,
         frames: &[HeldOutFrame],
@@ -795,7 +826,7 @@ impl Cascade {
             combined_detections.push(detections);
             truth.push(frame.truth.to_vec());
         }
-        let mut cascade = self.clone();
+        let mut cascade = Cascade { final_calibration: None, ..self.clone() };
         let mut report = Vec::new();
         let mut failures = Vec::new();
         for (category, stage) in &mut cascade.stages {
@@ -862,7 +893,10 @@ fn combined(detection: &Detection, context: f32) -> f32 {
 
 /// Errors unless every detection is a calibrated first-stage one.
 fn check_first_stage(detections: &[Detection]) -> Result<()> {
-    if let Some(d) = detections.iter().find(|d| d.context_score.is_some() || d.score_before_exclusion.is_some()) {
+    let rescored = |d: &&Detection| {
+        d.context_score.is_some() || d.score_before_exclusion.is_some() || d.score_before_final_calibration.is_some()
+    };
+    if let Some(d) = detections.iter().find(rescored) {
         return Err(Error::Input(format!(
             "a '{}' detection was already rescored by a cascade; the cascade takes first-stage detections \
              (detect --no-cascade)",
@@ -1481,6 +1515,7 @@ pub fn train_cascade_resumable(
         stages,
         training,
         exclusion: None,
+        final_calibration: None,
     };
     Ok((cascade, results.into_iter().collect(), resumed.into_inner()))
 }

@@ -78,6 +78,11 @@ pub struct Detection {
     /// detection that did.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub excluded_by: Option<String>,
+    /// When the cascade has a final calibration ([`crate::cascade::Cascade::final_calibration`]): the score
+    /// before it (after the stages and the exclusion), which `score` replaced (`score = σ(a·logit(p) + b)`,
+    /// [`crate::calibration::Calibration::recalibrate`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub score_before_final_calibration: Option<f32>,
 }
 
 impl Detection {
@@ -101,6 +106,7 @@ impl Detection {
             cross_scores: None,
             score_before_exclusion: None,
             excluded_by: None,
+            score_before_final_calibration: None,
         }
     }
 }
@@ -331,6 +337,19 @@ pub fn scored_boxes(detections: &[Vec<Detection>], category: &str) -> Vec<Scored
                 cuboid: d.cuboid(),
             })
         })
+        .collect()
+}
+
+/// `categories`, or when it is empty every cog-gpu category (in [`crate::category::CATEGORIES`]' order) with
+/// a ground-truth box in `truth`: the categories a fit over held-out frames reads by default.
+pub fn chosen_or_annotated_categories(categories: &[String], truth: &[Vec<crate::frame::Object>]) -> Vec<String> {
+    if !categories.is_empty() {
+        return categories.to_vec();
+    }
+    crate::category::CATEGORIES
+        .iter()
+        .filter(|c| truth.iter().flatten().any(|o| o.category == **c))
+        .map(|c| c.to_string())
         .collect()
 }
 

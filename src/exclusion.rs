@@ -37,8 +37,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::category::CATEGORIES;
-use crate::eval::{evaluate_categories, mean_ap, Detection};
+use crate::eval::{chosen_or_annotated_categories, evaluate_categories, mean_ap, Detection};
 use crate::frame::Object;
 use crate::geometry::iou_3d;
 
@@ -170,11 +169,7 @@ pub fn fit_exclusion(
     categories: &[String],
     iou_threshold: f32,
 ) -> ExclusionFit {
-    let categories: Vec<String> = if categories.is_empty() {
-        CATEGORIES.iter().filter(|c| truth.iter().flatten().any(|o| o.category == **c)).map(|c| c.to_string()).collect()
-    } else {
-        categories.to_vec()
-    };
+    let categories = chosen_or_annotated_categories(categories, truth);
     // Only what the AP reads: the category, the box and the score (not the cross scores, cloned per trial).
     let detections: Vec<Vec<Detection>> = detections
         .iter()

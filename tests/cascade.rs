@@ -414,6 +414,7 @@ fn a_cascade_refuses_first_stage_models_it_was_not_trained_with() {
         stages: BTreeMap::new(),
         training: CascadeTraining::default(),
         exclusion: None,
+        final_calibration: None,
     };
     cascade.check_models(&models).unwrap();
     let bed = models.iter().find(|m| m.category == "bed").unwrap().calibration.clone().unwrap();

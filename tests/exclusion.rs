@@ -1,12 +1,11 @@
 //! Cross-category exclusion (`cog_gpu::exclusion`): the demotion against a hand computation, the fit on
 //! constructed frames whose best parameters are known, the cascade file that carries it, and the CLI.
 
-use std::collections::BTreeMap;
 use std::process::Command;
 
 mod common;
 
-use cog_gpu::cascade::{Cascade, CascadeTraining, FEATURES};
+use cog_gpu::cascade::Cascade;
 use cog_gpu::eval::{Detection, FrameDetections};
 use cog_gpu::exclusion::{competitors, fit_exclusion, Exclusion, IOU_GRID, WEIGHT_GRID};
 use cog_gpu::frame::Object;
@@ -177,15 +176,7 @@ fn the_fit_chooses_no_exclusion_when_the_more_confident_category_is_wrong() {
 }
 
 fn cascade_without_stages(exclusion: Option<Exclusion>) -> Cascade {
-    Cascade {
-        format: cog_gpu::cascade::FORMAT.into(),
-        version: cog_gpu::cascade::VERSION,
-        features: FEATURES.into(),
-        categories: ["table", "desk"].map(String::from).to_vec(),
-        stages: BTreeMap::new(),
-        training: CascadeTraining::default(),
-        exclusion,
-    }
+    common::cascade_without_stages(exclusion, None)
 }
 
 #[test]

@@ -20,11 +20,20 @@
 //! fits the cascade's cross-category exclusion ([`cog_gpu::exclusion`]) on the same kind of held-out
 //! first-stage detections: the grid's mean APs (over --categories; default every category with ground
 //! truth), the chosen parameters' per-category APs, and the cascade written with them.
+//!
+//! `cog-gpu calibrate --cascade CASCADE.json --final --data DIR --detections DIR [--out FILE | --check]`:
+//! fits the cascade's final calibration ([`cog_gpu::calibration`], "The cascade's final calibration": one
+//! map of every category's score after the stages and the exclusion) on the same kind of held-out
+//! first-stage detections, over --categories (default every category with ground truth); reports the log
+//! loss and the expected true positives before and after, and the scores' reliability bins
+//! ([`cog_gpu::diagnose::reliability`]) before and after on these frames; writes the cascade with it.
+//! Refitting the stages' calibrations or the exclusion drops a cascade's final calibration (it was fitted
+//! on their scores), and says so.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
-use cog_gpu::calibration::{fit_logistic, label_detections, Calibration};
+use cog_gpu::calibration::{fit_final_calibration, fit_logistic, label_detections, Calibration};
 use cog_gpu::cascade::{Cascade, HeldOutFrame};
 use cog_gpu::category::{category_index, normalise_name, CATEGORIES};
 use cog_gpu::eval::Detection;
@@ -55,6 +64,11 @@ pub struct Args {
     /// --check: only report).
     #[arg(long, requires = "cascade")]
     pub exclusion: bool,
+    /// With --cascade: fit the cascade's final calibration (one map of every category's score after the
+    /// stages and the exclusion, p' = σ(a·logit(p) + b), monotone: no AP changes) instead of the stages'
+    /// calibrations, and write the cascade with it (with --check: only report).
+    #[arg(long, requires = "cascade", conflicts_with = "exclusion")]
+    pub r#final: bool,
 }
 
 /// What `calibrate` and `cascade` learn from: held-out frames, their detections by a models directory's
@@ -102,6 +116,9 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     if let Some(cascade) = &args.cascade {
         if args.exclusion {
             return fit_cascade_exclusion(&args.held_out, cascade, args.out.as_deref(), args.check);
+        }
+        if args.r#final {
+            return fit_cascade_final_calibration(&args.held_out, cascade, args.out.as_deref(), args.check);
         }
         return calibrate_cascade(&args.held_out, cascade, args.out.as_deref(), args.check);
     }
@@ -209,6 +226,7 @@ fn calibrate_cascade(held_out: &HeldOutArgs, path: &Path, out: Option<&Path>, ch
         frames,
         out.display()
     );
+    say_final_calibration_dropped(&cascade);
     Ok(())
 }
 
@@ -281,12 +299,80 @@ fn fit_cascade_exclusion(held_out: &HeldOutArgs, path: &Path, out: Option<&Path>
         return Ok(());
     }
     let out = out.unwrap_or(path);
-    Cascade { exclusion: fit.chosen, ..cascade }.write(out)?;
+    Cascade { exclusion: fit.chosen, final_calibration: None, ..cascade.clone() }.write(out)?;
     println!(
         "wrote the cascade with {} to {}",
         fit.chosen.map_or("no exclusion".into(), |e| format!("exclusion IoU {}, weight {}", e.iou, e.weight)),
         out.display()
     );
+    say_final_calibration_dropped(&cascade);
+    Ok(())
+}
+
+/// After refitting what a final calibration was fitted on: says that the written cascade has none.
+fn say_final_calibration_dropped(cascade: &Cascade) {
+    if cascade.final_calibration.is_some() {
+        println!(
+            "the cascade's final calibration was fitted on the scores before this fit and is not kept: fit it \
+             again (calibrate --cascade --final)"
+        );
+    }
+}
+
+/// `calibrate --cascade --final`: the cascade's final calibration fitted on the held-out frames
+/// ([`fit_final_calibration`]; their first-stage detections rescored by the stages and the exclusion, any
+/// stored final calibration left out), reported with the scores' reliability before and after, and the file
+/// written with it (not with `check`).
+fn fit_cascade_final_calibration(
+    held_out: &HeldOutArgs,
+    path: &Path,
+    out: Option<&Path>,
+    check: bool,
+) -> anyhow::Result<()> {
+    let (cascade, categories, LabelledDetections { frames, truth, mut detections, rooms, .. }) =
+        cascade_and_held_out(held_out, path)?;
+    for (f, frame) in detections.iter_mut().enumerate() {
+        cascade.rescore_before_final_calibration(frame, rooms[f].as_ref()).with_context(|| {
+            format!("rescoring the detections of frame {} of {}", f + 1, held_out.detections.display())
+        })?;
+    }
+    let data = held_out.data.display().to_string();
+    let fit = fit_final_calibration(&detections, &truth, &categories, held_out.iou, &data)
+        .with_context(|| format!("fitting the final calibration on {}", held_out.detections.display()))?;
+    let c = &fit.calibration;
+    println!(
+        "final calibration p' = σ(a·logit(p) + b): a = {:.4}, b = {:.4} ({} categories, {frames} frames, {} detections, \
+         {} true positives at IoU {})",
+        c.a,
+        c.b,
+        fit.categories.len(),
+        c.detections,
+        c.true_positives,
+        held_out.iou
+    );
+    println!(
+        "mean log loss {:.5} before, {:.5} after; expected true positives {:.1} before, {:.1} after",
+        fit.log_loss_before, fit.log_loss_after, fit.expected_true_positives_before, fit.expected_true_positives_after
+    );
+    if let Some(stored) = &cascade.final_calibration {
+        println!("the file's final calibration: a = {:.4}, b = {:.4} (replaced)", stored.a, stored.b);
+    }
+    let mut mapped = detections.clone();
+    for d in mapped.iter_mut().flatten() {
+        d.score = c.recalibrate(d.score);
+    }
+    for (name, scored) in [("before", &detections), ("after", &mapped)] {
+        let reliability = cog_gpu::diagnose::reliability(&truth, scored, &fit.categories, held_out.iou);
+        println!("{name}, on these frames:");
+        super::eval::print_reliability(&reliability);
+    }
+    if check {
+        println!("nothing written");
+        return Ok(());
+    }
+    let out = out.unwrap_or(path);
+    Cascade { final_calibration: Some(fit.calibration), ..cascade }.write(out)?;
+    println!("wrote the cascade with its final calibration to {}", out.display());
     Ok(())
 }
 

@@ -1070,7 +1070,7 @@ fn print_diagnosis(
 
 /// The reliability table: per bin of the score its detections, true positives, the true positives its
 /// scores expect, their mean score and the bin's precision; then the expected calibration error.
-fn print_reliability(r: &Reliability) {
+pub fn print_reliability(r: &Reliability) {
     println!("scores as probabilities (every detection, labelled by the AP's matching), by bin of the score:");
     println!("{:<12} {:>8} {:>7} {:>9} {:>6} {:>9}", "score", "#dets", "#TP", "expected", "mean", "precision");
     let last = r.bins.len().saturating_sub(1);

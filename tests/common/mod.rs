@@ -152,3 +152,22 @@ pub fn run_cog_gpu(args: &[&str]) -> std::process::Output {
         .output()
         .expect("run cog-gpu")
 }
+
+/// A cascade file with no stages over the context categories table and desk (feature set v4): the
+/// exclusion and the final calibration given, applied to first-stage scores as they are.
+#[allow(dead_code)]
+pub fn cascade_without_stages(
+    exclusion: Option<cog_gpu::exclusion::Exclusion>,
+    final_calibration: Option<cog_gpu::calibration::Calibration>,
+) -> cog_gpu::cascade::Cascade {
+    cog_gpu::cascade::Cascade {
+        format: cog_gpu::cascade::FORMAT.into(),
+        version: cog_gpu::cascade::VERSION,
+        features: cog_gpu::cascade::FEATURES.into(),
+        categories: ["table", "desk"].map(String::from).to_vec(),
+        stages: std::collections::BTreeMap::new(),
+        training: cog_gpu::cascade::CascadeTraining::default(),
+        exclusion,
+        final_calibration,
+    }
+}
