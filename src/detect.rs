@@ -362,12 +362,16 @@ pub fn detect_frame(
 
 /// Checks the memory of every model's sliding window and fast-path tables on `pre` (see
 /// [`crate::features::budget`]) before any of them is built; each distinct setting is checked once.
-pub fn check_budget(pre: &Preprocessed, models: &[Model]) -> Result<()> {
+pub fn check_budget<'a>(pre: &Preprocessed, models: impl IntoIterator<Item = &'a Model>) -> Result<()> {
     check_budget_with(pre, &FrameYaws::new(pre), models)
 }
 
 /// [`check_budget`] with the frame's yaws (shared with the scenes that follow).
-fn check_budget_with(pre: &Preprocessed, frame_yaws: &FrameYaws, models: &[Model]) -> Result<()> {
+fn check_budget_with<'a>(
+    pre: &Preprocessed,
+    frame_yaws: &FrameYaws,
+    models: impl IntoIterator<Item = &'a Model>,
+) -> Result<()> {
     let mut checked = Vec::new();
     for model in models {
         let anchor = model.window.yaw_anchor;
@@ -592,12 +596,12 @@ pub fn detect_preprocessed_timed(
 
     // The same models on the second floor where the floor is not seen: the frame's points with the floor
     // moved (the yaws, from the normals, are the same), their own scenes, tables and window. A second floor
-    // beyond the memory budget (its boxes reach more layers) is skipped with a warning, not an error: the
-    // frame is still detected as without it.
+    // beyond the memory budget of those models (its boxes reach more layers) is skipped with a warning, not
+    // an error: the frame is still detected as without it.
     let second_floor = pre.unseen_floor().filter(|_| options.unseen_floor && !floor_models.is_empty());
     let lower = second_floor.and_then(|floor| {
         let lower = Preprocessed { floor, ..pre.clone() };
-        match check_budget_with(&lower, &frame_yaws, models) {
+        match check_budget_with(&lower, &frame_yaws, floor_models.iter().copied()) {
             Ok(()) => Some(lower),
             Err(e) => {
                 log::warn!(

@@ -116,8 +116,9 @@ pub fn frame_window_best_ious(
     let mut out = floor_window_best_ious(pre, &wanted, objects);
     if let Some(floor) = pre.unseen_floor().filter(|_| unseen_floor) {
         let lower = Preprocessed { floor, ..pre.clone() };
-        // As detection: a second floor beyond the memory budget is not searched.
-        if let Err(e) = crate::detect::check_budget(&lower, models) {
+        // As detection: a second floor beyond the memory budget of the models that search it is not searched.
+        let searching = models.iter().filter(|m| !m.window.support.uses_surfaces());
+        if let Err(e) = crate::detect::check_budget(&lower, searching) {
             log::warn!("the window recall's second floor at {floor} m is not searched: {e}");
             return out;
         }

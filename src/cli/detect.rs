@@ -450,7 +450,16 @@ pub(super) fn cascade_for(
         );
         return Ok(None);
     }
-    log::info!("context cascade: {}", path.display());
+    let exclusion = cascade
+        .exclusion
+        .map(|e| format!(", cross-category exclusion IoU {} weight {}", e.iou, e.weight))
+        .unwrap_or_default();
+    let map = cascade
+        .final_calibration
+        .as_ref()
+        .map(|c| format!(", final calibration a = {:.4}, b = {:.4}", c.a, c.b))
+        .unwrap_or_default();
+    log::info!("context cascade: {} ({} stages{exclusion}{map})", path.display(), cascade.stages.len());
     Ok(Some(cascade))
 }
 
