@@ -21,39 +21,14 @@
 //!   flagged ([`Calibration::shortage`]; `calibrate` warns): two parameters from a handful of positives
 //!   give probabilities that say little (the shipped TV's, from one, puts a raw score of 0 at 0.70).
 //!
-//! # The cascade's final calibration (our addition)
-//! The context cascade ([`crate::cascade`]) calibrates each stage on its own training frames and then
-//! demotes detections by cross-category exclusion, so its final scores need not hold as probabilities
-//! (measured on held-out frames they were too low: README "The scores as probabilities"). A cascade file may
-//! therefore carry one more Platt fit ([`crate::cascade::Cascade::final_calibration`]), applied last to every
-//! detection's score `p`, whatever its category:
-//!
-//! ```text
-//! p' = σ(a·logit(p) + b),   logit(p) = ln(p / (1 − p)),   a > 0
-//! ```
-//!
-//! ([`Calibration::recalibrate`]; the same [`Calibration`] numbers, read on the log-odds of the score instead
-//! of a raw score). Choices:
-//! * **One map for all categories**: it is monotone in `p`, so it moves no detection past another — no AP,
-//!   no overlay order changes (only f32 rounding can make two scores equal; it never swaps two) — and only
-//!   what reads the scores as probabilities does (`detect`'s overlay threshold, `--min-probability`). A map
-//!   per category would also reorder the categories, from far fewer true positives each: on the two halves
-//!   of the selection set it fitted the other half worse than one map (README).
-//! * **On the log-odds**: a Platt fit on `p` itself could not reach 0 and 1; on the log-odds, `a = 1, b = 0`
-//!   is the identity, `b` a shift of all odds by `e^b`, `a` a sharpening or softening.
-//! * **Fit** ([`fit_final_calibration`]): [`fit_logistic`] on `(logit(p), true positive)` over every
-//!   detection of the chosen categories of held-out frames, each category's detections labelled by the
-//!   benchmark's matching in the order of their scores (as [`label_scores`]). Scores of exactly 0 and 1
-//!   (f32 rounding of the stages' σ) get the log-odds of the f32 rounding boundaries next to them
-//!   ([`fit_log_odds`]); applied, the map keeps 0 and 1 where they are.
+//! The cascade's final calibration, one more map of its final scores, is [`final_calibration`].
 
 use serde::{Deserialize, Serialize};
 
+pub mod final_calibration;
+
 use crate::error::{Error, Result};
-use crate::eval::{
-    average_precision, category_truth, chosen_or_annotated_categories, scored_boxes, true_positives_in_input_order,
-    Detection, ScoredBox,
-};
+use crate::eval::{average_precision, category_truth, Detection, ScoredBox};
 use crate::frame::Object;
 
 /// Smallest slope: keeps `p` strictly increasing in the raw score.
@@ -104,17 +79,6 @@ impl Calibration {
         raw
     }
 
-    /// As a final calibration (module doc): `σ(a·logit(p) + b)` of a score `p` in [0, 1], computed in f64;
-    /// 0 and 1 stay 0 and 1. Non-decreasing in `p` (strictly in f64; f32 rounding can only make two
-    /// scores equal).
-    pub fn recalibrate(&self, p: f32) -> f32 {
-        if p <= 0.0 || p >= 1.0 {
-            return p.clamp(0.0, 1.0);
-        }
-        let p = f64::from(p);
-        sigmoid(self.a * (p / (1.0 - p)).ln() + self.b) as f32
-    }
-
     /// Why this calibration's probabilities are not to be trusted, when it was fitted on fewer than
     /// [`MIN_RELIABLE_TRUE_POSITIVES`] true positives (`None` otherwise).
     pub fn shortage(&self) -> Option<String> {
@@ -150,16 +114,7 @@ fn sigmoid(x: f64) -> f64 {
 
 /// Fits `p(s) = σ(a·s + b)` to `(score, is true positive)` pairs (see the module doc). Returns `(a, b)`.
 pub fn fit_logistic(samples: &[(f32, bool)]) -> Result<(f64, f64)> {
-    let positives = samples.iter().filter(|s| s.1).count();
-    if positives == 0 || positives == samples.len() {
-        return Err(Error::Input(format!(
-            "calibration needs true and false positives; got {positives} true of {} detections",
-            samples.len()
-        )));
-    }
-    if samples.iter().any(|s| !s.0.is_finite()) {
-        return Err(Error::Input("calibration: a detection score is not finite".into()));
-    }
+    check_samples(samples, "calibration")?;
     let (a, b) = newton(samples, None);
     if a > MIN_SLOPE {
         return Ok((a, b));
@@ -167,16 +122,40 @@ pub fn fit_logistic(samples: &[(f32, bool)]) -> Result<(f64, f64)> {
     Ok((MIN_SLOPE, newton(samples, Some(MIN_SLOPE)).1))
 }
 
+/// Errors (naming `what` is fitted) unless `samples` hold a true and a false positive and every score is
+/// finite: what any fit of a probability needs.
+fn check_samples(samples: &[(f32, bool)], what: &str) -> Result<()> {
+    let positives = samples.iter().filter(|s| s.1).count();
+    if positives == 0 || positives == samples.len() {
+        return Err(Error::Input(format!(
+            "{what} needs true and false positives; got {positives} true of {} detections",
+            samples.len()
+        )));
+    }
+    if samples.iter().any(|s| !s.0.is_finite()) {
+        return Err(Error::Input(format!("{what}: a detection score is not finite")));
+    }
+    Ok(())
+}
+
 /// The penalised negative log-likelihood of `(a, b)`.
 fn objective(samples: &[(f32, bool)], a: f64, b: f64) -> f64 {
     let mut total = 0.5 * PRIOR * (a * a + b * b);
     for &(s, y) in samples {
-        let z = a * f64::from(s) + b;
-        // −log σ(z) = log(1 + e^{−z}); −log(1 − σ(z)) = log(1 + e^{z}); computed without overflow.
-        let t = if y { -z } else { z };
-        total += if t > 0.0 { t + (-t).exp().ln_1p() } else { t.exp().ln_1p() };
+        total += negative_log_likelihood(a * f64::from(s) + b, y);
     }
     total
+}
+
+/// `−log σ(z)` for a true positive, `−log(1 − σ(z))` for a false one: `log(1 + e^{∓z})`, computed without
+/// overflow.
+fn negative_log_likelihood(z: f64, true_positive: bool) -> f64 {
+    let t = if true_positive { -z } else { z };
+    if t > 0.0 {
+        t + (-t).exp().ln_1p()
+    } else {
+        t.exp().ln_1p()
+    }
 }
 
 /// Damped Newton's method on the penalised negative log-likelihood (the step is halved until the
@@ -224,99 +203,6 @@ fn newton(samples: &[(f32, bool)], fixed_a: Option<f64>) -> (f64, f64) {
         }
     }
     (a, b)
-}
-
-/// Log-odds of 1.0 in a final-calibration fit: those of `1 − 2⁻²⁵`, the smallest probability that f32
-/// rounds to 1 (module doc).
-pub const LOG_ODDS_OF_ONE: f32 = 17.328_68;
-/// Log-odds of 0.0 in a final-calibration fit: those of `2⁻¹⁵⁰`, below which f32 rounds to 0.
-pub const LOG_ODDS_OF_ZERO: f32 = -103.972_08;
-
-/// The log-odds `ln(p / (1 − p))` of a score `p` in [0, 1] for a final-calibration fit (module doc): finite
-/// also at 0 and 1 ([`LOG_ODDS_OF_ZERO`], [`LOG_ODDS_OF_ONE`]).
-pub fn fit_log_odds(p: f32) -> f32 {
-    if p <= 0.0 {
-        return LOG_ODDS_OF_ZERO;
-    }
-    if p >= 1.0 {
-        return LOG_ODDS_OF_ONE;
-    }
-    let p = f64::from(p);
-    ((p / (1.0 - p)).ln() as f32).clamp(LOG_ODDS_OF_ZERO, LOG_ODDS_OF_ONE)
-}
-
-/// Labels the detections of one category over several frames by their **`score`** (not the raw score
-/// [`label_detections`] reads): `(score, true positive)` per detection in input order (frame by frame),
-/// matched with the benchmark's rules in score order.
-pub fn label_scores(
-    detections: &[Vec<Detection>],
-    truth: &[Vec<Object>],
-    category: &str,
-    iou: f32,
-) -> Vec<(f32, bool)> {
-    let boxes = scored_boxes(detections, category);
-    let labels = true_positives_in_input_order(&boxes, &category_truth(truth, category), iou);
-    boxes.iter().map(|b| b.score).zip(labels).collect()
-}
-
-/// What [`fit_final_calibration`] found on held-out frames: the fitted map, the categories whose
-/// detections it saw, and how the scores held as probabilities before and after it (mean negative
-/// log-likelihood of the labels, probabilities clamped to [10⁻⁶, 1 − 10⁻⁶]; expected true positives = the
-/// sum of the probabilities; the map's `true_positives` is the number found).
-#[derive(Clone, Debug, PartialEq)]
-pub struct FinalCalibrationFit {
-    pub calibration: Calibration,
-    pub categories: Vec<String>,
-    pub log_loss_before: f64,
-    pub log_loss_after: f64,
-    pub expected_true_positives_before: f64,
-    pub expected_true_positives_after: f64,
-}
-
-/// Fits a final calibration (module doc) on held-out frames: `detections[f]` are frame `f`'s detections
-/// with the scores to be mapped (the cascade's after its exclusion, [`crate::cascade::Cascade::rescore`]
-/// without a final calibration), `truth[f]` its annotated objects. Every detection of `categories` (empty:
-/// every cog-gpu category with ground truth in `truth`) is labelled at `iou` ([`label_scores`]); `data`
-/// names the frames in the result's provenance. Errors when the detections hold no true or no false positive.
-pub fn fit_final_calibration(
-    detections: &[Vec<Detection>],
-    truth: &[Vec<Object>],
-    categories: &[String],
-    iou: f32,
-    data: &str,
-) -> Result<FinalCalibrationFit> {
-    let categories = chosen_or_annotated_categories(categories, truth);
-    let scores: Vec<(f32, bool)> =
-        categories.iter().flat_map(|category| label_scores(detections, truth, category, iou)).collect();
-    let log_odds: Vec<(f32, bool)> = scores.iter().map(|&(p, y)| (fit_log_odds(p), y)).collect();
-    let (a, b) = fit_logistic(&log_odds).map_err(|e| Error::Input(format!("final calibration: {e}")))?;
-    let calibration = Calibration {
-        a,
-        b,
-        detections: scores.len(),
-        true_positives: scores.iter().filter(|s| s.1).count(),
-        iou,
-        data: data.to_string(),
-        frames: truth.len(),
-    };
-    let loss = |map: &dyn Fn(f32) -> f32| {
-        let total: f64 = scores
-            .iter()
-            .map(|&(p, y)| {
-                let p = f64::from(map(p)).clamp(1e-6, 1.0 - 1e-6);
-                -(if y { p } else { 1.0 - p }).ln()
-            })
-            .sum();
-        total / scores.len() as f64
-    };
-    Ok(FinalCalibrationFit {
-        log_loss_before: loss(&|p| p),
-        log_loss_after: loss(&|p| calibration.recalibrate(p)),
-        expected_true_positives_before: scores.iter().map(|&(p, _)| f64::from(p)).sum(),
-        expected_true_positives_after: scores.iter().map(|&(p, _)| f64::from(calibration.recalibrate(p))).sum(),
-        calibration,
-        categories,
-    })
 }
 
 /// Labels the detections of one category over several frames with the benchmark's matching rules:

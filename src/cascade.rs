@@ -138,6 +138,7 @@ use std::path::Path;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use crate::calibration::final_calibration::FinalCalibration;
 use crate::calibration::{fit_logistic, label_detections, Calibration};
 use crate::category::{category_index, is_cross_score_category, CROSS_SCORE_CATEGORIES, LARGE_CATEGORIES};
 use crate::error::{Error, Result};
@@ -495,11 +496,11 @@ pub struct Cascade {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub exclusion: Option<Exclusion>,
     /// One map of every detection's score applied last, after the stages and the exclusion
-    /// ([`crate::calibration`], "The cascade's final calibration"), when fitted on held-out frames
+    /// ([`crate::calibration::final_calibration`]), when fitted on held-out frames
     /// (`calibrate --cascade C --final`); absent in files without it (the scores as the exclusion leaves
     /// them). Refitting the stages' calibrations or the exclusion drops it (it was fitted on their scores).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub final_calibration: Option<Calibration>,
+    pub final_calibration: Option<FinalCalibration>,
 }
 
 impl Cascade {
@@ -607,7 +608,7 @@ impl Cascade {
             exclusion.check()?;
         }
         if let Some(calibration) = &self.final_calibration {
-            calibration.validate().map_err(|e| format!("final {e}"))?;
+            calibration.validate()?;
         }
         Ok(())
     }

@@ -79,8 +79,8 @@ pub struct Detection {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub excluded_by: Option<String>,
     /// When the cascade has a final calibration ([`crate::cascade::Cascade::final_calibration`]): the score
-    /// before it (after the stages and the exclusion), which `score` replaced (`score = σ(a·logit(p) + b)`,
-    /// [`crate::calibration::Calibration::recalibrate`]).
+    /// before it (after the stages and the exclusion), which `score` replaced (`logit score = a·ln p −
+    /// b·ln(1 − p) + c`, [`crate::calibration::final_calibration::FinalCalibration::recalibrate`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub score_before_final_calibration: Option<f32>,
 }

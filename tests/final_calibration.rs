@@ -4,7 +4,10 @@
 
 mod common;
 
-use cog_gpu::calibration::{fit_final_calibration, fit_log_odds, Calibration, LOG_ODDS_OF_ONE, LOG_ODDS_OF_ZERO};
+use cog_gpu::calibration::final_calibration::{
+    fit_features, fit_final_calibration, FinalCalibration, FIT_MAX_SCORE, FIT_MIN_SCORE,
+};
+use cog_gpu::calibration::MIN_SLOPE;
 use cog_gpu::cascade::Cascade;
 use cog_gpu::eval::{Detection, FrameDetections};
 use cog_gpu::exclusion::Exclusion;
@@ -12,12 +15,8 @@ use cog_gpu::frame::Object;
 use cog_gpu::geometry::Cuboid;
 use glam::Vec3;
 
-fn map(a: f64, b: f64) -> Calibration {
-    Calibration { a, b, detections: 0, true_positives: 0, iou: 0.25, data: String::new(), frames: 0 }
-}
-
-fn sigmoid(x: f64) -> f32 {
-    (1.0 / (1.0 + (-x).exp())) as f32
+fn map(a: f64, b: f64, c: f64) -> FinalCalibration {
+    FinalCalibration { a, b, c, detections: 0, true_positives: 0, iou: 0.25, data: String::new(), frames: 0 }
 }
 
 fn unit_box(x: f32) -> Cuboid {
@@ -33,19 +32,23 @@ fn detection(category: &str, x: f32, p: f32) -> Detection {
 
 #[test]
 fn the_map_matches_hand_values_keeps_the_ends_and_never_reorders() {
-    // a = 1, b = ln 2 doubles the odds: 1/2 → 2/3, 1/3 → 1/2.
-    let double = map(1.0, 2f64.ln());
-    assert!((double.recalibrate(0.5) - 2.0 / 3.0).abs() < 1e-7);
-    assert!((double.recalibrate(1.0 / 3.0) - 0.5).abs() < 1e-7);
-    // a = 2, b = 0 squares the odds: 1/3 (odds 1/2) → 1/5 (odds 1/4).
-    assert!((map(2.0, 0.0).recalibrate(1.0 / 3.0) - 0.2).abs() < 1e-7);
+    // logit p' = a·ln p − b·ln(1 − p) + c. With a = b it is a map of the log-odds: a = b = 1, c = ln 2
+    // doubles the odds (1/2 → 2/3, 1/3 → 1/2), a = b = 2 squares them (1/3, odds 1/2 → odds 1/4: 1/5).
+    let close = |got: f32, want: f64| (f64::from(got) - want).abs() < 1e-7;
+    let double = map(1.0, 1.0, 2f64.ln());
+    assert!(close(double.recalibrate(0.5), 2.0 / 3.0) && close(double.recalibrate(1.0 / 3.0), 0.5));
+    assert!(close(map(2.0, 2.0, 0.0).recalibrate(1.0 / 3.0), 0.2));
+    // a ≠ b: a = 2, b = 1 gives 1/2 the log-odds 2·ln ½ − ln ½ = −ln 2 (1/3), and 1/3 the log-odds
+    // 2·ln ⅓ − ln ⅔ = ln ⅙ (1/7).
+    let skewed = map(2.0, 1.0, 0.0);
+    assert!(close(skewed.recalibrate(0.5), 1.0 / 3.0) && close(skewed.recalibrate(1.0 / 3.0), 1.0 / 7.0));
     // The identity map gives every score back (to the f32 it came from).
-    let identity = map(1.0, 0.0);
+    let identity = map(1.0, 1.0, 0.0);
     for p in [1e-30f32, 1e-6, 0.01, 0.3, 0.5, 0.77, 0.999, 1.0 - 6e-8] {
         assert_eq!(identity.recalibrate(p), p, "{p}");
     }
     // 0 and 1 stay; the map never puts a lower score above a higher one.
-    for calibration in [map(0.5, 0.4), map(1.0, 0.44), map(2.0, -1.0), map(1e-3, 3.0)] {
+    for calibration in [map(0.5, 0.5, 0.4), map(1.17, 0.37, 1.2), map(2.0, 0.1, -1.0), map(MIN_SLOPE, 3.0, 3.0)] {
         assert_eq!(calibration.recalibrate(0.0), 0.0);
         assert_eq!(calibration.recalibrate(1.0), 1.0);
         let mut previous = 0.0f32;
@@ -57,63 +60,97 @@ fn the_map_matches_hand_values_keeps_the_ends_and_never_reorders() {
             p = if p < 0.999 { p * 1.01 } else { p.next_up() };
         }
     }
-    // The fit's log-odds of 0 and 1 are those of the f32 rounding boundaries, 2⁻¹⁵⁰ and 1 − 2⁻²⁵.
-    assert_eq!(fit_log_odds(0.0), LOG_ODDS_OF_ZERO);
-    assert_eq!(fit_log_odds(1.0), LOG_ODDS_OF_ONE);
-    let logit = |p: f64| (p / (1.0 - p)).ln() as f32;
-    assert_eq!(LOG_ODDS_OF_ZERO, logit(2f64.powi(-150)));
-    assert_eq!(LOG_ODDS_OF_ONE, logit(1.0 - 2f64.powi(-25)));
-    assert!((fit_log_odds(0.25) - logit(0.25)).abs() < 1e-6);
-    assert!(fit_log_odds(1.0 - 6e-8) < LOG_ODDS_OF_ONE && fit_log_odds(1e-45) > LOG_ODDS_OF_ZERO);
+    // A fit reads 0 and 1 as the f32 rounding boundaries 2⁻¹⁵⁰ and 1 − 2⁻²⁵: finite terms.
+    assert_eq!((FIT_MIN_SCORE, FIT_MAX_SCORE), (2f64.powi(-150), 1.0 - 2f64.powi(-25)));
+    assert_eq!(fit_features(0.0), [FIT_MIN_SCORE.ln(), -(-FIT_MIN_SCORE).ln_1p()]);
+    assert_eq!(fit_features(1.0), [FIT_MAX_SCORE.ln(), 25.0 * 2f64.ln()]);
+    assert_eq!(fit_features(0.25), [0.25f64.ln(), -(0.75f64.ln())]);
 }
 
-/// Frames of one table each, with one table detection each: 40 at probability σ(−1), 10 of them on their
-/// frame's table (true positives), and 40 at σ(1), 30 of them true; plus in every frame a desk detection
-/// (no desk is annotated). The logistic fit of two score values fits their frequencies exactly (up to the
-/// fit's weak prior): logit(1/4) = −a + b and logit(3/4) = a + b give a = ln 3, b = 0.
-fn two_level_frames() -> (Vec<Vec<Detection>>, Vec<Vec<Object>>) {
-    let (low, high) = (sigmoid(-1.0), sigmoid(1.0));
+/// 120 frames of one table each, with one table detection each: 40 at score 0.2, 10 of them on their
+/// frame's table (true positives), 40 at 0.5 with `hits[1]` true, 40 at 0.8 with `hits[2]` true; plus in
+/// every frame a desk detection (no desk is annotated).
+fn three_level_frames(hits: [usize; 3]) -> (Vec<Vec<Detection>>, Vec<Vec<Object>>) {
+    let levels = [0.2f32, 0.5, 0.8];
     let mut detections = Vec::new();
     let mut truth = Vec::new();
-    for f in 0..80 {
-        let (p, hit) = if f < 40 { (low, f < 10) } else { (high, f < 70) };
-        let x = if hit { 0.0 } else { 5.0 };
-        detections.push(vec![detection("table", x, p), detection("desk", 2.0, 0.9)]);
+    for f in 0..120 {
+        let (level, n) = (f / 40, f % 40);
+        let x = if n < hits[level] { 0.0 } else { 5.0 };
+        detections.push(vec![detection("table", x, levels[level]), detection("desk", 2.0, 0.9)]);
         truth.push(vec![Object { category: "table".into(), label: None, cuboid: unit_box(0.0) }]);
     }
     (detections, truth)
 }
 
+/// The map through three points: `(a, b, c)` with `a·ln pᵢ − b·ln(1 − pᵢ) + c = logit qᵢ`, by Cramer's rule.
+fn through(points: [(f64, f64); 3]) -> [f64; 3] {
+    let rows = points.map(|(p, _)| [p.ln(), -(1.0 - p).ln(), 1.0]);
+    let rhs = points.map(|(_, q)| (q / (1.0 - q)).ln());
+    let det = |m: [[f64; 3]; 3]| {
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+    };
+    [0, 1, 2].map(|k| {
+        let mut m = rows;
+        for i in 0..3 {
+            m[i][k] = rhs[i];
+        }
+        det(m) / det(rows)
+    })
+}
+
 #[test]
-fn the_fit_recovers_the_closed_form_map() {
-    let (detections, truth) = two_level_frames();
-    let fit = fit_final_calibration(&detections, &truth, &[], 0.25, "two levels").unwrap();
+fn the_fit_recovers_the_map_through_the_frequencies() {
+    // Three score levels right 10, 24 and 36 times in 40: three parameters fit three frequencies exactly
+    // (up to the fit's weak prior), so the map is the one through (0.2, 1/4), (0.5, 3/5), (0.8, 9/10):
+    // a = 0.866, b = 1.511, c = −0.041 — both slopes positive, and unequal (no map of the log-odds fits).
+    let (detections, truth) = three_level_frames([10, 24, 36]);
+    let fit = fit_final_calibration(&detections, &truth, &[], 0.25, "three levels").unwrap();
     // Default categories: those with ground truth (the table), so the desk's false detections are not seen.
     assert_eq!(fit.categories, ["table"]);
     let c = &fit.calibration;
-    assert!((c.a - 3f64.ln()).abs() < 2e-3 && c.b.abs() < 2e-3, "a {} b {}", c.a, c.b);
-    assert_eq!((c.detections, c.true_positives, c.frames), (80, 40, 80));
-    assert_eq!(c.data, "two levels");
-    // Before: the scores expect 40·σ(−1) + 40·σ(1) = 40 true positives — right in sum, wrong per level; the
-    // fit's probabilities 1/4 and 3/4 expect 40 too, and lose less.
-    assert!((fit.expected_true_positives_before - 40.0).abs() < 1e-4);
-    assert!((fit.expected_true_positives_after - 40.0).abs() < 0.05);
+    let want = through([(0.2, 0.25), (0.5, 0.6), (0.8, 0.9)]);
+    assert!((want[0] - 0.866).abs() < 1e-3 && (want[1] - 1.511).abs() < 1e-3 && (want[2] + 0.041).abs() < 1e-3);
+    for (got, want) in [c.a, c.b, c.c].into_iter().zip(want) {
+        assert!((got - want).abs() < 5e-3, "{:?} against {want:?}", [c.a, c.b, c.c]);
+    }
+    for (p, q) in [(0.2, 0.25), (0.5, 0.6), (0.8, 0.9)] {
+        assert!((f64::from(c.recalibrate(p)) - q).abs() < 1e-3, "{p} → {}", c.recalibrate(p));
+    }
+    assert_eq!((c.detections, c.true_positives, c.frames), (120, 70, 120));
+    assert_eq!(c.data, "three levels");
+    // Before: the scores expect 8 + 20 + 32 = 60 true positives; the fit's probabilities expect the 70
+    // found, and lose less (log losses by hand).
+    assert!((fit.expected_true_positives_before - 60.0).abs() < 1e-4);
+    assert!((fit.expected_true_positives_after - 70.0).abs() < 0.05);
     let loss = |p: f64, hits: f64| -(hits * p.ln() + (40.0 - hits) * (1.0 - p).ln());
-    let (low, high) = (f64::from(sigmoid(-1.0)), f64::from(sigmoid(1.0)));
-    assert!((fit.log_loss_before - (loss(low, 10.0) + loss(high, 30.0)) / 80.0).abs() < 1e-6);
-    assert!((fit.log_loss_after - (loss(0.25, 10.0) + loss(0.75, 30.0)) / 80.0).abs() < 1e-4);
-    assert!((c.recalibrate(sigmoid(-1.0)) - 0.25).abs() < 1e-3);
+    let before = (loss(0.2, 10.0) + loss(0.5, 24.0) + loss(0.8, 36.0)) / 120.0;
+    let after = (loss(0.25, 10.0) + loss(0.6, 24.0) + loss(0.9, 36.0)) / 120.0;
+    assert!((fit.log_loss_before - before).abs() < 1e-6 && (fit.log_loss_after - after).abs() < 1e-4);
 
-    // With the desk among the categories, its 80 false detections at 0.9 count: the fit moves (lower b).
+    // Frequencies 1/4, 1/2, 9/10: the map through them has a = −0.042 < 0 (a higher score, a lower
+    // probability near 0): a is held at the minimum slope and b, c refitted, so the map stays increasing.
+    let unconstrained = through([(0.2, 0.25), (0.5, 0.5), (0.8, 0.9)]);
+    assert!(unconstrained[0] < 0.0);
+    let (detections, truth) = three_level_frames([10, 20, 36]);
+    let held = fit_final_calibration(&detections, &truth, &[], 0.25, "").unwrap().calibration;
+    assert_eq!(held.a, MIN_SLOPE);
+    assert!(
+        held.b > 1.0 && held.recalibrate(0.2) < held.recalibrate(0.5) && held.recalibrate(0.5) < held.recalibrate(0.8)
+    );
+
+    // With the desk among the categories, its 120 false detections at 0.9 count: the fit moves.
+    let (detections, truth) = three_level_frames([10, 24, 36]);
     let with_desk = fit_final_calibration(&detections, &truth, &["table".into(), "desk".into()], 0.25, "").unwrap();
-    assert_eq!(with_desk.calibration.detections, 160);
+    assert_eq!(with_desk.calibration.detections, 240);
     assert!(with_desk.calibration.recalibrate(0.9) < 0.5);
     // Only true or only false positives: no map, an error that says so.
     let err = fit_final_calibration(&detections, &truth, &["desk".into()], 0.25, "").unwrap_err().to_string();
     assert!(err.contains("final calibration") && err.contains("0 true"), "{err}");
 }
 
-fn cascade(exclusion: Option<Exclusion>, final_calibration: Option<Calibration>) -> Cascade {
+fn cascade(exclusion: Option<Exclusion>, final_calibration: Option<FinalCalibration>) -> Cascade {
     common::cascade_without_stages(exclusion, final_calibration)
 }
 
@@ -122,7 +159,7 @@ fn the_cascade_file_carries_the_map_and_applies_it_last() {
     let tmp = tempfile::tempdir().unwrap();
     let path = tmp.path().join("cascade.json");
     let exclusion = Exclusion { iou: 0.05, weight: 0.5 };
-    let with_map = cascade(Some(exclusion), Some(map(1.0, 2f64.ln())));
+    let with_map = cascade(Some(exclusion), Some(map(1.0, 1.0, 2f64.ln())));
     with_map.write(&path).unwrap();
     assert_eq!(Cascade::read(&path).unwrap(), with_map);
     // A file without the field (every cascade before it) reads as no final calibration.
@@ -131,10 +168,12 @@ fn the_cascade_file_carries_the_map_and_applies_it_last() {
     std::fs::write(&path, json.to_string()).unwrap();
     assert_eq!(Cascade::read(&path).unwrap().final_calibration, None);
     // A slope ≤ 0 would reorder the detections: refused, naming the file.
-    json["final_calibration"] = serde_json::to_value(map(-1.0, 0.0)).unwrap();
-    std::fs::write(&path, json.to_string()).unwrap();
-    let err = Cascade::read(&path).unwrap_err().to_string();
-    assert!(err.contains("cascade.json") && err.contains("final calibration slope"), "{err}");
+    for (a, b) in [(-1.0, 1.0), (1.0, 0.0)] {
+        json["final_calibration"] = serde_json::to_value(map(a, b, 0.0)).unwrap();
+        std::fs::write(&path, json.to_string()).unwrap();
+        let err = Cascade::read(&path).unwrap_err().to_string();
+        assert!(err.contains("cascade.json") && err.contains("final calibration slopes"), "{err}");
+    }
 
     // A desk at 0.8 and a table at 0.5 on one box, a table at 0.2 alone: the exclusion demotes the first
     // table to 0.5 · (1 − 0.5 · 0.8) = 0.3, then the map doubles every odds: 0.8 → 8/9, 0.3 → 6/13,
@@ -177,9 +216,9 @@ fn cli_fits_the_map_and_rescore_applies_it() {
     let tmp = tempfile::tempdir().unwrap();
     let (data, first) = (tmp.path().join("data"), tmp.path().join("first"));
     std::fs::create_dir_all(&first).unwrap();
-    let (detections, truth) = two_level_frames();
+    let (detections, truth) = three_level_frames([10, 24, 36]);
     for (f, (frame, objects)) in detections.iter().zip(&truth).enumerate() {
-        let name = format!("t{f:02}");
+        let name = format!("t{f:03}");
         common::write_tiny_frame(&data, &name, objects.clone());
         FrameDetections { frame: name.clone(), detections: frame.clone() }
             .write(&first.join(format!("{name}.json")))
@@ -187,30 +226,33 @@ fn cli_fits_the_map_and_rescore_applies_it() {
     }
     let (input, output) = (tmp.path().join("cascade.json"), tmp.path().join("mapped.json"));
     // The input's own map is replaced, not composed with: the fit reads the scores before it.
-    cascade(None, Some(map(5.0, 5.0))).write(&input).unwrap();
+    cascade(None, Some(map(5.0, 5.0, 5.0))).write(&input).unwrap();
     let base = ["calibrate", "--cascade", input.to_str().unwrap(), "--final", "--data", data.to_str().unwrap()];
     let base: Vec<&str> = base.into_iter().chain(["--detections", first.to_str().unwrap()]).collect();
 
     let checked = common::run_cog_gpu(&[base.as_slice(), &["--check"]].concat());
     let stdout = String::from_utf8_lossy(&checked.stdout);
     assert!(checked.status.success(), "{}", String::from_utf8_lossy(&checked.stderr));
-    // a = ln 3 = 1.0986, b = 0 (to the fit's prior).
-    assert!(
-        stdout.contains("a = 1.098") && (stdout.contains("b = 0.000") || stdout.contains("b = -0.000")),
-        "{stdout}"
-    );
-    assert!(stdout.contains("1 categories, 80 frames, 80 detections, 40 true positives"), "{stdout}");
-    assert!(stdout.contains("(replaced)") && stdout.contains("nothing written"), "{stdout}");
-    // The reliability bins before (40 detections at 0.269 with 10 true, 40 at 0.731 with 30) and after
-    // (at 0.250 and 0.750).
-    for bin in [
-        ["[0.2,", "0.3)", "40", "10", "10.8", "0.269", "0.250"],
-        ["[0.7,", "0.8)", "40", "30", "29.2", "0.731", "0.750"],
-        ["[0.2,", "0.3)", "40", "10", "10.0", "0.250", "0.250"],
-        ["[0.7,", "0.8)", "40", "30", "30.0", "0.750", "0.750"],
-    ] {
-        assert!(stdout.lines().any(|l| l.split_whitespace().collect::<Vec<_>>() == bin), "{bin:?}\n{stdout}");
+    // The map through the frequencies (the_fit_recovers_the_map_through_the_frequencies): a = 0.866,
+    // b = 1.511, c = −0.041, to the fit's prior.
+    for number in ["a = 0.86", "b = 1.51", "c = -0.04"] {
+        assert!(stdout.contains(number), "{number}: {stdout}");
     }
+    assert!(stdout.contains("1 categories, 120 frames, 120 detections, 70 true positives"), "{stdout}");
+    assert!(stdout.contains("(replaced)") && stdout.contains("nothing written"), "{stdout}");
+    // The reliability bins before (40 detections each at 0.2, 0.5 and 0.8, with 10, 24 and 36 true) and
+    // after (at 0.25, 0.6 and 0.9: the last on the edge of two bins, so its bin is not asserted).
+    let rows: Vec<Vec<&str>> = stdout.lines().map(|l| l.split_whitespace().collect()).collect();
+    for bin in [
+        ["[0.2,", "0.3)", "40", "10", "8.0", "0.200", "0.250"],
+        ["[0.5,", "0.6)", "40", "24", "20.0", "0.500", "0.600"],
+        ["[0.8,", "0.9)", "40", "36", "32.0", "0.800", "0.900"],
+        ["[0.2,", "0.3)", "40", "10", "10.0", "0.250", "0.250"],
+        ["[0.6,", "0.7)", "40", "24", "24.0", "0.600", "0.600"],
+    ] {
+        assert!(rows.iter().any(|r| r == &bin), "{bin:?}\n{stdout}");
+    }
+    assert!(rows.iter().any(|r| r.len() == 7 && r[2..] == ["40", "36", "36.0", "0.900", "0.900"]), "{stdout}");
     assert!(!output.exists());
     assert!(!stdout.contains("desk"));
 
@@ -232,9 +274,9 @@ fn cli_fits_the_map_and_rescore_applies_it() {
     let args = ["rescore", "--detections", first.to_str().unwrap(), "--out", rescored.to_str().unwrap()];
     let out = common::run_cog_gpu(&[args.as_slice(), &["--cascade", output.to_str().unwrap()]].concat());
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let file = FrameDetections::read(&rescored.join("t00.json")).unwrap();
+    let file = FrameDetections::read(&rescored.join("t000.json")).unwrap();
     let table = file.detections.iter().find(|d| d.category == "table").unwrap();
-    assert_eq!(table.score_before_final_calibration, Some(sigmoid(-1.0)));
+    assert_eq!(table.score_before_final_calibration, Some(0.2));
     assert!((table.score - 0.25).abs() < 1e-3, "{}", table.score);
 
     // Fitting the exclusion again drops the map, and says so.

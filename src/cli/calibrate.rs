@@ -22,8 +22,8 @@
 //! truth), the chosen parameters' per-category APs, and the cascade written with them.
 //!
 //! `cog-gpu calibrate --cascade CASCADE.json --final --data DIR --detections DIR [--out FILE | --check]`:
-//! fits the cascade's final calibration ([`cog_gpu::calibration`], "The cascade's final calibration": one
-//! map of every category's score after the stages and the exclusion) on the same kind of held-out
+//! fits the cascade's final calibration ([`cog_gpu::calibration::final_calibration`]: one map of every
+//! category's score after the stages and the exclusion) on the same kind of held-out
 //! first-stage detections, over --categories (default every category with ground truth); reports the log
 //! loss and the expected true positives before and after, and the scores' reliability bins
 //! ([`cog_gpu::diagnose::reliability`]) before and after on these frames; writes the cascade with it.
@@ -33,7 +33,8 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
-use cog_gpu::calibration::{fit_final_calibration, fit_logistic, label_detections, Calibration};
+use cog_gpu::calibration::final_calibration::fit_final_calibration;
+use cog_gpu::calibration::{fit_logistic, label_detections, Calibration};
 use cog_gpu::cascade::{Cascade, HeldOutFrame};
 use cog_gpu::category::{category_index, normalise_name, CATEGORIES};
 use cog_gpu::eval::Detection;
@@ -65,8 +66,9 @@ pub struct Args {
     #[arg(long, requires = "cascade")]
     pub exclusion: bool,
     /// With --cascade: fit the cascade's final calibration (one map of every category's score after the
-    /// stages and the exclusion, p' = σ(a·logit(p) + b), monotone: no AP changes) instead of the stages'
-    /// calibrations, and write the cascade with it (with --check: only report).
+    /// stages and the exclusion, beta calibration logit p' = a·ln p − b·ln(1 − p) + c, increasing: no AP
+    /// changes) instead of the stages' calibrations, and write the cascade with it (with --check: only
+    /// report).
     #[arg(long, requires = "cascade", conflicts_with = "exclusion")]
     pub r#final: bool,
 }
@@ -341,10 +343,11 @@ fn fit_cascade_final_calibration(
         .with_context(|| format!("fitting the final calibration on {}", held_out.detections.display()))?;
     let c = &fit.calibration;
     println!(
-        "final calibration p' = σ(a·logit(p) + b): a = {:.4}, b = {:.4} ({} categories, {frames} frames, {} detections, \
-         {} true positives at IoU {})",
+        "final calibration logit p' = a·ln p − b·ln(1 − p) + c: a = {:.4}, b = {:.4}, c = {:.4} ({} categories, \
+         {frames} frames, {} detections, {} true positives at IoU {})",
         c.a,
         c.b,
+        c.c,
         fit.categories.len(),
         c.detections,
         c.true_positives,
@@ -355,7 +358,10 @@ fn fit_cascade_final_calibration(
         fit.log_loss_before, fit.log_loss_after, fit.expected_true_positives_before, fit.expected_true_positives_after
     );
     if let Some(stored) = &cascade.final_calibration {
-        println!("the file's final calibration: a = {:.4}, b = {:.4} (replaced)", stored.a, stored.b);
+        println!(
+            "the file's final calibration: a = {:.4}, b = {:.4}, c = {:.4} (replaced)",
+            stored.a, stored.b, stored.c
+        );
     }
     let mut mapped = detections.clone();
     for d in mapped.iter_mut().flatten() {

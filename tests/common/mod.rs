@@ -158,7 +158,7 @@ pub fn run_cog_gpu(args: &[&str]) -> std::process::Output {
 #[allow(dead_code)]
 pub fn cascade_without_stages(
     exclusion: Option<cog_gpu::exclusion::Exclusion>,
-    final_calibration: Option<cog_gpu::calibration::Calibration>,
+    final_calibration: Option<cog_gpu::calibration::final_calibration::FinalCalibration>,
 ) -> cog_gpu::cascade::Cascade {
     cog_gpu::cascade::Cascade {
         format: cog_gpu::cascade::FORMAT.into(),
