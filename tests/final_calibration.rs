@@ -106,7 +106,7 @@ fn the_fit_recovers_the_map_through_the_frequencies() {
     // (up to the fit's weak prior), so the map is the one through (0.2, 1/4), (0.5, 3/5), (0.8, 9/10):
     // a = 0.866, b = 1.511, c = −0.041 — both slopes positive, and unequal (no map of the log-odds fits).
     let (detections, truth) = three_level_frames([10, 24, 36]);
-    let fit = fit_final_calibration(&detections, &truth, &[], 0.25, "three levels").unwrap();
+    let fit = fit_final_calibration(&detections, &truth, &[], 0.25, "three levels", None).unwrap();
     // Default categories: those with ground truth (the table), so the desk's false detections are not seen.
     assert_eq!(fit.categories, ["table"]);
     let c = &fit.calibration;
@@ -122,19 +122,19 @@ fn the_fit_recovers_the_map_through_the_frequencies() {
     assert_eq!(c.data, "three levels");
     // Before: the scores expect 8 + 20 + 32 = 60 true positives; the fit's probabilities expect the 70
     // found, and lose less (log losses by hand).
-    assert!((fit.expected_true_positives_before - 60.0).abs() < 1e-4);
-    assert!((fit.expected_true_positives_after - 70.0).abs() < 0.05);
+    assert!((fit.before.expected_true_positives - 60.0).abs() < 1e-4);
+    assert!((fit.after.expected_true_positives - 70.0).abs() < 0.05);
     let loss = |p: f64, hits: f64| -(hits * p.ln() + (40.0 - hits) * (1.0 - p).ln());
     let before = (loss(0.2, 10.0) + loss(0.5, 24.0) + loss(0.8, 36.0)) / 120.0;
     let after = (loss(0.25, 10.0) + loss(0.6, 24.0) + loss(0.9, 36.0)) / 120.0;
-    assert!((fit.log_loss_before - before).abs() < 1e-6 && (fit.log_loss_after - after).abs() < 1e-4);
+    assert!((fit.before.log_loss - before).abs() < 1e-6 && (fit.after.log_loss - after).abs() < 1e-4);
 
     // Frequencies 1/4, 1/2, 9/10: the map through them has a = −0.042 < 0 (a higher score, a lower
     // probability near 0): a is held at the minimum slope and b, c refitted, so the map stays increasing.
     let unconstrained = through([(0.2, 0.25), (0.5, 0.5), (0.8, 0.9)]);
     assert!(unconstrained[0] < 0.0);
     let (detections, truth) = three_level_frames([10, 20, 36]);
-    let held = fit_final_calibration(&detections, &truth, &[], 0.25, "").unwrap().calibration;
+    let held = fit_final_calibration(&detections, &truth, &[], 0.25, "", None).unwrap().calibration;
     assert_eq!(held.a, MIN_SLOPE);
     assert!(
         held.b > 1.0 && held.recalibrate(0.2) < held.recalibrate(0.5) && held.recalibrate(0.5) < held.recalibrate(0.8)
@@ -142,11 +142,12 @@ fn the_fit_recovers_the_map_through_the_frequencies() {
 
     // With the desk among the categories, its 120 false detections at 0.9 count: the fit moves.
     let (detections, truth) = three_level_frames([10, 24, 36]);
-    let with_desk = fit_final_calibration(&detections, &truth, &["table".into(), "desk".into()], 0.25, "").unwrap();
+    let with_desk =
+        fit_final_calibration(&detections, &truth, &["table".into(), "desk".into()], 0.25, "", None).unwrap();
     assert_eq!(with_desk.calibration.detections, 240);
     assert!(with_desk.calibration.recalibrate(0.9) < 0.5);
     // Only true or only false positives: no map, an error that says so.
-    let err = fit_final_calibration(&detections, &truth, &["desk".into()], 0.25, "").unwrap_err().to_string();
+    let err = fit_final_calibration(&detections, &truth, &["desk".into()], 0.25, "", None).unwrap_err().to_string();
     assert!(err.contains("final calibration") && err.contains("0 true"), "{err}");
 }
 
@@ -239,7 +240,29 @@ fn cli_fits_the_map_and_rescore_applies_it() {
         assert!(stdout.contains(number), "{number}: {stdout}");
     }
     assert!(stdout.contains("1 categories, 120 frames, 120 detections, 70 true positives"), "{stdout}");
-    assert!(stdout.contains("(replaced)") && stdout.contains("nothing written"), "{stdout}");
+    assert!(stdout.contains("nothing written"), "{stdout}");
+    // The file's own map, summarised on the same detections: logit p' = 5·logit p + 5 puts 0.2 at
+    // σ(5·ln ¼ + 5) = 0.127 and the other two levels above 0.99; the expected true positives and the mean
+    // log loss by hand.
+    let stored = |p: f64| 1.0 / (1.0 + (-(5.0 * (p / (1.0 - p)).ln() + 5.0)).exp());
+    let levels = [(0.2f32, 10.0), (0.5, 24.0), (0.8, 36.0)];
+    let expected: f64 = levels.iter().map(|&(p, _)| 40.0 * stored(f64::from(p))).sum();
+    let loss: f64 = levels
+        .iter()
+        .map(|&(p, hits)| {
+            let q = stored(f64::from(p)).clamp(1e-6, 1.0 - 1e-6);
+            -(hits * q.ln() + (40.0 - hits) * (1.0 - q).ln())
+        })
+        .sum::<f64>()
+        / 120.0;
+    // (The map's f32 output near 1 moves the loss in the fourth decimal.)
+    let line = stdout
+        .lines()
+        .find(|l| l.starts_with("the file's map (a = 5.0000, b = 5.0000, c = 5.0000):"))
+        .unwrap_or_else(|| panic!("{stdout}"));
+    assert!(line.ends_with(&format!("expected true positives {expected:.1}")), "{expected}: {line}");
+    let printed: f64 = line.split("mean log loss ").nth(1).unwrap().split(',').next().unwrap().parse().unwrap();
+    assert!((printed - loss).abs() < 1e-3, "{loss}: {line}");
     // The reliability bins before (40 detections each at 0.2, 0.5 and 0.8, with 10, 24 and 36 true) and
     // after (at 0.25, 0.6 and 0.9: the last on the edge of two bins, so its bin is not asserted).
     let rows: Vec<Vec<&str>> = stdout.lines().map(|l| l.split_whitespace().collect()).collect();
@@ -249,6 +272,7 @@ fn cli_fits_the_map_and_rescore_applies_it() {
         ["[0.8,", "0.9)", "40", "36", "32.0", "0.800", "0.900"],
         ["[0.2,", "0.3)", "40", "10", "10.0", "0.250", "0.250"],
         ["[0.6,", "0.7)", "40", "24", "24.0", "0.600", "0.600"],
+        ["[0.1,", "0.2)", "40", "10", "5.1", "0.127", "0.250"],
     ] {
         assert!(rows.iter().any(|r| r == &bin), "{bin:?}\n{stdout}");
     }
@@ -263,9 +287,10 @@ fn cli_fits_the_map_and_rescore_applies_it() {
 
     let written = common::run_cog_gpu(&[base.as_slice(), &["--out", output.to_str().unwrap()]].concat());
     assert!(written.status.success(), "{}", String::from_utf8_lossy(&written.stderr));
+    assert!(String::from_utf8_lossy(&written.stdout).contains("(the map it had replaced)"));
     let mapped = Cascade::read(&output).unwrap();
     let stored = mapped.final_calibration.clone().unwrap();
-    let library = fit_final_calibration(&detections, &truth, &[], 0.25, data.to_str().unwrap()).unwrap();
+    let library = fit_final_calibration(&detections, &truth, &[], 0.25, data.to_str().unwrap(), None).unwrap();
     assert_eq!(stored, library.calibration);
     assert_eq!(Cascade { final_calibration: None, ..mapped }, cascade(None, None));
 

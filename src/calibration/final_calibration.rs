@@ -121,32 +121,56 @@ pub fn label_scores(
     boxes.iter().map(|b| b.score).zip(labels).collect()
 }
 
-/// What [`fit_final_calibration`] found on held-out frames: the fitted map, the categories whose
-/// detections it saw, and how the scores held as probabilities before and after it (mean negative
-/// log-likelihood of the labels, probabilities clamped to [10⁻⁶, 1 − 10⁻⁶]; expected true positives = the
-/// sum of the probabilities; the map's `true_positives` is the number found).
+/// How scores hold as probabilities on labelled detections: the mean negative log-likelihood of the labels
+/// (probabilities clamped to [10⁻⁶, 1 − 10⁻⁶], so that one confident mistake is a large loss, not an
+/// infinite one) and the true positives they expect (the sum of the probabilities).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ScoreSummary {
+    pub log_loss: f64,
+    pub expected_true_positives: f64,
+}
+
+impl ScoreSummary {
+    /// The summary of `scores` (`(score, true positive)` pairs) read through `map`.
+    pub fn of(scores: &[(f32, bool)], map: impl Fn(f32) -> f32) -> ScoreSummary {
+        let (mut loss, mut expected) = (0.0, 0.0);
+        for &(score, true_positive) in scores {
+            let p = f64::from(map(score));
+            expected += p;
+            let p = p.clamp(1e-6, 1.0 - 1e-6);
+            loss -= (if true_positive { p } else { 1.0 - p }).ln();
+        }
+        ScoreSummary { log_loss: loss / scores.len().max(1) as f64, expected_true_positives: expected }
+    }
+}
+
+/// What [`fit_final_calibration`] found on held-out frames: the fitted map (its `true_positives` is the
+/// number found), the categories whose detections it saw, and how the scores held as probabilities without
+/// a map (`before`), with the fitted one (`after`) and with `stored`, the map given to compare with (a
+/// cascade file's), if any.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FinalCalibrationFit {
     pub calibration: FinalCalibration,
     pub categories: Vec<String>,
-    pub log_loss_before: f64,
-    pub log_loss_after: f64,
-    pub expected_true_positives_before: f64,
-    pub expected_true_positives_after: f64,
+    pub before: ScoreSummary,
+    pub after: ScoreSummary,
+    pub stored: Option<ScoreSummary>,
 }
 
 /// Fits a final calibration (module doc) on held-out frames: `detections[f]` are frame `f`'s detections
 /// with the scores to be mapped (the cascade's after its exclusion,
 /// [`crate::cascade::Cascade::rescore_before_final_calibration`]), `truth[f]` its annotated objects. Every
 /// detection of `categories` (empty: every cog-gpu category with ground truth in `truth`) is labelled at
-/// `iou` ([`label_scores`]); `data` names the frames in the result's provenance. Errors when the
-/// detections hold no true or no false positive.
+/// `iou` ([`label_scores`]); `data` names the frames in the result's provenance; `stored` (a cascade file's
+/// map) is summarised on the same detections. Errors when the detections hold no true or no false
+/// positive.
 pub fn fit_final_calibration(
     detections: &[Vec<Detection>],
     truth: &[Vec<Object>],
     categories: &[String],
     iou: f32,
     data: &str,
+    stored: Option<&FinalCalibration>,
 ) -> Result<FinalCalibrationFit> {
     let categories = chosen_or_annotated_categories(categories, truth);
     let scores: Vec<(f32, bool)> =
@@ -162,21 +186,10 @@ pub fn fit_final_calibration(
         data: data.to_string(),
         frames: truth.len(),
     };
-    let loss = |map: &dyn Fn(f32) -> f32| {
-        let total: f64 = scores
-            .iter()
-            .map(|&(p, y)| {
-                let p = f64::from(map(p)).clamp(1e-6, 1.0 - 1e-6);
-                -(if y { p } else { 1.0 - p }).ln()
-            })
-            .sum();
-        total / scores.len() as f64
-    };
     Ok(FinalCalibrationFit {
-        log_loss_before: loss(&|p| p),
-        log_loss_after: loss(&|p| calibration.recalibrate(p)),
-        expected_true_positives_before: scores.iter().map(|&(p, _)| f64::from(p)).sum(),
-        expected_true_positives_after: scores.iter().map(|&(p, _)| f64::from(calibration.recalibrate(p))).sum(),
+        before: ScoreSummary::of(&scores, |p| p),
+        after: ScoreSummary::of(&scores, |p| calibration.recalibrate(p)),
+        stored: stored.map(|map| ScoreSummary::of(&scores, |p| map.recalibrate(p))),
         calibration,
         categories,
     })

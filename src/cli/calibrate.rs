@@ -33,7 +33,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
-use cog_gpu::calibration::final_calibration::fit_final_calibration;
+use cog_gpu::calibration::final_calibration::{fit_final_calibration, FinalCalibration, ScoreSummary};
 use cog_gpu::calibration::{fit_logistic, label_detections, Calibration};
 use cog_gpu::cascade::{Cascade, HeldOutFrame};
 use cog_gpu::category::{category_index, normalise_name, CATEGORIES};
@@ -339,7 +339,8 @@ fn fit_cascade_final_calibration(
         })?;
     }
     let data = held_out.data.display().to_string();
-    let fit = fit_final_calibration(&detections, &truth, &categories, held_out.iou, &data)
+    let stored = cascade.final_calibration.as_ref();
+    let fit = fit_final_calibration(&detections, &truth, &categories, held_out.iou, &data, stored)
         .with_context(|| format!("fitting the final calibration on {}", held_out.detections.display()))?;
     let c = &fit.calibration;
     println!(
@@ -353,21 +354,27 @@ fn fit_cascade_final_calibration(
         c.true_positives,
         held_out.iou
     );
-    println!(
-        "mean log loss {:.5} before, {:.5} after; expected true positives {:.1} before, {:.1} after",
-        fit.log_loss_before, fit.log_loss_after, fit.expected_true_positives_before, fit.expected_true_positives_after
-    );
-    if let Some(stored) = &cascade.final_calibration {
-        println!(
-            "the file's final calibration: a = {:.4}, b = {:.4}, c = {:.4} (replaced)",
-            stored.a, stored.b, stored.c
-        );
+    let summary = |name: &str, s: &ScoreSummary| {
+        println!("{name:<34} mean log loss {:.5}, expected true positives {:.1}", s.log_loss, s.expected_true_positives)
+    };
+    summary("before (no map):", &fit.before);
+    if let (Some(map), Some(s)) = (stored, &fit.stored) {
+        summary(&format!("the file's map (a = {:.4}, b = {:.4}, c = {:.4}):", map.a, map.b, map.c), s);
     }
-    let mut mapped = detections.clone();
-    for d in mapped.iter_mut().flatten() {
-        d.score = c.recalibrate(d.score);
+    summary("after (the fitted map):", &fit.after);
+    let mapped_by = |map: &FinalCalibration| {
+        let mut mapped = detections.clone();
+        for d in mapped.iter_mut().flatten() {
+            d.score = map.recalibrate(d.score);
+        }
+        mapped
+    };
+    let mut tables = vec![("before (no map)", detections.clone())];
+    if let Some(map) = stored {
+        tables.push(("with the file's map", mapped_by(map)));
     }
-    for (name, scored) in [("before", &detections), ("after", &mapped)] {
+    tables.push(("after (the fitted map)", mapped_by(c)));
+    for (name, scored) in &tables {
         let reliability = cog_gpu::diagnose::reliability(&truth, scored, &fit.categories, held_out.iou);
         println!("{name}, on these frames:");
         super::eval::print_reliability(&reliability);
@@ -377,8 +384,9 @@ fn fit_cascade_final_calibration(
         return Ok(());
     }
     let out = out.unwrap_or(path);
-    Cascade { final_calibration: Some(fit.calibration), ..cascade }.write(out)?;
-    println!("wrote the cascade with its final calibration to {}", out.display());
+    let replaced = if stored.is_some() { " (the map it had replaced)" } else { "" };
+    Cascade { final_calibration: Some(fit.calibration), ..cascade.clone() }.write(out)?;
+    println!("wrote the cascade with its final calibration to {}{replaced}", out.display());
     Ok(())
 }
 
