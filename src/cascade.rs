@@ -138,7 +138,7 @@ use std::path::Path;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::calibration::final_calibration::FinalCalibration;
+use crate::calibration::final_calibration::{FinalCalibration, ScoreSummary};
 use crate::calibration::{fit_logistic, label_detections, Calibration};
 use crate::category::{category_index, is_cross_score_category, CROSS_SCORE_CATEGORIES, LARGE_CATEGORIES};
 use crate::error::{Error, Result};
@@ -851,14 +851,13 @@ impl Cascade {
                 data: data.to_string(),
                 frames: frames.len(),
             };
-            let expected_true_positives_before =
-                samples.iter().map(|&(z, _)| f64::from(stage.calibration.probability(z))).sum();
+            let before = ScoreSummary::of(&samples, |z| stage.calibration.probability(z));
             report.push(Recalibration {
                 category: category.clone(),
                 before: stage.calibration.clone(),
-                log_loss_before: mean_log_loss(&stage.calibration, &samples),
-                log_loss_after: mean_log_loss(&after, &samples),
-                expected_true_positives_before,
+                log_loss_before: before.log_loss,
+                log_loss_after: ScoreSummary::of(&samples, |z| after.probability(z)).log_loss,
+                expected_true_positives_before: before.expected_true_positives,
                 after: after.clone(),
             });
             stage.calibration = after;
@@ -872,19 +871,6 @@ impl Cascade {
         cascade.check().map_err(Error::Input)?;
         Ok((cascade, report))
     }
-}
-
-/// The mean negative log-likelihood of `(score, true positive)` pairs under `calibration` (probabilities
-/// clamped to [10⁻⁶, 1 − 10⁻⁶], so that one confident mistake is a large loss, not an infinite one).
-fn mean_log_loss(calibration: &Calibration, samples: &[(f32, bool)]) -> f64 {
-    let total: f64 = samples
-        .iter()
-        .map(|&(z, y)| {
-            let p = f64::from(calibration.probability(z)).clamp(1e-6, 1.0 - 1e-6);
-            -(if y { p } else { 1.0 - p }).ln()
-        })
-        .sum();
-    total / samples.len().max(1) as f64
 }
 
 /// `z + z'`: the first stage's raw score plus the context score.
