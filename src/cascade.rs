@@ -702,11 +702,7 @@ impl Cascade {
     pub fn rescore(&self, detections: &mut [Detection], room: Option<&Room>) -> Result<()> {
         self.rescore_before_final_calibration(detections, room)?;
         if let Some(calibration) = &self.final_calibration {
-            for d in detections.iter_mut() {
-                d.score_before_final_calibration = Some(d.score);
-                d.score = calibration.recalibrate(d.score);
-            }
-            detections.sort_by(|a, b| b.score.total_cmp(&a.score));
+            calibration.apply(detections);
         }
         Ok(())
     }

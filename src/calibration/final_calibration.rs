@@ -78,6 +78,18 @@ impl FinalCalibration {
         sigmoid(self.a * ln_p + self.b * minus_ln_q + self.c) as f32
     }
 
+    /// Maps every detection's score of one frame (`detections`, in place) and sorts them by score, best
+    /// first (stable; the map keeps their order but for f32 ties): each keeps the score before it in
+    /// [`Detection::score_before_final_calibration`]. The one place the map meets detections
+    /// ([`crate::cascade::Cascade::rescore`], `calibrate --cascade --final`'s report).
+    pub fn apply(&self, detections: &mut [Detection]) {
+        for d in detections.iter_mut() {
+            d.score_before_final_calibration = Some(d.score);
+            d.score = self.recalibrate(d.score);
+        }
+        detections.sort_by(|a, b| b.score.total_cmp(&a.score));
+    }
+
     /// Checks the stored numbers (finite, both slopes > 0).
     pub fn validate(&self) -> std::result::Result<(), String> {
         if !(self.a.is_finite() && self.b.is_finite() && self.c.is_finite()) {

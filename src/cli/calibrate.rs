@@ -25,8 +25,9 @@
 //! fits the cascade's final calibration ([`cog_gpu::calibration::final_calibration`]: one map of every
 //! category's score after the stages and the exclusion) on the same kind of held-out
 //! first-stage detections, over --categories (default every category with ground truth); reports the log
-//! loss and the expected true positives before and after, and the scores' reliability bins
-//! ([`cog_gpu::diagnose::reliability`]) before and after on these frames; writes the cascade with it.
+//! loss, the expected true positives and the scores' reliability bins ([`cog_gpu::diagnose::reliability`])
+//! on these frames without a map, with the file's own map (when it has one) and with the fitted one;
+//! writes the cascade with it.
 //! Refitting the stages' calibrations or the exclusion drops a cascade's final calibration (it was fitted
 //! on their scores), and says so.
 
@@ -323,8 +324,9 @@ fn say_final_calibration_dropped(cascade: &Cascade) {
 
 /// `calibrate --cascade --final`: the cascade's final calibration fitted on the held-out frames
 /// ([`fit_final_calibration`]; their first-stage detections rescored by the stages and the exclusion, any
-/// stored final calibration left out), reported with the scores' reliability before and after, and the file
-/// written with it (not with `check`).
+/// stored final calibration left out), reported with the scores' log loss, expected true positives and
+/// reliability without a map, with the file's own map (when it has one) and with the fitted one, and the
+/// file written with it (not with `check`).
 fn fit_cascade_final_calibration(
     held_out: &HeldOutArgs,
     path: &Path,
@@ -364,8 +366,8 @@ fn fit_cascade_final_calibration(
     summary("after (the fitted map):", &fit.after);
     let mapped_by = |map: &FinalCalibration| {
         let mut mapped = detections.clone();
-        for d in mapped.iter_mut().flatten() {
-            d.score = map.recalibrate(d.score);
+        for frame in &mut mapped {
+            map.apply(frame);
         }
         mapped
     };

@@ -457,7 +457,7 @@ pub(super) fn cascade_for(
     let map = cascade
         .final_calibration
         .as_ref()
-        .map(|c| format!(", final calibration a = {:.4}, b = {:.4}", c.a, c.b))
+        .map(|c| format!(", final calibration a = {:.4}, b = {:.4}, c = {:.4}", c.a, c.b, c.c))
         .unwrap_or_default();
     log::info!("context cascade: {} ({} stages{exclusion}{map})", path.display(), cascade.stages.len());
     Ok(Some(cascade))
