@@ -197,6 +197,22 @@ selection_set() {
     done
 }
 
+# selection_first: WORK/final/selection-first, the selection set's first-stage files of the shipped models as
+# `detect` makes them today (the second floor searched, box voting; about 30 min on the 2-core machine),
+# made when missing or made by an earlier rule (`final` and `shipped-cascade` modes).
+selection_first() {
+    selection_set
+    if [ "$(cat "$WORK/final/selection-first/.done" 2>/dev/null)" != "$CROSS_MARK $FLOOR_MARK" ]; then
+        local started=$SECONDS
+        rm -rf "$WORK/final/selection-first"
+        mkdir -p "$WORK/final"
+        "$BIN" detect "$WORK/selection" --models assets/models --out "$WORK/final/selection-first" --min-score -3 \
+            --no-overlay --no-cascade > /dev/null
+        echo "$CROSS_MARK $FLOOR_MARK" > "$WORK/final/selection-first/.done"
+        echo "final: selection detect $((SECONDS - started)) s" >> "$WORK/final/times.txt"
+    fi
+}
+
 # cascade_set: WORK/cascade-set, the 2 000 held-out frames that train the context cascade (`cascade` and
 # `shipped-cascade` modes).
 cascade_set() {
@@ -397,16 +413,7 @@ case "$mode" in
         # (but for the data paths it names) when the shipped models and cascade are what made it; the fit's
         # report in WORK/final/final.txt.
         dir="$WORK/final"
-        mkdir -p "$dir"
-        selection_set
-        started=$SECONDS
-        if [ "$(cat "$dir/selection-first/.done" 2>/dev/null)" != "$CROSS_MARK $FLOOR_MARK" ]; then
-            rm -rf "$dir/selection-first"
-            "$BIN" detect "$WORK/selection" --models assets/models --out "$dir/selection-first" --min-score -3 \
-                --no-overlay --no-cascade > /dev/null
-            echo "$CROSS_MARK $FLOOR_MARK" > "$dir/selection-first/.done"
-            echo "final: selection detect $((SECONDS - started)) s" >> "$dir/times.txt"
-        fi
+        selection_first
         "$BIN" calibrate --cascade assets/models/cascade.json --final --data "$WORK/selection" \
             --detections "$dir/selection-first" --out "$dir/cascade.json" | tee "$dir/final.txt"
         # The files name the frames they were fitted on ("data"): compared without those lines.
@@ -423,8 +430,9 @@ case "$mode" in
         # model -- as the shipped stages' files were (`--box-voting off --unseen-floor off`, the FIT options;
         # about 2.5 h on the 2-core machine; an interrupted run goes on where it stopped, `detect
         # --resume`), then `cascade --features best-cross --keep nested-gain` on them into
-        # WORK/shipped-cascade/cascade.json (about 1 h; its stage checkpoints resume likewise), compared
-        # stage by stage with the shipped file. WORK/shipped-cascade/first is what a changed model's
+        # WORK/shipped-cascade/cascade.json (about 1 h; its stage checkpoints resume likewise; kept when
+        # it exists), compared stage by stage with the shipped file and, on the selection set, by AP
+        # (WORK/shipped-cascade/selection-ap*.txt). WORK/shipped-cascade/first is what a changed model's
         # cascade-set detections are merged into before the cascade is trained again (README "Changing a
         # shipped model": the script's `cascade` mode trains on its own models instead, whose monitor and
         # sink differ from the shipped ones).
@@ -442,9 +450,11 @@ case "$mode" in
             echo "shipped-cascade: detect $((SECONDS - started)) s" >> "$dir/times.txt"
         fi
         started=$SECONDS
-        "$BIN" cascade --data "$WORK/cascade-set" --detections "$dir/first" --models assets/models \
-            --features best-cross --keep nested-gain --out "$dir/cascade.json" | tee "$dir/cascade.txt"
-        echo "shipped-cascade: train $((SECONDS - started)) s" >> "$dir/times.txt"
+        if [ ! -f "$dir/cascade.json" ]; then
+            "$BIN" cascade --data "$WORK/cascade-set" --detections "$dir/first" --models assets/models \
+                --features best-cross --keep nested-gain --out "$dir/cascade.json" | tee "$dir/cascade.txt"
+            echo "shipped-cascade: train $((SECONDS - started)) s" >> "$dir/times.txt"
+        fi
         # The shipped file also holds the cross-category exclusion and the final calibration (fitted after
         # its stages, on the selection set: the `exclusion` and `final` modes' commands) and names the
         # directories it was trained on; everything else is compared.
@@ -469,6 +479,29 @@ else:
         if trained["stages"].get(category) != shipped["stages"].get(category):
             print("  the stage of", category, "differs")
 PY
+        # Stages that differ (first-stage files changed by the code since the shipped cascade was trained,
+        # e.g. the support surfaces of 2026-12-06) are judged by what they do: the selection set's shipped
+        # first stage (as the `final` mode detects it; made here when missing) rescored by the shipped
+        # cascade and by the retrained stages with the shipped exclusion and final calibration, compared.
+        selection_first
+        python3 - "$dir/cascade.json" assets/models/cascade.json "$dir/cascade-with-shipped-rules.json" <<'PY'
+import json, sys
+trained, shipped = json.load(open(sys.argv[1])), json.load(open(sys.argv[2]))
+for key in ("exclusion", "final_calibration"):
+    if key in shipped:
+        trained[key] = shipped[key]
+json.dump(trained, open(sys.argv[3], "w"), indent=2)
+PY
+        for which in shipped retrained; do
+            cascade=assets/models/cascade.json
+            [ "$which" = retrained ] && cascade="$dir/cascade-with-shipped-rules.json"
+            rm -rf "$dir/selection-$which"
+            "$BIN" rescore --detections "$WORK/final/selection-first" --out "$dir/selection-$which" --cascade "$cascade"
+        done
+        "$BIN" eval --data "$WORK/selection" --detections "$dir/selection-retrained" --categories all --bootstrap 1000 \
+            --versus "$dir/selection-shipped" | tee "$dir/selection-ap.txt"
+        "$BIN" eval --data "$WORK/selection" --detections "$dir/selection-retrained" --bootstrap 1000 \
+            --versus "$dir/selection-shipped" | tee "$dir/selection-ap-ten.txt"
         ;;
     exclusion)
         # The cascade's cross-category exclusion (README "Cross-category exclusion"), after `cascade`: the
