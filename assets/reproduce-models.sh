@@ -240,6 +240,28 @@ cascade_set() {
     done
 }
 
+# cascade_first MODELS OUT TIMES: the cascade set's first-stage files of MODELS in OUT, detected as the
+# shipped stages' files were (no box voting, one floor: FIT), the time appended to TIMES. The marker holds
+# the number of frames and the rules, so that a set that grew or files of an earlier rule are detected
+# again from scratch; a run interrupted before its marker was written goes on where it stopped (`detect
+# --resume`; the cascade set takes hours).
+cascade_first() {
+    local models=$1 out=$2 times=$3 started=$SECONDS frames
+    frames=$(find "$WORK/cascade-set" -mindepth 2 -maxdepth 2 -type d | wc -l)
+    local marker="$frames $FIT_MARK $CROSS_MARK"
+    [ "$(cat "$out/.done" 2>/dev/null)" = "$marker" ] && return 0
+    local resume=()
+    if [ -f "$out/.done" ]; then
+        rm -rf "$out"
+    elif [ -d "$out" ]; then
+        resume=(--resume)
+    fi
+    "$BIN" detect "$WORK/cascade-set" --models "$models" --out "$out" --min-score -3 --no-overlay --no-cascade \
+        "${FIT[@]}" "${resume[@]}" > /dev/null
+    echo "$marker" > "$out/.done"
+    echo "cascade set detected into $out: $((SECONDS - started)) s" >> "$times"
+}
+
 case "$mode" in
     shipped)
         # The README's status table ("Where it stands") and "The shipped pipeline today": the shipped models,
@@ -383,15 +405,7 @@ case "$mode" in
             echo "$CROSS_MARK" > "$dir/detections/.done"
         fi
         cascade_set
-        started=$SECONDS
-        # The marker holds the number of frames detected, so that a set that grew is detected again.
-        cascade_frames=$(find "$WORK/cascade-set" -mindepth 2 -maxdepth 2 -type d | wc -l)
-        if [ "$(cat "$dir/cascade-detections/.done" 2>/dev/null)" != "$cascade_frames $FIT_MARK $CROSS_MARK" ]; then
-            "$BIN" detect "$WORK/cascade-set" --models "$dir/models" --out "$dir/cascade-detections" \
-                --min-score -3 --no-overlay --no-cascade "${FIT[@]}" > /dev/null
-            echo "$cascade_frames $FIT_MARK $CROSS_MARK" > "$dir/cascade-detections/.done"
-            echo "cascade detect $((SECONDS - started)) s" >> "$dir/times.txt"
-        fi
+        cascade_first "$dir/models" "$dir/cascade-detections" "$dir/times.txt"
         "$BIN" cascade --data "$WORK/cascade-set" --detections "$dir/cascade-detections" --models "$dir/models" --features best-cross \
             --keep nested-gain --out "$dir/cascade.json" | tee "$dir/cascade.txt"
         rm -rf "$dir/cascade-test-detections"
@@ -439,16 +453,7 @@ case "$mode" in
         dir="$WORK/shipped-cascade"
         mkdir -p "$dir"
         cascade_set
-        started=$SECONDS
-        cascade_frames=$(find "$WORK/cascade-set" -mindepth 2 -maxdepth 2 -type d | wc -l)
-        if [ "$(cat "$dir/first/.done" 2>/dev/null)" != "$cascade_frames $FIT_MARK $CROSS_MARK" ]; then
-            resume=()
-            [ -d "$dir/first" ] && resume=(--resume)
-            "$BIN" detect "$WORK/cascade-set" --models assets/models --out "$dir/first" --min-score -3 \
-                --no-overlay --no-cascade "${FIT[@]}" "${resume[@]}" > /dev/null
-            echo "$cascade_frames $FIT_MARK $CROSS_MARK" > "$dir/first/.done"
-            echo "shipped-cascade: detect $((SECONDS - started)) s" >> "$dir/times.txt"
-        fi
+        cascade_first assets/models "$dir/first" "$dir/times.txt"
         started=$SECONDS
         if [ ! -f "$dir/cascade.json" ]; then
             "$BIN" cascade --data "$WORK/cascade-set" --detections "$dir/first" --models assets/models \

@@ -371,16 +371,16 @@ fn fit_cascade_final_calibration(
         }
         mapped
     };
-    let mut tables = vec![("before (no map)", detections.clone())];
-    if let Some(map) = stored {
-        tables.push(("with the file's map", mapped_by(map)));
-    }
-    tables.push(("after (the fitted map)", mapped_by(c)));
-    for (name, scored) in &tables {
+    let print_bins = |name: &str, scored: &[Vec<Detection>]| {
         let reliability = cog_gpu::diagnose::reliability(&truth, scored, &fit.categories, held_out.iou);
         println!("{name}, on these frames:");
         super::eval::print_reliability(&reliability);
+    };
+    print_bins("before (no map)", &detections);
+    if let Some(map) = stored {
+        print_bins("with the file's map", &mapped_by(map));
     }
+    print_bins("after (the fitted map)", &mapped_by(c));
     if check {
         println!("nothing written");
         return Ok(());
