@@ -12,7 +12,7 @@
 #                                             # fitted again on the selection set, into WORK/final/
 #   bash assets/reproduce-models.sh shipped-cascade # only the cascade's stages trained: the shipped
 #                                             # models' cascade-set detections and the cascade trained on
-#                                             # them, into WORK/shipped-cascade/
+#                                             # them, into WORK/shipped-cascade/ (needs python3)
 #   bash assets/reproduce-models.sh shipped   # nothing trained: the shipped pipeline (assets/models as they
 #                                             # are) on the test set, both annotation rules -- the figures of
 #                                             # the README's status table, in WORK/shipped/summary.txt
@@ -53,6 +53,13 @@ WORK=${WORK:-/tmp/cog-gpu-repro}
 ANNOTATE=${ANNOTATE:-visible}
 BIN=${BIN:-target/release/cog-gpu}
 mode=${1:-models}
+# shipped-cascade's comparisons read JSON with python3 (its standard library only): checked before the
+# hours of detection and training rather than after them.
+if [ "$mode" = shipped-cascade ] && ! command -v python3 > /dev/null; then
+    echo "reproduce-models.sh shipped-cascade: python3 is needed to compare the cascade files (e.g. apt-get" \
+        "install python3); nothing was run" >&2
+    exit 1
+fi
 export NODEVICE_SELECT=1 RUST_LOG=${RUST_LOG:-info}
 
 cargo build --release --locked
