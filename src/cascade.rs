@@ -1213,7 +1213,11 @@ struct Validated {
 /// at each `C` of [`C_GRID`] (in its order); `None` where a fold lacks a class. Each fold's SVMs are
 /// trained from the largest `C` down, each started from the one before with its α scaled by the ratio
 /// of the `C`s (feasible with balanced costs): the same optima, reached in fewer working-set rounds.
+/// The two folds are trained in parallel (each fit is single-threaded and reads only its fold; the
+/// results are then added in fold order), so a category's stage is not one thread's work: the same
+/// numbers as one fold after the other, bit for bit.
 fn cross_validate(s: &Samples, iou_threshold: f32) -> Vec<Option<Validated>> {
+    let folds: Vec<FoldScores> = (0..2).into_par_iter().map(|fold| fold_scores(s, fold, iou_threshold)).collect();
     let mut results: Vec<Option<Validated>> = (0..C_GRID.len())
         .map(|_| {
             Some(Validated {
@@ -1225,24 +1229,19 @@ fn cross_validate(s: &Samples, iou_threshold: f32) -> Vec<Option<Validated>> {
             })
         })
         .collect();
-    for fold in 0..2 {
-        let train: Vec<usize> = (0..s.labels.len()).filter(|&n| !in_fold(s.frame[n], fold)).collect();
-        let test: Vec<usize> = (0..s.labels.len()).filter(|&n| in_fold(s.frame[n], fold)).collect();
-        let base: Vec<f32> = test.iter().map(|&n| s.raw[n]).collect();
-        let first = subset_ap(s, &test, &base, iou_threshold);
-        for (k, combined) in combined_scores_per_c(s, &train, &test).into_iter().enumerate() {
-            let Some(combined) = combined else {
+    for (fold, scores) in folds.into_iter().enumerate() {
+        for (k, per_c) in scores.per_c.into_iter().enumerate() {
+            let Some((combined, cascade)) = per_c else {
                 results[k] = None;
                 continue;
             };
-            let cascade = subset_ap(s, &test, &combined, iou_threshold);
             if let Some(v) = results[k].as_mut() {
                 // Sums here, halved below (the arithmetic of every cascade trained before).
-                v.ap_first += first;
+                v.ap_first += scores.first;
                 v.ap_cascade += cascade;
-                v.fold_first[fold] = first;
+                v.fold_first[fold] = scores.first;
                 v.fold_cascade[fold] = cascade;
-                for (&n, &score) in test.iter().zip(&combined) {
+                for (&n, &score) in scores.test.iter().zip(&combined) {
                     v.held_out[n] = score;
                 }
             }
@@ -1253,6 +1252,32 @@ fn cross_validate(s: &Samples, iou_threshold: f32) -> Vec<Option<Validated>> {
         v.ap_cascade /= 2.0;
     }
     results
+}
+
+/// One fold of [`cross_validate`]: its samples, the first stage's AP on them and, per `C` of [`C_GRID`],
+/// the combined scores of the SVM trained on the other fold and their AP (`None` where it could not be
+/// fitted).
+struct FoldScores {
+    test: Vec<usize>,
+    first: f32,
+    per_c: Vec<Option<(Vec<f32>, f32)>>,
+}
+
+fn fold_scores(s: &Samples, fold: usize, iou_threshold: f32) -> FoldScores {
+    let train: Vec<usize> = (0..s.labels.len()).filter(|&n| !in_fold(s.frame[n], fold)).collect();
+    let test: Vec<usize> = (0..s.labels.len()).filter(|&n| in_fold(s.frame[n], fold)).collect();
+    let base: Vec<f32> = test.iter().map(|&n| s.raw[n]).collect();
+    let first = subset_ap(s, &test, &base, iou_threshold);
+    let per_c = combined_scores_per_c(s, &train, &test)
+        .into_iter()
+        .map(|combined| {
+            combined.map(|combined| {
+                let cascade = subset_ap(s, &test, &combined, iou_threshold);
+                (combined, cascade)
+            })
+        })
+        .collect();
+    FoldScores { test, first, per_c }
 }
 
 /// The combined scores of the samples `test` given by the SVM trained on the samples `fit` at each `C` of
@@ -1436,43 +1461,49 @@ pub fn train_cascade_resumable(
     let results: Vec<(String, StageOutcome)> = categories
         .par_iter()
         .map(|category| -> Result<(String, StageOutcome)> {
+            // The feature sets' trainings are independent: in parallel, collected in the sets' order.
+            let trained: Vec<(FeatureSet, StageResult, Option<NestedFolds>)> = sets
+                .par_iter()
+                .map(|&set| -> Result<(FeatureSet, StageResult, Option<NestedFolds>)> {
+                    if v7_adds_nothing(set, category, sets) {
+                        let reason = format!("not trained: a {category} detection has no cross scores, v6 is the same");
+                        return Ok((set, Err(reason), None));
+                    }
+                    let key = StageKey {
+                        category,
+                        set,
+                        categories,
+                        iou: iou_threshold,
+                        fingerprint: &fingerprint,
+                        nested: rule.needs_nested(),
+                    };
+                    let stored = checkpoints.and_then(|dir| key.read(dir));
+                    let (result, numbers) = match stored {
+                        Some(outcome) => {
+                            resumed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                            outcome
+                        }
+                        None => {
+                            let outcome =
+                                train_stage(frames, category, categories, iou_threshold, set, rule.needs_nested());
+                            if let Some(dir) = checkpoints {
+                                key.write(dir, &outcome.0, outcome.1.as_ref())?;
+                            }
+                            outcome
+                        }
+                    };
+                    // Named here, for fresh and resumed stages alike (a checkpoint may come from a run whose
+                    // file set was another).
+                    let result = result
+                        .and_then(|stage| rule.admits(&stage).map(|()| stage))
+                        .map(|stage| SecondStage { features: set.name_unless(file_set), ..stage });
+                    Ok((set, result, numbers))
+                })
+                .collect::<Result<_>>()?;
             let mut candidates: Vec<(FeatureSet, StageResult)> = Vec::with_capacity(sets.len());
             let mut nested_numbers: Vec<NestedFolds> = Vec::new();
-            for &set in sets {
-                if v7_adds_nothing(set, category, sets) {
-                    let reason = format!("not trained: a {category} detection has no cross scores, v6 is the same");
-                    candidates.push((set, Err(reason)));
-                    continue;
-                }
-                let key = StageKey {
-                    category,
-                    set,
-                    categories,
-                    iou: iou_threshold,
-                    fingerprint: &fingerprint,
-                    nested: rule.needs_nested(),
-                };
-                let stored = checkpoints.and_then(|dir| key.read(dir));
-                let (result, numbers) = match stored {
-                    Some(outcome) => {
-                        resumed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                        outcome
-                    }
-                    None => {
-                        let outcome =
-                            train_stage(frames, category, categories, iou_threshold, set, rule.needs_nested());
-                        if let Some(dir) = checkpoints {
-                            key.write(dir, &outcome.0, outcome.1.as_ref())?;
-                        }
-                        outcome
-                    }
-                };
+            for (set, result, numbers) in trained {
                 nested_numbers.extend(numbers);
-                // Named here, for fresh and resumed stages alike (a checkpoint may come from a run whose
-                // file set was another).
-                let result = result
-                    .and_then(|stage| rule.admits(&stage).map(|()| stage))
-                    .map(|stage| SecondStage { features: set.name_unless(file_set), ..stage });
                 candidates.push((set, result));
             }
             let mut outcome = StageOutcome { candidates, nested_gain: None, refused: None };
@@ -1697,8 +1728,13 @@ fn train_stage(
     if positives == 0 || positives == s.labels.len() {
         return (Err(format!("{positives} true positives among {} detections", s.labels.len())), None);
     }
-    let validated = cross_validate(&s, iou_threshold);
-    let numbers = nested.then(|| nested::nested_folds(&s, &validated, iou_threshold));
+    // The stage's cross-validation and the nested one's inner cross-validations are independent: run
+    // side by side (each fit single-threaded; the same numbers as one after the other).
+    let (validated, inner) = rayon::join(
+        || cross_validate(&s, iou_threshold),
+        || nested.then(|| nested::inner_validations(&s, iou_threshold)),
+    );
+    let numbers = inner.map(|inner| nested::nested_folds(&validated, &inner));
     (stage_of(&s, validated, frames.len(), iou_threshold), numbers)
 }
 

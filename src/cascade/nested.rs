@@ -19,6 +19,7 @@
 //! a quarter of the frames each. The nested gain is the mean over the two outer folds of (that AP − the
 //! first stage's AP on the fold), the same arithmetic as the stage's cross-validated gain.
 
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::{cross_validate, Samples, Validated, C_GRID};
@@ -75,19 +76,28 @@ fn fold_samples(s: &Samples, parity: usize) -> Samples {
     }
 }
 
+/// The inner cross-validations of one training: the stage's own cross-validation ([`cross_validate`]) on
+/// the samples of each outer training fold ([`fold_samples`]) — element `fold` for outer fold `fold`, which
+/// the SVMs trained on the frames of the other parity score. The two are independent and run in parallel
+/// (the same numbers as one after the other), and [`super::train_stage`] runs them beside the stage's own
+/// cross-validation.
+pub(super) fn inner_validations(s: &Samples, iou_threshold: f32) -> Vec<Vec<Option<Validated>>> {
+    (0..2).into_par_iter().map(|fold| cross_validate(&fold_samples(s, 1 - fold), iou_threshold)).collect()
+}
+
 /// The nested numbers of one training from its cross-validation `validated` (per `C` of [`C_GRID`]; its
-/// per-fold APs are the outer ones) and the inner cross-validations run here: the stage's own
-/// cross-validation on each outer training fold's samples ([`fold_samples`]). Where no `C` could be fitted
-/// the first-stage APs read 0: every choice then falls back to the first stage, whose gain is 0 whatever
-/// its AP.
-pub(super) fn nested_folds(s: &Samples, validated: &[Option<Validated>], iou_threshold: f32) -> NestedFolds {
+/// per-fold APs are the outer ones) and its [`inner_validations`]. Where no `C` could be fitted the
+/// first-stage APs read 0: every choice then falls back to the first stage, whose gain is 0 whatever its
+/// AP.
+pub(super) fn nested_folds(
+    validated: &[Option<Validated>],
+    inner_validations: &[Vec<Option<Validated>>],
+) -> NestedFolds {
     let first_aps = |v: &[Option<Validated>]| v.iter().flatten().next().map_or([0.0; 2], |v| v.fold_first);
     let mut inner_first = [0.0; 2];
     let mut inner: [Vec<Option<f32>>; 2] = [vec![], vec![]];
-    for fold in 0..2 {
-        // Outer fold `fold` is scored by the SVMs trained on the frames of the other parity.
-        let within = cross_validate(&fold_samples(s, 1 - fold), iou_threshold);
-        let [a, b] = first_aps(&within);
+    for (fold, within) in inner_validations.iter().enumerate() {
+        let [a, b] = first_aps(within);
         inner_first[fold] = (a + b) / 2.0;
         inner[fold] = within.iter().map(|v| v.as_ref().map(|v| v.ap_cascade)).collect();
     }
