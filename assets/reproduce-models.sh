@@ -33,11 +33,14 @@
 #                 40 living rooms (2003) -- the first 200, listed in WORK/test-first200.txt -- and 60
 #                 bathrooms (2004), 45 bedrooms (2005), 20 offices (2006), so that every one of the ten
 #                 categories has at least 30 test boxes (bathtub and dresser 30, bookshelf 33);
-#   cascade-set 1000 frames (held out: trains the context cascade): 80 of the default mix (seed 1700),
+#   cascade-set 2000 frames (held out: trains the context cascade): 80 of the default mix (seed 1700),
 #                 40 bathrooms (1701), 40 bedrooms (1702), 40 living rooms (1703), as the test set; and 120
 #                 of the default mix (1704), 60 bathrooms (1705), 60 bedrooms (1706), 60 living rooms (1707);
 #                 then the same 500 again with seeds 1708-1715 (frames dmixed-*, dbath-*, ..., dliving2-*),
-#                 and twice more with seeds 1716-1723 (emixed-*, ...) and 1724-1731 (fmixed-*, ...): 2000.
+#                 and twice more with seeds 1716-1723 (emixed-*, ...) and 1724-1731 (fmixed-*, ...): 2000,
+#                 the CASCADE_BLOCKS (default 4) blocks of 500; up to 8 blocks (4000 frames, seeds up to
+#                 1763, frames gmixed-* to jliving2-*) for `cascade` and `shipped-cascade` -- a larger set
+#                 keeps the smaller one's frames and their detections (detected on, not again).
 #   selection     325 frames (held out: fits the cascade's cross-category exclusion and its final calibration;
 #                 `exclusion` and `final` modes only),
 #                 composed as the test set with seeds 2500-2506.
@@ -52,6 +55,11 @@ cd "$(dirname "$0")/.."
 WORK=${WORK:-/tmp/cog-gpu-repro}
 ANNOTATE=${ANNOTATE:-visible}
 BIN=${BIN:-target/release/cog-gpu}
+CASCADE_BLOCKS=${CASCADE_BLOCKS:-4}
+case "$CASCADE_BLOCKS" in
+    [1-8]) ;;
+    *) echo "CASCADE_BLOCKS must be 1 to 8 (blocks of 500 cascade-set frames), not '$CASCADE_BLOCKS'" >&2; exit 1 ;;
+esac
 mode=${1:-models}
 # shipped-cascade's comparisons read JSON with python3 (its standard library only): checked before the
 # hours of detection and training rather than after them.
@@ -220,16 +228,18 @@ selection_first() {
     fi
 }
 
-# cascade_set: WORK/cascade-set, the 2 000 held-out frames that train the context cascade (`cascade` and
-# `shipped-cascade` modes).
+# cascade_set: WORK/cascade-set, the held-out frames that train the context cascade (`cascade` and
+# `shipped-cascade` modes): CASCADE_BLOCKS blocks of 500 (default 4, the shipped cascade's 2 000 frames).
 cascade_set() {
     local block letter seed first second index spec rooms short frames suffix tag room_arg
-    # Four blocks of 500 frames composed the same way (80 of the default mix, 40 bathrooms, 40 bedrooms, 40
+    # Blocks of 500 frames composed the same way (80 of the default mix, 40 bathrooms, 40 bedrooms, 40
     # living rooms, then 120, 60, 60, 60; the 200-frame set starved the second stage, and each doubling
     # since helped: README "Context cascade"), block b's eight sets seeded 1700 + 8b, in order, frames
-    # prefixed by the block's letter (c, d, e, f), directories suffixed "" and -2, -3 and -4, ...
+    # prefixed by the block's letter (c, d, e, f, then g, h, i, j), directories suffixed "" and -2, -3 and
+    # -4, ..., -15 and -16. A set made with more blocks holds the smaller one's frames unchanged.
     block=0
-    for letter in c d e f; do
+    for letter in c d e f g h i j; do
+        [ "$block" -lt "$CASCADE_BLOCKS" ] || break
         seed=$((1700 + 8 * block))
         first=$([ $block = 0 ] && echo "" || echo "-$((2 * block + 1))")
         second="-$((2 * block + 2))"
@@ -249,18 +259,20 @@ cascade_set() {
 
 # cascade_first MODELS OUT TIMES: the cascade set's first-stage files of MODELS in OUT, detected as the
 # shipped stages' files were (no box voting, one floor: FIT), the time appended to TIMES. The marker holds
-# the number of frames and the rules, so that a set that grew or files of an earlier rule are detected
-# again from scratch; a run interrupted before its marker was written goes on where it stopped (`detect
-# --resume`; the cascade set takes hours).
+# the number of frames and the rules: files of an earlier rule are detected again from scratch; a set that
+# grew (more CASCADE_BLOCKS) and a run interrupted before its marker was written go on where they stopped
+# (`detect --resume` detects only the frames without a file; the cascade set takes hours).
 cascade_first() {
-    local models=$1 out=$2 times=$3 started=$SECONDS frames
+    local models=$1 out=$2 times=$3 started=$SECONDS frames done_marker
     frames=$(find "$WORK/cascade-set" -mindepth 2 -maxdepth 2 -type d | wc -l)
     local marker="$frames $FIT_MARK $CROSS_MARK"
-    [ "$(cat "$out/.done" 2>/dev/null)" = "$marker" ] && return 0
+    done_marker=$(cat "$out/.done" 2>/dev/null || true)
+    [ "$done_marker" = "$marker" ] && return 0
     local resume=()
-    if [ -f "$out/.done" ]; then
+    if [ -n "$done_marker" ] && [ "${done_marker#* }" != "${marker#* }" ]; then
         rm -rf "$out"
     elif [ -d "$out" ]; then
+        rm -f "$out/.done"
         resume=(--resume)
     fi
     "$BIN" detect "$WORK/cascade-set" --models "$models" --out "$out" --min-score -3 --no-overlay --no-cascade \
@@ -452,8 +464,10 @@ case "$mode" in
         # about 2.5 h on the 2-core machine; an interrupted run goes on where it stopped, `detect
         # --resume`), then `cascade --features best-cross --keep nested-gain` on them into
         # WORK/shipped-cascade/cascade.json (about 1 h; its stage checkpoints resume likewise; kept when
-        # it exists), compared stage by stage with the shipped file and, on the selection set, by AP
-        # (WORK/shipped-cascade/selection-ap*.txt). WORK/shipped-cascade/first is what a changed model's
+        # it exists and was trained on as many frames), compared stage by stage with the shipped file and,
+        # on the selection set, by AP (WORK/shipped-cascade/selection-ap*.txt). With CASCADE_BLOCKS=8 the
+        # same on 4 000 frames (the 2 000 first-stage files kept, 2 000 more detected): a larger set's
+        # cascade against the shipped one. WORK/shipped-cascade/first is what a changed model's
         # cascade-set detections are merged into before the cascade is trained again (README "Changing a
         # shipped model": the script's `cascade` mode trains on its own models instead, whose monitor and
         # sink differ from the shipped ones).
@@ -462,6 +476,13 @@ case "$mode" in
         cascade_set
         cascade_first assets/models "$dir/first" "$dir/times.txt"
         started=$SECONDS
+        # A cascade trained on another number of frames (CASCADE_BLOCKS changed) is trained again.
+        frames=$(find "$WORK/cascade-set" -mindepth 2 -maxdepth 2 -type d | wc -l)
+        if [ -f "$dir/cascade.json" ] \
+            && [ "$(python3 -c 'import json, sys; print(json.load(open(sys.argv[1]))["training"]["frames"])' \
+                "$dir/cascade.json")" != "$frames" ]; then
+            rm "$dir/cascade.json"
+        fi
         if [ ! -f "$dir/cascade.json" ]; then
             "$BIN" cascade --data "$WORK/cascade-set" --detections "$dir/first" --models assets/models \
                 --features best-cross --keep nested-gain --out "$dir/cascade.json" | tee "$dir/cascade.txt"
