@@ -257,15 +257,20 @@ cascade_set() {
     done
 }
 
+# cascade_set_frames: the number of frames in WORK/cascade-set.
+cascade_set_frames() {
+    find "$WORK/cascade-set" -mindepth 2 -maxdepth 2 -type d | wc -l
+}
+
 # cascade_first MODELS OUT TIMES: the cascade set's first-stage files of MODELS in OUT, detected as the
 # shipped stages' files were (no box voting, one floor: FIT), the time appended to TIMES. The marker holds
 # the number of frames and the rules: files of an earlier rule are detected again from scratch; a set that
 # grew (more CASCADE_BLOCKS) and a run interrupted before its marker was written go on where they stopped
 # (`detect --resume` detects only the frames without a file; the cascade set takes hours).
 cascade_first() {
-    local models=$1 out=$2 times=$3 started=$SECONDS frames done_marker
-    frames=$(find "$WORK/cascade-set" -mindepth 2 -maxdepth 2 -type d | wc -l)
-    local marker="$frames $FIT_MARK $CROSS_MARK"
+    local models=$1 out=$2 times=$3 started=$SECONDS done_marker
+    local marker
+    marker="$(cascade_set_frames) $FIT_MARK $CROSS_MARK"
     done_marker=$(cat "$out/.done" 2>/dev/null || true)
     [ "$done_marker" = "$marker" ] && return 0
     local resume=()
@@ -477,10 +482,9 @@ case "$mode" in
         cascade_first assets/models "$dir/first" "$dir/times.txt"
         started=$SECONDS
         # A cascade trained on another number of frames (CASCADE_BLOCKS changed) is trained again.
-        frames=$(find "$WORK/cascade-set" -mindepth 2 -maxdepth 2 -type d | wc -l)
         if [ -f "$dir/cascade.json" ] \
             && [ "$(python3 -c 'import json, sys; print(json.load(open(sys.argv[1]))["training"]["frames"])' \
-                "$dir/cascade.json")" != "$frames" ]; then
+                "$dir/cascade.json")" != "$(cascade_set_frames)" ]; then
             rm "$dir/cascade.json"
         fi
         if [ ! -f "$dir/cascade.json" ]; then
