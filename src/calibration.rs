@@ -36,6 +36,10 @@ pub const MIN_SLOPE: f64 = 1e-3;
 /// Fewest true positives for a calibration that `calibrate` does not warn about (our choice: about ten
 /// events per fitted parameter is where a logistic fit's probabilities start to mean something).
 pub const MIN_RELIABLE_TRUE_POSITIVES: usize = 20;
+/// Largest magnitude of a stored calibration coefficient (the models' [`crate::model::MAX_WEIGHT`]): fits
+/// on real scores give slopes and offsets of a few tens at most; beyond it a file is not a fitted
+/// calibration, and would put every detection at probability 0 or 1.
+pub const MAX_COEFFICIENT: f64 = 1e6;
 /// Weight of the Gaussian prior on `(a, b)`.
 const PRIOR: f64 = 1e-3;
 
@@ -91,15 +95,36 @@ impl Calibration {
         })
     }
 
-    /// Checks the stored numbers (finite, slope positive).
+    /// Checks the stored numbers: finite, the slope in [[`MIN_SLOPE`], [`MAX_COEFFICIENT`]] (what a fit
+    /// gives: monotone, and never so steep or so flat that every score becomes 1 or 0), the offset within
+    /// ±[`MAX_COEFFICIENT`], the IoU in (0, 1].
     pub fn validate(&self) -> std::result::Result<(), String> {
         if !(self.a.is_finite() && self.b.is_finite()) {
             return Err(format!("calibration has a non-finite coefficient (a = {}, b = {})", self.a, self.b));
         }
-        if self.a <= 0.0 {
-            return Err(format!("calibration slope a = {} must be > 0 (a calibration must be monotone)", self.a));
+        if !(MIN_SLOPE..=MAX_COEFFICIENT).contains(&self.a) {
+            return Err(format!(
+                "calibration slope a = {} must be in [{MIN_SLOPE}, {MAX_COEFFICIENT:e}] (a calibration must be \
+                 monotone; a fit holds its slope at {MIN_SLOPE} at least)",
+                self.a
+            ));
         }
+        if self.b.abs() > MAX_COEFFICIENT {
+            return Err(format!(
+                "calibration offset b = {} is beyond ±{MAX_COEFFICIENT:e}: not a fitted calibration",
+                self.b
+            ));
+        }
+        check_iou(self.iou)
+    }
+}
+
+/// A stored fit's IoU threshold, the one that defined its true positives: in (0, 1], as `--iou`'s.
+fn check_iou(iou: f32) -> std::result::Result<(), String> {
+    if iou > 0.0 && iou <= 1.0 {
         Ok(())
+    } else {
+        Err(format!("calibration IoU {iou} must be in (0, 1]"))
     }
 }
 

@@ -151,6 +151,7 @@ use crate::frame::Object;
 use crate::geometry::{footprint_overlap_area, intersection_volume, polygon_contains, Cuboid};
 use crate::learn::binary_svm::{balanced_costs, train_linear_svm_from, SvmSolution};
 use crate::learn::checkpoint::{fnv1a, FNV_OFFSET};
+use crate::limits::MAX_COORDINATE_M;
 use crate::model::{check_weight_magnitudes, Model};
 use glam::{Vec2, Vec3};
 
@@ -313,6 +314,7 @@ pub fn room_in(path: &Path, text: &str) -> Result<Option<Room>> {
     struct Layout {
         corners: Vec<[f32; 2]>,
         floor: Option<f32>,
+        ceiling: Option<f32>,
     }
     let file: File = serde_json::from_str(text).map_err(|e| Error::invalid(path, e.to_string()))?;
     let Some(layout) = file.layout else { return Ok(None) };
@@ -323,6 +325,21 @@ pub fn room_in(path: &Path, text: &str) -> Result<Option<Room>> {
         Some(floor) if floor.is_finite() => floor,
         _ => return Err(Error::invalid(path, "the layout has no finite floor height".to_string())),
     };
+    // The layout file's own rules (`room_layout::LayoutFile::read`): the ceiling above the floor, every
+    // coordinate within ±MAX_COORDINATE_M of the camera — a room beyond them is no room `detect` predicts,
+    // and its wall distances would drive the stages' features far outside anything they were trained on.
+    if let Some(ceiling) = layout.ceiling {
+        if !ceiling.is_finite() || ceiling <= floor {
+            return Err(Error::invalid(path, format!("the layout's ceiling {ceiling} is not above its floor {floor}")));
+        }
+    }
+    let coordinates = || layout.corners.iter().flatten().chain([&floor]).chain(layout.ceiling.iter());
+    if coordinates().any(|v| f64::from(v.abs()) > MAX_COORDINATE_M) {
+        return Err(Error::invalid(
+            path,
+            format!("the layout has a coordinate beyond ±{MAX_COORDINATE_M} m of the camera"),
+        ));
+    }
     Ok(Some(Room { corners: layout.corners.into_iter().map(Vec2::from).collect(), floor }))
 }
 
@@ -588,7 +605,10 @@ impl Cascade {
             }
         }
         let unknown = |name: &str| {
-            format!("feature set '{name}' is not one of this build's '{V6_FEATURES}', '{V5_FEATURES}', '{V4_FEATURES}'")
+            format!(
+                "feature set '{name}' is not one of this build's '{V7_FEATURES}', '{V6_FEATURES}', '{V5_FEATURES}', \
+                 '{V4_FEATURES}'"
+            )
         };
         self.feature_set().ok_or_else(|| unknown(&self.features))?;
         for (category, stage) in &self.stages {
@@ -1788,6 +1808,33 @@ fn stage_of(s: &Samples, validated: Vec<Option<Validated>>, frames: usize, iou_t
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A detections file's room is read only within the layout file's rules: a ceiling at or below the
+    /// floor and a coordinate beyond ±100 m are errors naming the file (they were read as rooms before).
+    #[test]
+    fn a_room_out_of_the_layout_files_rules_is_an_error() {
+        let path = Path::new("frame.json");
+        let file = |corners: &str, floor: f32, ceiling: f32| {
+            format!(
+                r#"{{"frame": "f", "detections": [], "layout": {{"corners": {corners}, "floor": {floor}, "ceiling": {ceiling}}}}}"#
+            )
+        };
+        let square = "[[-2, 1], [2, 1], [2, 5], [-2, 5]]";
+        let room = room_in(path, &file(square, -1.3, 1.2)).unwrap().unwrap();
+        assert_eq!((room.corners.len(), room.floor), (4, -1.3));
+        for (text, says) in [
+            (file(square, 5.0, 1.3), "not above its floor"),
+            (file(square, -1.3, -1.3), "not above its floor"),
+            (file(square, 1e6, 2e6), "beyond ±100 m"),
+            (file("[[-2, 1], [2, 1], [1000000, 1000000]]", -1.3, 1.2), "beyond ±100 m"),
+        ] {
+            let err = room_in(path, &text).unwrap_err().to_string();
+            assert!(err.contains("frame.json") && err.contains(says), "{err}");
+        }
+        // A file without a ceiling (older writers) is still read.
+        let no_ceiling = format!(r#"{{"layout": {{"corners": {square}, "floor": -1.3}}}}"#);
+        assert!(room_in(path, &no_ceiling).unwrap().is_some());
+    }
 
     /// Twelve frames of one category with 0–2 true boxes each and three detections per frame (hits and
     /// misses, every score distinct, so that [`MatchedDetections::resampled_ap`] is exact).

@@ -20,9 +20,10 @@ use std::path::Path;
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
-use crate::category::{category_index, normalise_name, CATEGORIES};
+use crate::category::{category_index, is_cross_score_category, normalise_name, CATEGORIES, CROSS_SCORE_CATEGORIES};
 use crate::error::{Error, Result};
 use crate::features::surface::SurfaceSource;
+use crate::features::weights::MAX_WEIGHT;
 use crate::geometry::{iou_3d, Cuboid};
 use crate::limits::{MAX_COORDINATE_M, MAX_OBJECT_SIZE_M};
 
@@ -156,11 +157,16 @@ impl FrameDetections {
                 .chain(&d.size)
                 .chain([&d.yaw, &d.score])
                 .chain(&d.raw_score)
+                .chain(&d.first_stage_score)
+                .chain(&d.context_score)
                 .chain(&d.surface_z)
+                .chain(&d.score_before_exclusion)
+                .chain(&d.score_before_final_calibration)
                 .all(|v| v.is_finite());
             if !finite {
                 return Err(Error::invalid(path, format!("detections[{i}] has a non-finite number")));
             }
+            check_cross_scores(d).map_err(|m| Error::invalid(path, format!("detections[{i}]: {m}")))?;
             if d.size.iter().any(|s| *s <= 0.0) {
                 return Err(Error::invalid(path, format!("detections[{i}] has a non-positive size {:?}", d.size)));
             }
@@ -184,6 +190,26 @@ impl FrameDetections {
         let text = serde_json::to_string_pretty(self).map_err(|e| Error::invalid(path, e.to_string()))?;
         std::fs::write(path, text).map_err(|e| Error::io(path, e))
     }
+}
+
+/// A detection's `cross_scores` as `detect` writes them: each key one of
+/// [`crate::category::CROSS_SCORE_CATEGORIES`] (another name is a model no cascade has a weight for, and
+/// would be read as nothing), each value a raw score within ±[`MAX_WEIGHT`] (the bound of a model's
+/// weights; real raw scores are a few units) — the cascade's v7 stages multiply them by their weights, so
+/// one absurd value would decide a detection's probability alone.
+fn check_cross_scores(d: &Detection) -> std::result::Result<(), String> {
+    for (category, &score) in d.cross_scores.iter().flatten() {
+        if !is_cross_score_category(category) {
+            return Err(format!(
+                "cross_scores has '{category}', not one of the categories that make cross scores ({})",
+                CROSS_SCORE_CATEGORIES.join(", ")
+            ));
+        }
+        if !score.is_finite() || score.abs() > MAX_WEIGHT {
+            return Err(format!("cross_scores['{category}'] = {score} is not a raw score within ±{MAX_WEIGHT:e}"));
+        }
+    }
+    Ok(())
 }
 
 /// A scored cuboid of one image, the input of [`average_precision`].
@@ -408,6 +434,9 @@ pub struct IgnoredCounts {
 pub struct WithoutIgnored {
     /// Per image, its ground-truth boxes that are not ignored, in their order.
     pub truth: Vec<Vec<crate::frame::Object>>,
+    /// Per image, the index in the image's annotation of each box of `truth` (what a report that names
+    /// boxes by their index must print).
+    pub annotation_index: Vec<Vec<usize>>,
     /// Per image, its detections that are not dropped, in their order.
     pub detections: Vec<Vec<Detection>>,
     /// Per category (of the boxes and detections taken out, evaluated or not), what was taken out.
@@ -435,17 +464,21 @@ pub fn ignore_boxes(
     let is_ignored =
         |image: usize, object: usize| ignored.get(image).and_then(|m| m.get(object)).copied() == Some(true);
     let mut kept_truth = Vec::with_capacity(truth.len());
+    let mut annotation_index = Vec::with_capacity(truth.len());
     let mut kept_detections = Vec::with_capacity(detections.len());
     for (image, objects) in truth.iter().enumerate() {
         let mut kept = Vec::with_capacity(objects.len());
+        let mut index = Vec::with_capacity(objects.len());
         for (o, object) in objects.iter().enumerate() {
             if is_ignored(image, o) {
                 counts.entry(object.category.clone()).or_default().boxes += 1;
             } else {
                 kept.push(object.clone());
+                index.push(o);
             }
         }
         kept_truth.push(kept);
+        annotation_index.push(index);
     }
     for (image, frame) in detections.iter().enumerate() {
         let objects = truth.get(image).map(Vec::as_slice).unwrap_or(&[]);
@@ -461,7 +494,7 @@ pub fn ignore_boxes(
         }
         kept_detections.push(kept);
     }
-    WithoutIgnored { truth: kept_truth, detections: kept_detections, counts }
+    WithoutIgnored { truth: kept_truth, annotation_index, detections: kept_detections, counts }
 }
 
 // ---------------------------------------------------------------------------------------------------------
@@ -569,9 +602,11 @@ impl MatchedDetections {
     }
 
     /// The AP of the data set made of every frame `f` taken `counts[f]` times (`counts` has one entry per
-    /// frame; 0 leaves it out): [`average_precision`] on that data set, exactly, whenever no two frames'
-    /// detections tie in score (tied ones may then be visited in another order: here a frame's copies are
-    /// adjacent). `None` without ground truth.
+    /// frame; 0 leaves it out): [`average_precision`] on that data set, exactly, whenever no two of the
+    /// category's detections tie in score — tied ones may be visited in another order, here each detection's
+    /// copies one after the other, there copy by copy of its frame; two tied detections of one frame drawn
+    /// twice, a hit and a miss, are visited hit, hit, miss, miss here and hit, miss, hit, miss there.
+    /// `None` without ground truth.
     pub fn resampled_ap(&self, counts: &[u32]) -> Option<f32> {
         let positives: usize = self.positives.iter().zip(counts).map(|(&p, &k)| p * k as usize).sum();
         if positives == 0 {

@@ -429,10 +429,15 @@ fn open_image(path: &Path) -> Result<image::DynamicImage> {
     image::DynamicImage::from_decoder(decoder).map_err(image_error)
 }
 
-/// Whether a JPEG file ends with the end-of-image marker `FF D9` (trailing zero padding allowed).
+/// Whether a JPEG file ends with the end-of-image marker `FF D9` (trailing padding allowed).
 fn jpeg_is_complete(bytes: &[u8]) -> bool {
-    let end = bytes.iter().rposition(|&b| b != 0).map_or(0, |i| i + 1);
-    bytes[..end].ends_with(&[0xFF, 0xD9])
+    bytes[..jpeg_data_end(bytes)].ends_with(&[0xFF, 0xD9])
+}
+
+/// Where a JPEG's data ends: before any trailing padding — zero bytes and ASCII white space (a file saved
+/// by a tool that appends a newline is whole; decoders stop at the end-of-image marker and ignore them).
+fn jpeg_data_end(bytes: &[u8]) -> usize {
+    bytes.iter().rposition(|&b| b != 0 && !b.is_ascii_whitespace()).map_or(0, |i| i + 1)
 }
 
 /// Why a JPEG's entropy-coded data runs out before its last rows, if it does. A file cut short with an
@@ -450,8 +455,7 @@ fn jpeg_runs_out(bytes: &[u8]) -> Option<String> {
             .set_strict_mode(false);
         zune_jpeg::JpegDecoder::new_with_options(zune_core::bytestream::ZCursor::new(data), options).decode().ok()
     };
-    let end = bytes.iter().rposition(|&b| b != 0).map_or(0, |i| i + 1);
-    let marker = end.checked_sub(2)?;
+    let marker = jpeg_data_end(bytes).checked_sub(2)?;
     let mut filled = Vec::with_capacity(bytes.len() + JPEG_FILLER.len());
     filled.extend_from_slice(&bytes[..marker]);
     filled.extend_from_slice(&JPEG_FILLER);
@@ -481,13 +485,26 @@ pub fn read_depth_png(path: &Path) -> Result<(u32, u32, Vec<u16>)> {
     }
 }
 
+/// Writes `img` as a PNG at `path`: encoded in memory, then written in one call, so that a failed write (a
+/// full disk) is an error naming the file — `image`'s own `save` writes through a buffer whose last flush
+/// error it drops, leaving a truncated file and no error.
+pub fn write_png<P>(img: &image::ImageBuffer<P, Vec<P::Subpixel>>, path: &Path) -> Result<()>
+where
+    P: image::PixelWithColorType,
+    [P::Subpixel]: image::EncodableLayout,
+{
+    let mut bytes = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut bytes, image::ImageFormat::Png)
+        .map_err(|e| Error::invalid(path, format!("cannot encode the PNG: {e}")))?;
+    std::fs::write(path, bytes.into_inner()).map_err(|e| Error::io(path, e))
+}
+
 /// Writes decoded millimetres as a depth PNG with the toolbox's encoding.
 pub fn write_depth_png(path: &Path, width: u32, height: u32, depth_mm: &[u16]) -> Result<()> {
     let stored: Vec<u16> = depth_mm.iter().map(|&d| encode_depth_value(d)).collect();
     let buf = image::ImageBuffer::<image::Luma<u16>, _>::from_raw(width, height, stored)
         .ok_or_else(|| Error::invalid(path, format!("depth buffer does not hold {width}×{height} values")))?;
-    buf.save_with_format(path, image::ImageFormat::Png)
-        .map_err(|e| Error::Image { path: path.to_path_buf(), source: e })
+    write_png(&buf, path)
 }
 
 fn read_json(path: &Path) -> Result<Value> {
@@ -752,10 +769,7 @@ fn write_frame(dir: &Path, frame: &Frame) -> Result<()> {
         create_dir(&dir.join(sub))?;
     }
     let rgb_path = dir.join("image").join(format!("{}.png", frame.name));
-    frame
-        .rgb
-        .save_with_format(&rgb_path, image::ImageFormat::Png)
-        .map_err(|e| Error::Image { path: rgb_path.clone(), source: e })?;
+    write_png(&frame.rgb, &rgb_path)?;
     write_depth_png(&dir.join("depth").join(format!("{}.png", frame.name)), w, h, &frame.depth_mm)?;
     write_text(&dir.join("intrinsics.txt"), &matrix_text(&frame.k, false))?;
     write_text(&dir.join("extrinsics").join("00000000000000.txt"), &matrix_text(&frame.extrinsics, true))?;

@@ -61,8 +61,26 @@ fn restore_default_sigpipe() {
     }
 }
 
+/// `println!` panics when standard output cannot be written (a full disk, `> /dev/full`, an I/O error on
+/// the file it was sent to) — and the commands print their reports with it. That one panic becomes the
+/// commands' error exit instead: `error: writing standard output: <why>`, status 1. Every other panic keeps
+/// the default report (a bug to fix, with its location).
+fn stdout_errors_exit_cleanly() {
+    let default_hook = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let payload = info.payload();
+        let message = payload.downcast_ref::<String>().map(String::as_str).or(payload.downcast_ref::<&str>().copied());
+        if let Some(why) = message.and_then(|m| m.strip_prefix("failed printing to stdout: ")) {
+            eprintln!("error: writing standard output: {why}");
+            std::process::exit(1);
+        }
+        default_hook(info);
+    }));
+}
+
 fn main() {
     restore_default_sigpipe();
+    stdout_errors_exit_cleanly();
     env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("info")).format_timestamp(None).init();
     // Bad options exit with status 1 like every other error (README); --help and --version with 0.
     let cli = Cli::try_parse().unwrap_or_else(|err| {

@@ -769,3 +769,50 @@ fn cli_window_recall_with_models() {
     assert_eq!(report["overlay_precision"]["shown"], 0);
     assert!(report["overlay_precision"]["precision"].is_null());
 }
+
+/// `--objects` names each ground-truth box by its index in the frame's annotation, with boxes left out
+/// by `--ignore-out-of-view` too: those runs named the kept boxes by their place among the kept ones (a
+/// chair #5 became #4 after an ignored bed). Twelve synthetic frames (seed 7, boxes mostly out of the
+/// picture among them) without detections: every box the run with the option lists is the run without
+/// it's box of that frame and index — same category, size and share in view — and some ignored box
+/// comes before a kept one of its frame, so the indices had something to shift.
+#[test]
+fn objects_keep_their_annotation_index_when_out_of_view_boxes_are_ignored() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (data, dets) = (tmp.path().join("data"), tmp.path().join("dets"));
+    std::fs::create_dir_all(&dets).unwrap();
+    for index in 0..12 {
+        let synthetic = synth::generate_frame(7, index, &SynthOptions::small(320, 240)).unwrap();
+        synthetic.write(&data.join(&synthetic.frame.name), None).unwrap();
+        FrameDetections { frame: synthetic.frame.name.clone(), detections: vec![] }
+            .write(&dets.join(format!("{}.json", synthetic.frame.name)))
+            .unwrap();
+    }
+    let objects = |extra: &[&str]| -> Vec<Value> {
+        let out = Command::new(env!("CARGO_BIN_EXE_cog-gpu"))
+            .args(["eval", "--data", data.to_str().unwrap(), "--detections", dets.to_str().unwrap()])
+            .args(["--diagnose", "--objects", "--categories", "all", "--json"])
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let report: Value = serde_json::from_slice(&out.stdout).unwrap();
+        report["objects"].as_array().unwrap().clone()
+    };
+    let all = objects(&[]);
+    let kept = objects(&["--ignore-out-of-view", "0.25"]);
+    let key = |o: &Value| (o["frame"].as_str().unwrap().to_string(), o["object"].as_u64().unwrap());
+    let by_key: std::collections::BTreeMap<_, _> = all.iter().map(|o| (key(o), o)).collect();
+    assert!(kept.len() < all.len(), "no box was ignored: {} boxes", all.len());
+    for o in &kept {
+        let same = by_key.get(&key(o)).unwrap_or_else(|| panic!("{:?} is no box of the annotation", key(o)));
+        for field in ["category", "size", "in_view"] {
+            assert_eq!(o[field], same[field], "{:?}: {field}", key(o));
+        }
+    }
+    let kept_keys: std::collections::BTreeSet<_> = kept.iter().map(key).collect();
+    let shifted = all.iter().map(key).any(|(frame, object)| {
+        !kept_keys.contains(&(frame.clone(), object)) && kept_keys.iter().any(|(f, o)| *f == frame && *o > object)
+    });
+    assert!(shifted, "no ignored box comes before a kept one of its frame");
+}

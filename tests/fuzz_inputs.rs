@@ -200,6 +200,15 @@ fn broken_images_are_errors() {
     }
     std::fs::write(&jpeg, &bytes).unwrap();
     assert_accepted(&["info", text(&dir)]);
+    // A whole JPEG with padding after its end marker (a newline some tools append, zeros) is whole; a cut
+    // one with the same padding is still truncated.
+    for padding in [&b"\n"[..], b"\r\n \0\0\n"] {
+        std::fs::write(&jpeg, [&bytes[..], padding].concat()).unwrap();
+        assert_accepted(&["info", text(&dir)]);
+        std::fs::write(&jpeg, [&bytes[..bytes.len() * 2 / 3], padding].concat()).unwrap();
+        assert_rejected(&["info", text(&dir)], &["jpeg.jpg", "truncated"]);
+    }
+    std::fs::write(&jpeg, &bytes).unwrap();
 
     // A progressive JPEG and one with restart markers (`cjpeg -progressive`, `cjpeg -restart 1` of a
     // textured 96×64 image; tests/data/): read whole, and refused when cut short with an end marker.
@@ -664,4 +673,122 @@ fn duplicates_misspelt_categories_huge_rooms_and_stages_are_refused() {
         &["synth", "--out", text(&tmp.path().join("s")), "--frames", "18446744073709551615"],
         &["--frames", "at most 1000000"],
     );
+}
+
+/// Found by an audit of the binary's readers and writers (2026-12-07, night): inputs read without
+/// complaint that decided the answer alone, an input overwritten by its own output, training that failed
+/// only at its end, an AP of 0 for a directory without a single detections file, and a panic when the
+/// report could not be written. Each is now refused naming the file or the problem.
+#[test]
+fn extreme_numbers_unwritable_outputs_and_empty_directories_are_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tmp.path().join("data");
+    let frame = write_frame(&data, &good_frame("f"));
+
+    // Calibrations: a fit gives a slope of at least 1e-3 and coefficients of a few tens; one of 1e308 put
+    // every detection at probability 1, one of 1e-300 every one at 0.
+    let models = tmp.path().join("cal-models");
+    std::fs::create_dir_all(&models).unwrap();
+    let calibration = |a: f64, b: f64, iou: f64| {
+        let mut m = serde_json::to_value(model("bed")).unwrap();
+        m["calibration"] = serde_json::json!({"a": a, "b": b, "detections": 10, "true_positives": 5, "iou": iou});
+        std::fs::write(models.join("bed.json"), m.to_string()).unwrap();
+    };
+    for (a, b, iou, says) in [
+        (1.0, 1e308, 0.25, "offset b"),
+        (1e300, 0.0, 0.25, "slope a"),
+        (1e-300, 0.0, 0.25, "slope a"),
+        (1.0, 0.0, 7.0, "IoU 7"),
+    ] {
+        calibration(a, b, iou);
+        assert_rejected(&["detect", text(&frame), "--models", text(&models), "--no-overlay"], &["bed.json", says]);
+    }
+    calibration(11.27, -5.11, 0.25);
+    assert_accepted(&[
+        "detect",
+        text(&frame),
+        "--models",
+        text(&models),
+        "--no-overlay",
+        "--out",
+        text(&tmp.path().join("o")),
+    ]);
+
+    // The cascade's final calibration likewise.
+    let shipped = concat!(env!("CARGO_MANIFEST_DIR"), "/assets/models/cascade.json");
+    let mut cascade: Value = serde_json::from_str(&std::fs::read_to_string(shipped).unwrap()).unwrap();
+    cascade["final_calibration"]["c"] = 1e300.into();
+    let bad_cascade = tmp.path().join("cascade.json");
+    std::fs::write(&bad_cascade, cascade.to_string()).unwrap();
+    let dets = tmp.path().join("dets");
+    std::fs::create_dir_all(&dets).unwrap();
+    std::fs::write(dets.join("f.json"), r#"{"frame": "f", "detections": []}"#).unwrap();
+    let rescored = tmp.path().join("rescored");
+    assert_rejected(
+        &["rescore", "--detections", text(&dets), "--out", text(&rescored), "--cascade", text(&bad_cascade)],
+        &["cascade.json", "offset c"],
+    );
+
+    // A detections file's room: a ceiling below the floor or a wall a thousand kilometres away gave the
+    // cascade's layout features any value (scores of 1); now the layout file's own rules.
+    for (layout, says) in [
+        (r#"{"corners": [[-2, 1], [2, 1], [2, 5]], "floor": 5, "ceiling": 1.29}"#, "not above its floor"),
+        (r#"{"corners": [[-2, 1], [2, 1], [2, 5]], "floor": 1e6, "ceiling": 2e6}"#, "beyond ±100 m"),
+        (r#"{"corners": [[-2, 1], [2, 1], [1e6, 1e6]], "floor": -1.3, "ceiling": 1.2}"#, "beyond ±100 m"),
+    ] {
+        std::fs::write(dets.join("f.json"), format!(r#"{{"frame": "f", "detections": [], "layout": {layout}}}"#))
+            .unwrap();
+        assert_rejected(
+            &["rescore", "--detections", text(&dets), "--out", text(&rescored), "--cascade", shipped],
+            &["f.json", says],
+        );
+    }
+
+    // Cross scores: a name that makes none and a value no model gives.
+    let bed = |cross: &str| {
+        format!(
+            r#"{{"frame": "f", "detections": [{{"category": "bed", "centre": [0, 2, 0], "size": [1, 1, 1], "yaw": 0,
+                "score": 0.5, "raw_score": 0.1, "cross_scores": {cross}}}]}}"#
+        )
+    };
+    for (cross, says) in [(r#"{"flux": 1.0}"#, "'flux'"), (r#"{"bed": 1e30}"#, "cross_scores['bed']")] {
+        std::fs::write(dets.join("f.json"), bed(cross)).unwrap();
+        assert_rejected(&["eval", "--data", text(&data), "--detections", text(&dets)], &["f.json", says]);
+    }
+    std::fs::write(dets.join("f.json"), bed(r#"{"bed": 0.1, "desk": -1.2}"#)).unwrap();
+    assert_accepted(&["eval", "--data", text(&data), "--detections", text(&dets)]);
+
+    // A detections directory without a file for any frame (the data set itself, swapped arguments) gave
+    // mAP 0 and exit 0; an empty one is still no detections, a frame without its file only a warning.
+    assert_rejected(&["eval", "--data", text(&data), "--detections", text(&data)], &["no detections file for any"]);
+    let empty = tmp.path().join("empty");
+    std::fs::create_dir_all(&empty).unwrap();
+    assert_accepted(&["eval", "--data", text(&data), "--detections", text(&empty)]);
+    write_frame(&data, &good_frame("g"));
+    let (_, err) = assert_accepted(&["eval", "--data", text(&data), "--detections", text(&dets)]);
+    assert!(err.contains("1 of 2 frames have no detections file"), "{err}");
+
+    // merge-cascades --out an input under another spelling overwrote it.
+    let first = tmp.path().join("first.json");
+    std::fs::copy(shipped, &first).unwrap();
+    let before = std::fs::read(&first).unwrap();
+    let respelt = format!("{}/./first.json", tmp.path().display());
+    assert_rejected(&["merge-cascades", text(&first), shipped, "--out", &respelt], &["--out must not be"]);
+    assert_eq!(std::fs::read(&first).unwrap(), before);
+
+    // train and train-layout with --out a directory failed only after the whole training.
+    let taken = tmp.path().join("taken");
+    std::fs::create_dir_all(&taken).unwrap();
+    assert_rejected(
+        &["train", "--data", text(&data), "--category", "bed", "--out", text(&taken)],
+        &["taken", "is a directory"],
+    );
+    assert_rejected(&["train-layout", "--data", text(&data), "--out", text(&taken)], &["taken", "is a directory"]);
+
+    // A report that cannot be written (a full disk) panicked in println!.
+    let full = std::fs::OpenOptions::new().write(true).open("/dev/full").unwrap();
+    let out = cog_gpu(&["--cpu", "info", text(&frame)]).stdout(full).output().unwrap();
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("error: writing standard output") && !err.contains("panicked"), "{err}");
 }

@@ -35,7 +35,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{check_samples, negative_log_likelihood, sigmoid, MIN_SLOPE, PRIOR};
+use super::{check_iou, check_samples, negative_log_likelihood, sigmoid, MAX_COEFFICIENT, MIN_SLOPE, PRIOR};
 use crate::error::Result;
 use crate::eval::{
     category_truth, chosen_or_annotated_categories, scored_boxes, true_positives_in_input_order, Detection,
@@ -90,7 +90,8 @@ impl FinalCalibration {
         detections.sort_by(|a, b| b.score.total_cmp(&a.score));
     }
 
-    /// Checks the stored numbers (finite, both slopes > 0).
+    /// Checks the stored numbers: finite, both slopes in [[`MIN_SLOPE`], [`MAX_COEFFICIENT`]] (increasing,
+    /// as a fit leaves them), the offset within ±[`MAX_COEFFICIENT`], the IoU in (0, 1].
     pub fn validate(&self) -> std::result::Result<(), String> {
         if !(self.a.is_finite() && self.b.is_finite() && self.c.is_finite()) {
             return Err(format!(
@@ -98,13 +99,21 @@ impl FinalCalibration {
                 self.a, self.b, self.c
             ));
         }
-        if self.a <= 0.0 || self.b <= 0.0 {
+        let slope = MIN_SLOPE..=MAX_COEFFICIENT;
+        if !(slope.contains(&self.a) && slope.contains(&self.b)) {
             return Err(format!(
-                "final calibration slopes a = {}, b = {} must be > 0 (the map must be increasing)",
+                "final calibration slopes a = {}, b = {} must be in [{MIN_SLOPE}, {MAX_COEFFICIENT:e}] (the map must \
+                 be increasing; a fit holds them at {MIN_SLOPE} at least)",
                 self.a, self.b
             ));
         }
-        Ok(())
+        if self.c.abs() > MAX_COEFFICIENT {
+            return Err(format!(
+                "final calibration offset c = {} is beyond ±{MAX_COEFFICIENT:e}: not a fitted map",
+                self.c
+            ));
+        }
+        check_iou(self.iou).map_err(|e| format!("final {e}"))
     }
 }
 

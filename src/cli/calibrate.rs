@@ -91,7 +91,8 @@ pub struct HeldOutArgs {
     /// 3D IoU that makes a detection a true positive.
     #[arg(long, default_value_t = 0.25, value_parser = super::options::iou)]
     pub iou: f32,
-    /// Only these categories (comma-separated); default: every model in --models.
+    /// Only these categories (comma-separated); default: every model in --models (with --cascade and
+    /// --exclusion or --final: every category with ground truth).
     #[arg(long, value_delimiter = ',')]
     pub categories: Vec<String>,
 }

@@ -378,6 +378,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     let missing = per_frame.iter().filter(|(_, d)| d.is_none()).count();
     let (truth, detections): (Vec<Vec<Object>>, Vec<Vec<Detection>>) =
         per_frame.into_iter().map(|(t, d)| (t, d.unwrap_or_default())).unzip();
+    no_frame_detected(missing, evaluated, &args.detections)?;
     if missing > 0 {
         log::warn!(
             "{missing} of {evaluated} frames have no detections file in {}; counted as no detections",
@@ -388,13 +389,14 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         Some(share) => Some(OutOfView::mark(&frames, &truth, &categories, share)?),
         None => None,
     };
-    let (truth, detections, ignored) = match &out_of_view {
+    // `annotation_index`: each kept box's index in its frame's annotation, which `--objects` prints.
+    let (truth, detections, ignored, annotation_index) = match &out_of_view {
         Some(marks) => {
             let kept = marks.apply(&detections, args.iou);
             let report = marks.report(&kept.counts, &categories);
-            (kept.truth, kept.detections, Some(report))
+            (kept.truth, kept.detections, Some(report), Some(kept.annotation_index))
         }
-        None => (truth, detections, None),
+        None => (truth, detections, None, None),
     };
     if args.diagnose {
         let window = match &models {
@@ -407,7 +409,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         let drawn = overlay_of(OverlayRule::Drawn { top: args.overlay_top, min_probability: args.overlay_min_score });
         let reliability = reliability(&truth, &detections, &categories, args.iou);
         let objects = if args.objects {
-            Some(named_outcomes(&frames, &truth, &detections, &categories, args.iou)?)
+            Some(named_outcomes(&frames, &truth, annotation_index.as_deref(), &detections, &categories, args.iou)?)
         } else {
             None
         };
@@ -605,6 +607,7 @@ fn read_detection_dir(dir: &Path, frames: &[PathBuf]) -> anyhow::Result<Vec<Vec<
             }
         }
     }
+    no_frame_detected(missing, frames.len(), dir)?;
     if missing > 0 {
         log::warn!(
             "{missing} of {} frames have no detections file in {}; counted as no detections",
@@ -613,6 +616,24 @@ fn read_detection_dir(dir: &Path, frames: &[PathBuf]) -> anyhow::Result<Vec<Vec<
         );
     }
     Ok(out)
+}
+
+/// A detections directory that holds something but no file for any evaluated frame is an error, not an AP
+/// of 0: `detect` writes a file for every frame, even one without detections, so it is another directory
+/// than the one meant (the data set itself, another set's detections, swapped arguments). An empty
+/// directory is a detector that found nothing (a baseline for `--versus`, or `--diagnose --models` for the
+/// window's recall alone), and some frames without a file are a warning (a run interrupted, a frame that
+/// failed).
+fn no_frame_detected(missing: usize, frames: usize, dir: &Path) -> anyhow::Result<()> {
+    let empty = std::fs::read_dir(dir).map(|mut entries| entries.next().is_none()).unwrap_or(false);
+    if frames > 0 && missing == frames && !empty {
+        bail!(
+            "{}: no detections file for any of the {frames} evaluated frames (detect writes <frame>.json for \
+             each; is this the detections directory of this data set?)",
+            dir.display()
+        );
+    }
+    Ok(())
 }
 
 /// The percentile intervals of every category's AP and of the mAP over the resamples (and, with a
@@ -716,8 +737,7 @@ fn write_plots(dir: &Path, results: &[CategoryEvaluation]) -> anyhow::Result<()>
         let title = format!("{} AP={}", r.category, percent(r.pr.ap));
         let img = cog_gpu::eval::precision_recall_plot(&r.pr, &title, plot_colour(&r.category));
         let path = dir.join(format!("{}.png", r.category));
-        img.save_with_format(&path, image::ImageFormat::Png)
-            .with_context(|| format!("{}: cannot write", path.display()))?;
+        cog_gpu::frame::write_png(&img, &path)?;
     }
     Ok(())
 }
@@ -792,10 +812,13 @@ fn window_recall(
 }
 
 /// `--objects`: every ground-truth box of `categories` ([`object_outcomes`]) with its frame's name and its
-/// share in view, which reads each frame with such a box (its camera and image size).
+/// share in view, which reads each frame with such a box (its camera and image size). With boxes left out
+/// (`--ignore-out-of-view`), `annotation_index[image][o]` is kept box `o`'s index in the frame's
+/// annotation, which the outcome then names, as without them.
 fn named_outcomes(
     frames: &[PathBuf],
     truth: &[Vec<Object>],
+    annotation_index: Option<&[Vec<usize>]>,
     detections: &[Vec<Detection>],
     categories: &[String],
     iou: f32,
@@ -809,10 +832,12 @@ fn named_outcomes(
         .map(|outcome| {
             let (camera, width, height) = &cameras[&outcome.image];
             let box_ = &truth[outcome.image][outcome.object].cuboid;
+            let in_view = in_view_share(box_, camera, *width, *height);
+            let object = annotation_index.map_or(outcome.object, |index| index[outcome.image][outcome.object]);
             NamedOutcome {
                 frame: frame_name(&frames[outcome.image]),
-                in_view: in_view_share(box_, camera, *width, *height),
-                outcome,
+                in_view,
+                outcome: ObjectOutcome { object, ..outcome },
             }
         })
         .collect())

@@ -96,7 +96,7 @@ fn layout_one(dir: &Path, model: Option<&LayoutModel>, backend: Backend, args: &
         let camera = cog_gpu::geometry::Camera::new(frame.intrinsics(), frame.rtilt());
         draw_room(&mut img, &camera, &predicted.room, 2);
         let png = args.out.join(format!("{}.png", frame.name));
-        img.save(&png).with_context(|| format!("writing the overlay {}", png.display()))?;
+        cog_gpu::frame::write_png(&img, &png).context("writing the overlay")?;
     }
     if args.ply {
         write_scene_ply(&args.out.join(format!("{}.ply", frame.name)), &frame, Vec::new(), Some(&predicted.room))?;

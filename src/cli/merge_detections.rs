@@ -75,7 +75,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         if !dir.is_dir() {
             bail!("{}: {flag} detections directory not found", dir.display());
         }
-        if super::options::same_dir(dir, &args.out) {
+        if super::options::same_path(dir, &args.out) {
             bail!(
                 "{}: --out must differ from {flag} (its files are read while the merged ones are written)",
                 dir.display()

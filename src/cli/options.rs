@@ -211,9 +211,31 @@ pub fn names(flag: &str, values: &[String]) -> anyhow::Result<Vec<String>> {
     Ok(names)
 }
 
-/// Whether two paths name the same existing directory (false when either does not exist yet): an output
-/// directory that is also an input would be overwritten while it is read.
-pub fn same_dir(a: &std::path::Path, b: &std::path::Path) -> bool {
+/// Checks, before hours of training, that the model file `out` can be written at the end: its directory is
+/// made (as the write would need), `out` is not a directory, and a file can be created beside it (a probe,
+/// `<out>.write-check`, removed at once). Errors name the path.
+pub fn writable_output_file(out: &std::path::Path) -> anyhow::Result<()> {
+    use anyhow::Context;
+    if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating the model directory {}", dir.display()))?;
+    }
+    if out.is_dir() {
+        anyhow::bail!("{}: --out is a directory; give the model file's path", out.display());
+    }
+    let probe = std::path::PathBuf::from(format!("{}.write-check", out.display()));
+    std::fs::OpenOptions::new()
+        .write(true)
+        .create(true)
+        .truncate(true)
+        .open(&probe)
+        .with_context(|| format!("{}: cannot write the model file here", out.display()))?;
+    std::fs::remove_file(&probe).with_context(|| format!("removing {}", probe.display()))?;
+    Ok(())
+}
+
+/// Whether two paths name the same existing directory or file (false when either does not exist yet): an
+/// output that is also an input would be overwritten while it is read.
+pub fn same_path(a: &std::path::Path, b: &std::path::Path) -> bool {
     match (a.canonicalize(), b.canonicalize()) {
         (Ok(a), Ok(b)) => a == b,
         _ => false,

@@ -30,7 +30,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     if !args.detections.is_dir() {
         bail!("{}: detections directory not found", args.detections.display());
     }
-    if super::options::same_dir(&args.detections, &args.out) {
+    if super::options::same_path(&args.detections, &args.out) {
         bail!("{}: --out must differ from --detections (the first-stage files are kept)", args.out.display());
     }
     let inputs = super::options::json_files(&args.detections)?;

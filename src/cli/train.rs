@@ -203,7 +203,9 @@ pub struct Args {
     /// detection those of the frame's detections of those categories; for pillows, lamps, monitors, TVs
     /// and sinks), `free` (every bottom height from the floor to 1.5 m at the step: for what stands on
     /// things no model detects, e.g. TVs on walls and cabinets) or `floor+surfaces` (both the floor's
-    /// window and the surfaces': for what stands on either, e.g. pedestal sinks and basins on counters).
+    /// window and the surfaces': for what stands on either, e.g. pedestal sinks and basins on counters);
+    /// `resting` (the free window's boxes that rest on the floor or a seen top; the shipped pillow and lamp
+    /// detect with it as `--detect-support` after training on `free`).
     #[arg(long, value_enum, default_value_t = SupportArg::Floor)]
     pub support: SupportArg,
     /// The window detection uses, written into the model when it differs from `--support` (as
@@ -499,9 +501,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     if args.resume && !checkpoint.is_file() {
         bail!("--resume: no checkpoint at {}", checkpoint.display());
     }
-    if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating the model directory {}", dir.display()))?;
-    }
+    super::options::writable_output_file(&out)?;
 
     let mut dataset = Dataset::open(&args.data)?;
     if let Some(split) = &args.split {

@@ -75,10 +75,8 @@ fn example(dir: &std::path::Path, descriptor: Descriptor) -> anyhow::Result<Opti
 
 pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     let descriptor = Descriptor::new(args.discretisation.into(), args.cog, args.edges);
-    // The model's directory before the training, as `train` does: not a failure after it.
-    if let Some(dir) = args.out.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating the model directory {}", dir.display()))?;
-    }
+    // The model's file checked before the training, as `train` does: not a failure after it.
+    super::options::writable_output_file(&args.out)?;
     let mut frames = Dataset::open(&args.data)?.frames;
     if let Some(limit) = args.limit {
         frames.truncate(limit);

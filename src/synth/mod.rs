@@ -599,9 +599,7 @@ impl SynthFrame {
             if let Some(parent) = path.parent() {
                 std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
             }
-            preview::preview(&self.frame)
-                .save_with_format(path, image::ImageFormat::Png)
-                .map_err(|e| Error::Image { path: path.to_path_buf(), source: e })?;
+            crate::frame::write_png(&preview::preview(&self.frame), path)?;
         }
         Ok(())
     }
