@@ -580,7 +580,7 @@ impl Cascade {
     pub fn write(&self, path: &Path) -> Result<()> {
         self.check().map_err(|problem| Error::invalid(path, format!("not written: {problem}")))?;
         let text = serde_json::to_string_pretty(self).map_err(|e| Error::invalid(path, e.to_string()))?;
-        std::fs::write(path, text).map_err(|e| Error::io(path, e))
+        crate::error::write_replacing(path, text.as_bytes())
     }
 
     /// The stored numbers are usable: known format and features; context categories that are cog-gpu's,

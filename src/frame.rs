@@ -485,9 +485,10 @@ pub fn read_depth_png(path: &Path) -> Result<(u32, u32, Vec<u16>)> {
     }
 }
 
-/// Writes `img` as a PNG at `path`: encoded in memory, then written in one call, so that a failed write (a
-/// full disk) is an error naming the file — `image`'s own `save` writes through a buffer whose last flush
-/// error it drops, leaving a truncated file and no error.
+/// Writes `img` as a PNG at `path`: encoded in memory, then put in place by
+/// [`crate::error::write_whole`], so that a failed write (a full disk) is an error naming the file and
+/// leaves no truncated picture — `image`'s own `save` writes through a buffer whose last flush error it
+/// drops, leaving a truncated file and no error.
 pub fn write_png<P>(img: &image::ImageBuffer<P, Vec<P::Subpixel>>, path: &Path) -> Result<()>
 where
     P: image::PixelWithColorType,
@@ -496,7 +497,7 @@ where
     let mut bytes = std::io::Cursor::new(Vec::new());
     img.write_to(&mut bytes, image::ImageFormat::Png)
         .map_err(|e| Error::invalid(path, format!("cannot encode the PNG: {e}")))?;
-    std::fs::write(path, bytes.into_inner()).map_err(|e| Error::io(path, e))
+    crate::error::write_whole(path, &bytes.into_inner())
 }
 
 /// Writes decoded millimetres as a depth PNG with the toolbox's encoding.

@@ -64,10 +64,10 @@ pub fn write_ply(path: &Path, comment: &str, points: &[Vec3], colours: &[[u8; 3]
     }
     let vertex_count = points.len() + lines.iter().map(|l| l.vertices.len()).sum::<usize>();
     let edge_count: usize = lines.iter().map(|l| l.edges.len()).sum();
-    let file = std::fs::File::create(path).map_err(|e| Error::io(path, e))?;
-    let mut out = std::io::BufWriter::new(file);
+    // Written into memory, then put in place at once (`write_whole`): no half-written file is left.
+    let mut out = Vec::new();
     let comment = comment.replace(['\n', '\r'], " ");
-    let write = |out: &mut std::io::BufWriter<std::fs::File>| -> std::io::Result<()> {
+    let write = |out: &mut Vec<u8>| -> std::io::Result<()> {
         write!(
             out,
             "ply\nformat ascii 1.0\ncomment {comment}\nelement vertex {vertex_count}\nproperty float x\n\
@@ -92,7 +92,8 @@ pub fn write_ply(path: &Path, comment: &str, points: &[Vec3], colours: &[[u8; 3]
             }
             first += line.vertices.len() as u32;
         }
-        out.flush()
+        Ok(())
     };
-    write(&mut out).map_err(|e| Error::io(path, e))
+    write(&mut out).map_err(|e| Error::io(path, e))?;
+    crate::error::write_whole(path, &out)
 }

@@ -785,6 +785,19 @@ fn extreme_numbers_unwritable_outputs_and_empty_directories_are_refused() {
     );
     assert_rejected(&["train-layout", "--data", text(&data), "--out", text(&taken)], &["taken", "is a directory"]);
 
+    // synth into a directory of another set overwrote part of it (frames 2–5 of an old set of 6 stayed
+    // under a manifest of 2); the same options again complete or repeat the set.
+    let set = tmp.path().join("set");
+    let set_dir = text(&set).to_string();
+    let synth = |frames: &'static str| {
+        ["synth", "--out", set_dir.as_str(), "--frames", frames, "--seed", "3", "--width", "64", "--height", "48"]
+    };
+    assert_accepted(&synth("3"));
+    assert_accepted(&synth("3"));
+    assert_rejected(&synth("2"), &["manifest.json", "other options"]);
+    std::fs::remove_file(set.join("manifest.json")).unwrap();
+    assert_rejected(&synth("3"), &["no manifest.json"]);
+
     // A report that cannot be written (a full disk) panicked in println!.
     let full = std::fs::OpenOptions::new().write(true).open("/dev/full").unwrap();
     let out = cog_gpu(&["--cpu", "info", text(&frame)]).stdout(full).output().unwrap();

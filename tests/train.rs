@@ -364,6 +364,17 @@ fn train_writes_a_model_and_resumes_to_the_same_weights() {
     assert_eq!(a["weights"].as_array().unwrap().len(), FeatureLayout::default().dim());
     assert_eq!(a["weights"], b["weights"], "a resumed run must end with the same weights");
     assert!(a["weights"].as_array().unwrap().iter().any(|v| v.as_f64().unwrap() != 0.0));
+    // A resume under another output space is refused, also where the ground truths' features come out
+    // the same (another window's minimum points, the fast path's subdivisions, the support: accepted
+    // before 2026-12-07, mixing two problems' constraints).
+    for extra in [["--min-points", "300"], ["--subdivisions", "1"], ["--support", "free"]] {
+        let mut changed = train_args(data, split.to_str().unwrap(), "4");
+        changed.extend(extra);
+        changed.push("--resume");
+        let out = run(&changed);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && err.contains("data hash"), "{extra:?}: {err}");
+    }
 }
 
 /// Latent support surfaces end to end: a cuboid model, then `--surfaces-from` it (CCCP rounds recorded in

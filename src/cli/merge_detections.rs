@@ -187,8 +187,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     for (name, file) in &merged_files {
         let out = args.out.join(name);
-        std::fs::write(&out, serde_json::to_string_pretty(file)?)
-            .with_context(|| format!("writing {}", out.display()))?;
+        cog_gpu::error::write_whole(&out, serde_json::to_string_pretty(file)?.as_bytes())?;
     }
     println!("{:<12} {:>10} {:>10}", "category", "removed", "added");
     for (n, category) in categories.iter().enumerate() {

@@ -47,8 +47,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         let file = super::options::with_detections(&text, path, &frame.detections)?;
         let name = path.file_name().context("a detections file without a name")?;
         let out = args.out.join(name);
-        std::fs::write(&out, serde_json::to_string_pretty(&file)?)
-            .with_context(|| format!("writing {}", out.display()))?;
+        cog_gpu::error::write_whole(&out, serde_json::to_string_pretty(&file)?.as_bytes())?;
     }
     println!("rescored {} file(s) from {} into {}", inputs.len(), args.detections.display(), args.out.display());
     Ok(())

@@ -99,7 +99,7 @@ impl WeightsFile {
 
     pub fn write(&self, path: &Path) -> Result<()> {
         let text = serde_json::to_string(self).map_err(|e| Error::invalid(path, e.to_string()))?;
-        std::fs::write(path, text).map_err(|e| Error::io(path, e))
+        crate::error::write_replacing(path, text.as_bytes())
     }
 }
 

@@ -468,10 +468,17 @@ pub struct DetectorOracle {
     full_pass_micros: AtomicU64,
     /// One lock per example, so that rayon's workers never wait on each other's examples.
     candidates: Vec<Mutex<Candidates>>,
+    /// FNV-1a of `settings` (their `Debug` text), part of every [`SeparationOracle::example_fingerprint`]:
+    /// a checkpoint resumed under another output space — another window (`--min-points`, `--support`),
+    /// other features (`--subdivisions`) — is refused even where the ground truths' features come out the
+    /// same (they did for those three, and such a resume mixed two problems' constraints).
+    settings_fingerprint: u64,
 }
 
 impl DetectorOracle {
     pub fn new(settings: TrainingSettings, examples: Vec<TrainingExample>) -> Result<DetectorOracle> {
+        let settings_fingerprint =
+            super::checkpoint::fnv1a(super::checkpoint::FNV_OFFSET, format!("{settings:?}").as_bytes());
         if examples.is_empty() {
             return Err(Error::Input("no training examples".into()));
         }
@@ -518,6 +525,7 @@ impl DetectorOracle {
             scored_hypotheses: AtomicU64::new(0),
             full_pass_micros: AtomicU64::new(0),
             candidates,
+            settings_fingerprint,
         })
     }
 
@@ -770,7 +778,8 @@ impl SeparationOracle for DetectorOracle {
 
     /// The example's frame name: which frames the negatives are (their features are all "no object").
     fn example_fingerprint(&self, example: usize) -> u64 {
-        super::checkpoint::fnv1a(super::checkpoint::FNV_OFFSET, self.examples[example].name.as_bytes())
+        let name = super::checkpoint::fnv1a(super::checkpoint::FNV_OFFSET, self.examples[example].name.as_bytes());
+        super::checkpoint::fnv1a(name, &self.settings_fingerprint.to_le_bytes())
     }
 
     fn most_violated_batch(&self, examples: &[usize], w: &[f64]) -> Result<Vec<Constraint>> {
@@ -948,11 +957,21 @@ pub fn train_latent_detector(
     let mut last = None;
     for round in next_round..settings.max_rounds.max(next_round + 1) {
         oracle.set_latents(&latents)?;
+        let resumed_round = resume_checkpoint && round == next_round;
+        if !resumed_round {
+            // The round starts from scratch: the previous round's solver checkpoint goes before the
+            // progress names this round, so that a checkpoint beside a progress file is always its round's
+            // (interrupted between the two, the previous round is solved again; the other way round, a
+            // resume met the previous round's checkpoint with this round's slices and was refused).
+            if let Some(path) = ssvm.checkpoint.as_ref().filter(|p| p.is_file()) {
+                std::fs::remove_file(path).map_err(|e| Error::io(path, e))?;
+            }
+        }
         save(&LatentProgress { next_round: round, latents: latents.clone(), rounds: rounds.clone() })?;
         if round > 0 {
             oracle.allow_more_full_passes(settings.full_passes_per_round.max(1));
         }
-        let mut solver = match (&ssvm.checkpoint, resume_checkpoint && round == next_round) {
+        let mut solver = match (&ssvm.checkpoint, resumed_round) {
             (Some(path), true) if path.is_file() => CuttingPlane::resume(ssvm.clone(), path)?,
             _ => CuttingPlane::new(ssvm.clone())?,
         };

@@ -77,7 +77,7 @@ impl LayoutModel {
     pub fn write(&self, path: &Path) -> Result<()> {
         self.check().map_err(|m| Error::invalid(path, m))?;
         let text = serde_json::to_string_pretty(self).map_err(|e| Error::invalid(path, e.to_string()))?;
-        std::fs::write(path, text + "\n").map_err(|e| Error::io(path, e))
+        crate::error::write_replacing(path, (text + "\n").as_bytes())
     }
 
     pub fn weights_f64(&self) -> Vec<f64> {

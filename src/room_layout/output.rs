@@ -91,7 +91,7 @@ impl LayoutFile {
 
     pub fn write(&self, path: &Path) -> Result<()> {
         let text = serde_json::to_string_pretty(self).map_err(|e| Error::invalid(path, e.to_string()))?;
-        std::fs::write(path, text + "\n").map_err(|e| Error::io(path, e))
+        crate::error::write_whole(path, (text + "\n").as_bytes())
     }
 }
 

@@ -649,7 +649,14 @@ pub fn generate_dataset(
     if !(1..=MAX_FRAMES).contains(&frames) {
         return Err(Error::Input(format!("the number of frames must be in 1..={MAX_FRAMES}, got {frames}")));
     }
+    let path = out.join("manifest.json");
+    let text = serde_json::to_string_pretty(&manifest(seed, frames, options, preview))
+        .map_err(|e| Error::invalid(&path, e.to_string()))?;
+    refuse_another_set(out, &path, &text)?;
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+    // The manifest first: a run interrupted leaves its options beside its frames, so that running it again
+    // completes the set and another run is refused.
+    std::fs::write(&path, &text).map_err(|e| Error::io(&path, e))?;
     let results: Vec<Result<(Vec<String>, &'static str, &'static str)>> = (0..frames)
         .into_par_iter()
         .map(|i| {
@@ -671,9 +678,32 @@ pub fn generate_dataset(
         *summary.sensors.entry(sensor.to_string()).or_default() += 1;
         *summary.rooms.entry(room.to_string()).or_default() += 1;
     }
-    let path = out.join("manifest.json");
-    let text = serde_json::to_string_pretty(&manifest(seed, frames, options, preview))
-        .map_err(|e| Error::invalid(&path, e.to_string()))?;
-    std::fs::write(&path, text).map_err(|e| Error::io(&path, e))?;
     Ok(summary)
+}
+
+/// A directory that already holds a set made with other options (its `manifest.json` differs from this
+/// run's), or synthetic frames without a manifest, is refused: its frames would be overwritten in part —
+/// a set of 6 frames written again with 2 kept frames 2–5 of the old one under a manifest of 2. The same
+/// options again (a run interrupted or repeated: byte-identical frames) and a directory without frames
+/// are written.
+fn refuse_another_set(out: &Path, manifest_path: &Path, manifest: &str) -> Result<()> {
+    let another = "the output directory holds a synthetic set made with other options (seed, frames, size, \
+                   rooms, rule); write the new set to another directory, or remove this one first";
+    match std::fs::read_to_string(manifest_path) {
+        Ok(existing) if existing != manifest => Err(Error::invalid(manifest_path, another)),
+        Ok(_) => Ok(()),
+        Err(_) => {
+            let frames = std::fs::read_dir(out)
+                .map(|entries| entries.flatten().any(|e| e.file_name().to_string_lossy().starts_with("synth-")))
+                .unwrap_or(false);
+            if frames {
+                return Err(Error::invalid(
+                    out,
+                    "holds synthetic frames (synth-*) but no manifest.json: another run's; write the new set to \
+                     another directory, or remove this one first",
+                ));
+            }
+            Ok(())
+        }
+    }
 }
