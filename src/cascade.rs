@@ -596,6 +596,17 @@ impl Cascade {
         if self.categories.is_empty() {
             return Err("no context categories".into());
         }
+        // The calibrations recorded at training (every first-stage model's, since they were recorded) are
+        // what `detect` and `rescore` check their models and files against; one left out of a file that
+        // has them would pass another model's detections unchecked.
+        if !self.training.calibrations.is_empty() {
+            if let Some(category) = self.stages.keys().find(|c| !self.training.calibrations.contains_key(*c)) {
+                return Err(format!(
+                    "training.calibrations has no entry for the stage '{category}' (it records every first-stage \
+                     model's calibration)"
+                ));
+            }
+        }
         for (n, category) in self.categories.iter().enumerate() {
             if category_index(category).is_none() {
                 return Err(format!("context category '{category}' is not one of cog-gpu's"));

@@ -82,6 +82,19 @@ pub fn check_step(what: &str, step: f32) -> Result<()> {
     }
 }
 
+/// Checks a window's minimum points per box against 0..=[`MAX_PIXELS`] (a box holds at most one point a
+/// pixel: a larger minimum keeps no hypothesis, and the model written with it never detects); `what`
+/// names it.
+pub fn check_min_points(what: &str, min_points: u32) -> Result<()> {
+    if u64::from(min_points) <= MAX_PIXELS {
+        Ok(())
+    } else {
+        Err(Error::Input(format!(
+            "{what} must be at most {MAX_PIXELS} (a box holds at most one point a pixel), got {min_points}"
+        )))
+    }
+}
+
 /// Checks fast-path subdivisions against 1..=[`MAX_SUBDIVISIONS`]; `what` names them.
 pub fn check_subdivisions(what: &str, subdivisions: u32) -> Result<()> {
     if (1..=MAX_SUBDIVISIONS).contains(&subdivisions) {

@@ -334,6 +334,7 @@ impl Model {
         }
         check_sizes(&self.sizes)?;
         check_step("window.step", self.window.step).map_err(|e| e.to_string())?;
+        crate::limits::check_min_points("window.min_points", self.window.min_points).map_err(|e| e.to_string())?;
         check_subdivisions("features.subdivisions", self.features.subdivisions).map_err(|e| e.to_string())?;
         if !self.bias.is_finite() || self.threshold.is_nan() {
             return Err("bias must be finite and threshold a number".into());
@@ -397,6 +398,9 @@ pub const OTHER_STAGE_FILES: &[&str] = &["cascade.json", LAYOUT_MODEL_FILE];
 /// The models of a directory (`*.json` except [`OTHER_STAGE_FILES`]), sorted by category. With `categories`, exactly those (each must
 /// have a model); without, every model file. A directory without models is an error.
 pub fn read_models_dir(dir: &Path, categories: Option<&[String]>) -> Result<Vec<Model>> {
+    if dir.is_file() {
+        return Err(Error::invalid(dir, "is a file; give the models directory, which holds <category>.json files"));
+    }
     if !dir.is_dir() {
         return Err(Error::missing(dir, "models directory"));
     }

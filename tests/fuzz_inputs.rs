@@ -744,6 +744,15 @@ fn extreme_numbers_unwritable_outputs_and_empty_directories_are_refused() {
         );
     }
 
+    // A cascade whose recorded calibrations leave out a stage's model checked nothing for it.
+    let mut cascade: Value = serde_json::from_str(&std::fs::read_to_string(shipped).unwrap()).unwrap();
+    cascade["training"]["calibrations"].as_object_mut().unwrap().remove("bed");
+    std::fs::write(&bad_cascade, cascade.to_string()).unwrap();
+    assert_rejected(
+        &["rescore", "--detections", text(&dets), "--out", text(&rescored), "--cascade", text(&bad_cascade)],
+        &["cascade.json", "no entry for the stage 'bed'"],
+    );
+
     // Cross scores: a name that makes none and a value no model gives.
     let bed = |cross: &str| {
         format!(
@@ -797,6 +806,28 @@ fn extreme_numbers_unwritable_outputs_and_empty_directories_are_refused() {
     assert_rejected(&synth("2"), &["manifest.json", "other options"]);
     std::fs::remove_file(set.join("manifest.json")).unwrap();
     assert_rejected(&synth("3"), &["no manifest.json"]);
+
+    // detect --out into the frame's own folders wrote a second picture into image/, breaking the frame;
+    // a folder of its own inside the frame is fine.
+    for inside in [frame.join("image"), frame.clone()] {
+        assert_rejected(
+            &["detect", text(&frame), "--models", text(&models), "--out", text(&inside)],
+            &["writes into the frame"],
+        );
+    }
+    assert_accepted(&["info", text(&frame)]);
+    assert_accepted(&["detect", text(&frame), "--models", text(&models), "--out", text(&frame.join("detections"))]);
+    // A model file given as the models directory said "missing".
+    assert_rejected(&["detect", text(&frame), "--models", text(&models.join("bed.json"))], &["bed.json", "is a file"]);
+    // A minimum of points no box can hold wrote a model that never detects.
+    assert_rejected(
+        &["train", "--data", text(&data), "--category", "bed", "--min-points", "4000000000"],
+        &["--min-points", "at most 4194304"],
+    );
+    let mut never = serde_json::to_value(model("bed")).unwrap();
+    never["window"]["min_points"] = 4_000_000_000u32.into();
+    std::fs::write(models.join("bed.json"), never.to_string()).unwrap();
+    assert_rejected(&["detect", text(&frame), "--models", text(&models)], &["bed.json", "window.min_points"]);
 
     // A report that cannot be written (a full disk) panicked in println!.
     let full = std::fs::OpenOptions::new().write(true).open("/dev/full").unwrap();

@@ -56,7 +56,7 @@ pub struct Args {
     #[arg(long, default_value_t = DEFAULT_STEP, value_parser = options::step)]
     pub step: f32,
     /// Skip hypotheses with fewer points inside.
-    #[arg(long, default_value_t = DEFAULT_MIN_POINTS)]
+    #[arg(long, default_value_t = DEFAULT_MIN_POINTS, value_parser = options::min_points)]
     pub min_points: u32,
     /// Which feature path to time: `exact` (the CPU and/or GPU path chosen by --cpu/--gpu/--both),
     /// `fast` (the shared-work approximation, on the CPU and/or GPU likewise), or `all` (both, plus the cosine similarity of the

@@ -276,6 +276,20 @@ fn supporters_of(models: &[Model]) -> Vec<&'static str> {
         .collect()
 }
 
+/// The folders of a frame in the SUN RGB-D layout (README "Frames"), which `detect --out` must not write
+/// into.
+const FRAME_FOLDERS: [&str; 9] = [
+    "image",
+    "depth",
+    "depth_bfx",
+    "extrinsics",
+    "annotation",
+    "annotation2Dfinal",
+    "annotation3D",
+    "annotation3Dfinal",
+    "annotation3Dlayout",
+];
+
 pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     let detect_options = DetectOptions {
         nms_iou: args.nms_iou,
@@ -336,6 +350,24 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     // The room layout comes with the detections when the models directory holds a layout model.
     let layout_model = super::layout::model_in_dir(&models_dir)?;
     let frames = frame_dirs(&args.frames)?;
+    // Files written into a frame's own directory or its data folders would change the frame (`image/`
+    // with two pictures is an error of every reader): refused before anything is written. A folder of its
+    // own inside the frame (`detect .` from the frame's directory, `--out detections`) is fine.
+    let out = super::options::resolved(&args.out);
+    let writes_into = |frame: &PathBuf| match out.strip_prefix(super::options::resolved(frame)) {
+        Ok(below) => {
+            below.components().next().is_none_or(|first| FRAME_FOLDERS.iter().any(|f| first.as_os_str() == *f))
+        }
+        Err(_) => false,
+    };
+    if let Some(frame) = frames.iter().find(|f| writes_into(f)) {
+        bail!(
+            "--out {}: writes into the frame {} (its directory or one of its data folders); write the detections \
+             elsewhere",
+            args.out.display(),
+            frame.display()
+        );
+    }
     let run = run_fingerprint(&models, cascade.as_ref(), layout_model.as_ref(), &detect_options)?;
     let finished =
         if args.resume { finished_reports(&args.out, &frames, &run)? } else { frames.iter().map(|_| None).collect() };

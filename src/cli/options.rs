@@ -22,6 +22,13 @@ pub fn step(text: &str) -> Result<f32, String> {
     Ok(value)
 }
 
+/// `--min-points`: at most one point a pixel of the largest frame ([`cog_gpu::limits::check_min_points`]).
+pub fn min_points(text: &str) -> Result<u32, String> {
+    let value: u32 = text.trim().parse().map_err(|_| format!("'{text}' is not a whole number ≥ 0"))?;
+    cog_gpu::limits::check_min_points("--min-points", value).map_err(|e| e.to_string())?;
+    Ok(value)
+}
+
 /// `--normals`: how the points' normals find their neighbours (`kdtree`, `window`).
 pub fn normal_search(text: &str) -> Result<cog_gpu::features::preprocess::NormalSearch, String> {
     text.trim().parse().map_err(|e: cog_gpu::error::Error| e.to_string())
@@ -231,6 +238,26 @@ pub fn writable_output_file(out: &std::path::Path) -> anyhow::Result<()> {
         .with_context(|| format!("{}: cannot write the model file here", out.display()))?;
     std::fs::remove_file(&probe).with_context(|| format!("removing {}", probe.display()))?;
     Ok(())
+}
+
+/// `path` made absolute through its nearest existing ancestor (canonicalised: links and `..` resolved),
+/// with the parts that do not exist yet appended — a path not created yet can be compared with others.
+pub fn resolved(path: &std::path::Path) -> std::path::PathBuf {
+    let mut existing = path.to_path_buf();
+    let mut rest = Vec::new();
+    loop {
+        if let Ok(canonical) = existing.canonicalize() {
+            return rest.iter().rev().fold(canonical, |p, part| p.join(part));
+        }
+        match (existing.file_name().map(|n| n.to_os_string()), existing.parent()) {
+            (Some(name), Some(parent)) => {
+                rest.push(name);
+                existing =
+                    if parent.as_os_str().is_empty() { std::path::PathBuf::from(".") } else { parent.to_path_buf() };
+            }
+            _ => return path.to_path_buf(),
+        }
+    }
 }
 
 /// Whether two paths name the same existing directory or file (false when either does not exist yet): an

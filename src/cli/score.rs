@@ -29,7 +29,7 @@ pub struct Args {
     #[arg(long, default_value_t = DEFAULT_STEP, value_parser = options::step)]
     pub step: f32,
     /// Skip hypotheses with fewer points inside.
-    #[arg(long, default_value_t = DEFAULT_MIN_POINTS)]
+    #[arg(long, default_value_t = DEFAULT_MIN_POINTS, value_parser = options::min_points)]
     pub min_points: u32,
     /// Print the result as JSON.
     #[arg(long)]

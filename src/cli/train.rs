@@ -141,7 +141,7 @@ pub struct Args {
     #[arg(long, default_value_t = 0.2)]
     pub detect_step: f32,
     /// Skip hypotheses with fewer points inside.
-    #[arg(long, default_value_t = DEFAULT_MIN_POINTS)]
+    #[arg(long, default_value_t = DEFAULT_MIN_POINTS, value_parser = options::min_points)]
     pub min_points: u32,
     /// Feature path: fast (shared-work approximation) or exact.
     #[arg(long, value_enum, default_value_t = PathArg::Fast)]
