@@ -350,19 +350,34 @@ pub fn check_intrinsics(path: &Path, k: &[[f64; 3]; 3], width: u32, height: u32)
     Ok(())
 }
 
-/// The last file by name in `extrinsics/`.
+/// The last `*.txt` file by name in `extrinsics/` (SUN RGB-D names them by time stamp; an editor's backup
+/// `…txt~` or another file beside them is not one).
 fn extrinsics_file(dir: &Path) -> Result<PathBuf> {
     let ext_dir = dir.join("extrinsics");
     let entries = fs::read_dir(&ext_dir).map_err(|e| Error::io(&ext_dir, e))?;
-    let mut files: Vec<PathBuf> = entries.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.is_file()).collect();
+    let mut files: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.is_file() && p.extension().is_some_and(|x| x == "txt"))
+        .collect();
     files.sort();
-    files.pop().ok_or_else(|| Error::missing(&ext_dir, "no extrinsics file"))
+    files.pop().ok_or_else(|| Error::missing(&ext_dir, "no extrinsics file (<stamp>.txt)"))
 }
 
 fn read_extrinsics(path: &Path) -> Result<[[f64; 3]; 3]> {
     let v = parse_numbers(path, &read_text(path)?)?;
     let rows: [[f64; 3]; 3] = match v.len() {
-        12 => [[v[0], v[1], v[2]], [v[4], v[5], v[6]], [v[8], v[9], v[10]]],
+        12 => {
+            // SUN RGB-D's extrinsics are a rotation with a zero translation column; the points are read
+            // in the camera's frame, so a translation would be dropped without a word.
+            let translation = [v[3], v[7], v[11]];
+            if translation.iter().any(|t| t.abs() > 1e-6) {
+                return Err(Error::invalid(
+                    path,
+                    format!("the 4th column {translation:?} is not 0: cog-gpu reads [E | 0] (SUN RGB-D's), a rotation alone"),
+                ));
+            }
+            [[v[0], v[1], v[2]], [v[4], v[5], v[6]], [v[8], v[9], v[10]]]
+        }
         9 => [[v[0], v[1], v[2]], [v[3], v[4], v[5]], [v[6], v[7], v[8]]],
         n => return Err(Error::invalid(path, format!("expected a 3×4 (or 3×3) matrix, found {n} numbers"))),
     };
@@ -595,6 +610,10 @@ pub fn read_objects(path: &Path) -> Result<Vec<Object>> {
         if STRUCTURE_NAMES.contains(&category.as_str()) {
             continue;
         }
+        if category.is_empty() {
+            log::warn!("{}: {what} has an empty name; skipped", path.display());
+            continue;
+        }
         let Some(poly) = parse_polygon(path, entry, &what)? else { continue };
         if poly.xs.len() != 4 {
             log::warn!("{}: {what} ('{name}') has {} corners, not 4; skipped", path.display(), poly.xs.len());
@@ -636,6 +655,13 @@ pub fn read_layout(path: &Path) -> Result<Option<RoomLayout>> {
             return Ok(None);
         }
         let corners = poly.xs.iter().zip(&poly.zs).map(|(&x, &z)| Vec2::new(x as f32, z as f32)).collect();
+        let rooms = objects_array(path, &root)?
+            .iter()
+            .filter(|e| !e.is_null() && e.get("name").and_then(Value::as_str) == Some("room"))
+            .count();
+        if rooms > 1 {
+            log::warn!("{}: {rooms} objects named 'room'; the first, objects[{i}], is the layout", path.display());
+        }
         return Ok(Some(RoomLayout { corners, floor: -poly.y_max as f32, ceiling: -poly.y_min as f32 }));
     }
     Ok(None)
@@ -667,6 +693,18 @@ fn not_a_frame_dir(dir: &Path) -> Error {
 fn read_frame(dir: &Path, depth_source: DepthSource) -> Result<Frame> {
     if !dir.is_dir() {
         return Err(not_a_frame_dir(dir));
+    }
+    // A data set's directory given where one frame is expected said only that `image/` was missing.
+    if !dir.join("image").exists() && !dir.join("intrinsics.txt").exists() {
+        let frames = fs::read_dir(dir)
+            .map(|entries| entries.flatten().filter(|e| e.path().join("intrinsics.txt").is_file()).count())
+            .unwrap_or(0);
+        if frames > 0 {
+            return Err(Error::invalid(
+                dir,
+                format!("is a directory of {frames} frame(s), not a frame: give one of its frame directories"),
+            ));
+        }
     }
     let name = frame_name(dir);
     let rgb_path = single_image(dir, "image")?;

@@ -288,6 +288,25 @@ fn bad_annotations_are_skipped_with_a_warning_naming_frame_and_object() {
         assert!(info["layout"].is_null(), "{name}: the room was kept");
         assert!(err.contains(name) && err.contains("room polygon"), "{name}: {err}");
     }
+    // An object without a name (it was read as category '') is skipped; of two rooms the first is the
+    // layout, with a warning.
+    let dir = write_frame(tmp.path(), &good_frame("noname"));
+    std::fs::write(
+        dir.join("annotation3Dfinal/index.json"),
+        annotation_with([0.0, 1.0, 1.0, 0.0], [2.0, 2.0, 3.0, 3.0]).replace("\"bed\"", "\"\""),
+    )
+    .unwrap();
+    let room = |x: f64| serde_json::json!({"name": "room", "polygon": [{"X": [-x, x, x, -x], "Z": [0.5, 0.5, 5.0, 5.0], "Ymin": -1.5, "Ymax": 1.5}]});
+    std::fs::write(
+        dir.join("annotation3Dlayout/index.json"),
+        serde_json::json!({"objects": [room(2.0), room(3.0)]}).to_string(),
+    )
+    .unwrap();
+    let (stdout, err) = assert_accepted(&["info", text(&dir), "--json"]);
+    let info: Value = serde_json::from_str(&stdout).unwrap();
+    assert_eq!(info["objects"].as_array().unwrap().len(), 0, "{err}");
+    assert!(err.contains("objects[0] has an empty name") && err.contains("2 objects named 'room'"), "{err}");
+    assert!(!info["layout"].is_null());
     // A byte-order mark is accepted: the object is read.
     let dir = write_frame(tmp.path(), &good_frame("bom"));
     let path = dir.join("annotation3Dfinal/index.json");
@@ -828,6 +847,17 @@ fn extreme_numbers_unwritable_outputs_and_empty_directories_are_refused() {
     never["window"]["min_points"] = 4_000_000_000u32.into();
     std::fs::write(models.join("bed.json"), never.to_string()).unwrap();
     assert_rejected(&["detect", text(&frame), "--models", text(&models)], &["bed.json", "window.min_points"]);
+
+    // Frames: a translation in the extrinsics was dropped silently; an editor's backup beside the
+    // extrinsics was read as the last file; a data set given as a frame said only "image/ missing".
+    let odd = write_frame(tmp.path(), &good_frame("odd"));
+    let extrinsics = odd.join("extrinsics/00000000000000.txt");
+    std::fs::write(&extrinsics, "1 0 0 0.5\n0 1 0 0\n0 0 1 0\n").unwrap();
+    assert_rejected(&["info", text(&odd)], &["00000000000000.txt", "4th column"]);
+    std::fs::write(&extrinsics, "1 0 0 0\n0 1 0 0\n0 0 1 0\n").unwrap();
+    std::fs::write(odd.join("extrinsics/00000000000000.txt~"), "not numbers").unwrap();
+    assert_accepted(&["info", text(&odd)]);
+    assert_rejected(&["info", text(&data)], &["directory of", "frame(s), not a frame"]);
 
     // A report that cannot be written (a full disk) panicked in println!.
     let full = std::fs::OpenOptions::new().write(true).open("/dev/full").unwrap();
