@@ -377,6 +377,35 @@ fn train_writes_a_model_and_resumes_to_the_same_weights() {
     }
 }
 
+/// A resumed training counts its full passes against the one `--max-full-passes` budget with the run it
+/// continues (the checkpoint carries the oracle's counters since 2026-12-07; before, a resumed run counted
+/// from zero, made up to the whole budget again and recorded only its own). Two iterations at one full
+/// pass each spend a budget of 2; the resume makes one more, the pass that refills the candidate cache
+/// (which the checkpoint does not hold), then only cached passes: 3 in all, recorded as 3.
+#[test]
+fn a_resumed_training_keeps_the_full_pass_budget() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = tiny_dataset(dir.path());
+    let data = data.to_str().unwrap();
+    let out = dir.path().join("budget/bed.json");
+    let args = |iterations| {
+        let mut args = train_args(data, out.to_str().unwrap(), iterations);
+        let budget = args.iter().position(|a| *a == "--max-full-passes").unwrap() + 1;
+        args[budget] = "2";
+        args
+    };
+    let first = run(&args("2"));
+    assert!(first.status.success(), "{}", String::from_utf8_lossy(&first.stderr));
+    let mut resumed = args("6");
+    resumed.push("--resume");
+    let second = run(&resumed);
+    let log = String::from_utf8_lossy(&second.stderr);
+    assert!(second.status.success(), "{log}");
+    assert_eq!(log.matches("full pass ").count(), 1, "the resumed process: one refilling full pass\n{log}");
+    let model: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(model["training"]["full_passes"], 3, "{}", model["training"]);
+}
+
 /// Latent support surfaces end to end: a cuboid model, then `--surfaces-from` it (CCCP rounds recorded in
 /// the model, version 2, the progress file written), `--resume` from that progress, and `detect` with the
 /// surface model reports each detection's surface inside its box.

@@ -6,12 +6,16 @@
 //!
 //! ```text
 //! magic  b"COGSSVM\0"                       8 bytes
-//! version u32 = 1
-//! num_examples u64, dim u64, c f64, iteration u64, data_hash u64, num_constraints u64
+//! version u32 = 2
+//! num_examples u64, dim u64, c f64, iteration u64, data_hash u64, num_constraints u64,
+//! num_oracle_state u64                       (version 2)
 //! w      dim × f64
 //! per constraint: example u64, loss f64, alpha f64, inactive_iterations u32, psi dim × f32
+//! oracle_state   num_oracle_state × u64      (version 2)
 //! checksum u64  (FNV-1a of every byte before it)
 //! ```
+//!
+//! Version 1 (before 2026-12-07) had no oracle state; it is still read, with an empty one.
 //!
 //! Writes go to `<path>.tmp`, are synced, then renamed over `<path>`: a crash mid-write leaves the
 //! previous checkpoint intact.
@@ -20,7 +24,7 @@ use crate::error::{write_replacing, Error, Result};
 use std::path::Path;
 
 const MAGIC: &[u8; 8] = b"COGSSVM\0";
-const VERSION: u32 = 1;
+const VERSION: u32 = 2;
 
 /// One constraint of the working set with its dual variable.
 #[derive(Clone, Debug, PartialEq)]
@@ -51,6 +55,9 @@ pub struct Checkpoint {
     pub data_hash: u64,
     pub w: Vec<f64>,
     pub constraints: Vec<WorkingConstraint>,
+    /// The oracle's own counters at the checkpoint ([`super::SeparationOracle::run_state`]), given back to
+    /// it on resume so that it continues its schedule (the detector: its batch calls and full passes).
+    pub oracle_state: Vec<u64>,
 }
 
 impl Checkpoint {
@@ -67,14 +74,18 @@ impl Checkpoint {
 
     fn encode(&self) -> Vec<u8> {
         let constraint_bytes = 8 + 8 + 8 + 4 + 4 * self.dim;
-        let mut out = Vec::with_capacity(68 + 8 * self.dim + constraint_bytes * self.constraints.len());
+        let mut out = Vec::with_capacity(
+            76 + 8 * self.dim + constraint_bytes * self.constraints.len() + 8 * self.oracle_state.len(),
+        );
         out.extend_from_slice(MAGIC);
         out.extend_from_slice(&VERSION.to_le_bytes());
         for value in [self.num_examples as u64, self.dim as u64] {
             out.extend_from_slice(&value.to_le_bytes());
         }
         out.extend_from_slice(&self.c.to_le_bytes());
-        for value in [self.iteration as u64, self.data_hash, self.constraints.len() as u64] {
+        for value in
+            [self.iteration as u64, self.data_hash, self.constraints.len() as u64, self.oracle_state.len() as u64]
+        {
             out.extend_from_slice(&value.to_le_bytes());
         }
         for value in &self.w {
@@ -88,6 +99,9 @@ impl Checkpoint {
             for value in &constraint.psi {
                 out.extend_from_slice(&value.to_le_bytes());
             }
+        }
+        for value in &self.oracle_state {
+            out.extend_from_slice(&value.to_le_bytes());
         }
         let checksum = fnv1a(FNV_OFFSET, &out);
         out.extend_from_slice(&checksum.to_le_bytes());
@@ -105,8 +119,8 @@ impl Checkpoint {
         }
         let mut reader = Reader { bytes: body, position: 8 };
         let version = reader.u32()?;
-        if version != VERSION {
-            return Err(format!("format version {version}, this build reads version {VERSION}"));
+        if !(1..=VERSION).contains(&version) {
+            return Err(format!("format version {version}, this build reads versions 1 to {VERSION}"));
         }
         let num_examples = reader.usize()?;
         let dim = reader.usize()?;
@@ -114,10 +128,12 @@ impl Checkpoint {
         let iteration = reader.usize()?;
         let data_hash = reader.u64()?;
         let num_constraints = reader.usize()?;
+        let num_oracle_state = if version >= 2 { reader.usize()? } else { 0 };
         let constraint_bytes = 28usize.checked_add(dim.checked_mul(4).ok_or("dimension overflows")?);
         let expected = constraint_bytes
             .and_then(|per| per.checked_mul(num_constraints))
             .and_then(|all| all.checked_add(dim.checked_mul(8)?))
+            .and_then(|all| all.checked_add(num_oracle_state.checked_mul(8)?))
             .and_then(|all| all.checked_add(reader.position));
         if expected != Some(body.len()) {
             return Err(format!("size does not match {num_constraints} constraints of dimension {dim}"));
@@ -142,7 +158,8 @@ impl Checkpoint {
         if w.iter().any(|v| !v.is_finite()) {
             return Err("w has non-finite values".into());
         }
-        Ok(Checkpoint { num_examples, dim, c, iteration, data_hash, w, constraints })
+        let oracle_state = (0..num_oracle_state).map(|_| reader.u64()).collect::<std::result::Result<Vec<_>, _>>()?;
+        Ok(Checkpoint { num_examples, dim, c, iteration, data_hash, w, constraints, oracle_state })
     }
 }
 
@@ -185,5 +202,56 @@ impl Reader<'_> {
     }
     fn f32(&mut self) -> std::result::Result<f32, String> {
         self.take::<4>().map(f32::from_le_bytes)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample(oracle_state: Vec<u64>) -> Checkpoint {
+        Checkpoint {
+            num_examples: 2,
+            dim: 3,
+            c: 10.0,
+            iteration: 4,
+            data_hash: 0xfeed,
+            w: vec![0.5, -1.0, 2.0],
+            constraints: vec![WorkingConstraint {
+                example: 1,
+                loss: 0.75,
+                psi: vec![1.0, 0.0, -2.0],
+                alpha: 0.125,
+                inactive_iterations: 3,
+            }],
+            oracle_state,
+        }
+    }
+
+    /// Version 2 round-trips the oracle's state; a version-1 file (the layout before it: no count, no
+    /// values; built here by hand from the format description) reads with an empty one.
+    #[test]
+    fn version_2_carries_the_oracle_state_and_version_1_still_reads() {
+        let with_state = sample(vec![7, 2]);
+        assert_eq!(Checkpoint::decode(&with_state.encode()).unwrap(), with_state);
+        let v2 = sample(Vec::new()).encode();
+        // Version 1: the version word 1, the header without num_oracle_state (the 8 bytes after
+        // num_constraints, at 8 + 4 + 6·8), the same body, a new checksum.
+        let header_end = 8 + 4 + 6 * 8;
+        let mut v1 = Vec::new();
+        v1.extend_from_slice(MAGIC);
+        v1.extend_from_slice(&1u32.to_le_bytes());
+        v1.extend_from_slice(&v2[12..header_end]);
+        v1.extend_from_slice(&v2[header_end + 8..v2.len() - 8]);
+        let checksum = fnv1a(FNV_OFFSET, &v1);
+        v1.extend_from_slice(&checksum.to_le_bytes());
+        assert_eq!(Checkpoint::decode(&v1).unwrap(), sample(Vec::new()));
+        // A version this build does not know is refused.
+        let mut v3 = with_state.encode();
+        v3[8..12].copy_from_slice(&3u32.to_le_bytes());
+        let n = v3.len() - 8;
+        let checksum = fnv1a(FNV_OFFSET, &v3[..n]);
+        v3[n..].copy_from_slice(&checksum.to_le_bytes());
+        assert!(Checkpoint::decode(&v3).unwrap_err().contains("version 3"));
     }
 }

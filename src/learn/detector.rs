@@ -461,6 +461,9 @@ pub struct DetectorOracle {
     pub max_full_passes: usize,
     cached: AtomicBool,
     force_full: AtomicBool,
+    /// Set by [`SeparationOracle::restore_run_state`]: the candidate cache is not in the checkpoint, so a
+    /// resumed run's first batch call is a full pass, whatever the budget (it counts as one).
+    refill: AtomicBool,
     batch_calls: AtomicUsize,
     full_passes: AtomicUsize,
     /// Hypotheses scored by full passes, and their wall time in microseconds.
@@ -520,6 +523,7 @@ impl DetectorOracle {
             max_full_passes: 4,
             cached: AtomicBool::new(false),
             force_full: AtomicBool::new(false),
+            refill: AtomicBool::new(false),
             batch_calls: AtomicUsize::new(0),
             full_passes: AtomicUsize::new(0),
             scored_hypotheses: AtomicU64::new(0),
@@ -782,11 +786,45 @@ impl SeparationOracle for DetectorOracle {
         super::checkpoint::fnv1a(name, &self.settings_fingerprint.to_le_bytes())
     }
 
+    /// `[batch calls, full passes]`, so that a resumed run keeps the periodic schedule (`--full-every`) and
+    /// counts its full passes against the one budget (`--max-full-passes`) with the interrupted run's. With
+    /// latent surfaces nothing: each CCCP round sets its own budget of full passes
+    /// ([`DetectorOracle::allow_more_full_passes`]) before its solver resumes, and a resumed round keeps
+    /// counting from zero as before (README, "Progress and checkpoints").
+    fn run_state(&self) -> Vec<u64> {
+        if self.settings.surfaces {
+            return Vec::new();
+        }
+        vec![self.batch_calls.load(Ordering::SeqCst) as u64, self.full_passes() as u64]
+    }
+
+    /// Takes back [`SeparationOracle::run_state`] (an empty state leaves the counters at zero, as resumes
+    /// did before it was stored) and makes the next batch call a full pass, which refills the candidate
+    /// cache.
+    fn restore_run_state(&self, state: &[u64]) -> Result<()> {
+        match *state {
+            [] => {}
+            [batch_calls, full_passes] if !self.settings.surfaces => {
+                self.batch_calls.store(batch_calls as usize, Ordering::SeqCst);
+                self.full_passes.store(full_passes as usize, Ordering::SeqCst);
+            }
+            _ => {
+                return Err(Error::Input(format!(
+                    "the checkpoint's oracle state {state:?} is not this training's ([batch calls, full passes])"
+                )))
+            }
+        }
+        self.refill.store(true, Ordering::SeqCst);
+        Ok(())
+    }
+
     fn most_violated_batch(&self, examples: &[usize], w: &[f64]) -> Result<Vec<Constraint>> {
         let call = self.batch_calls.fetch_add(1, Ordering::SeqCst);
         let forced = self.force_full.swap(false, Ordering::SeqCst);
         let periodic = self.full_every > 0 && call > 0 && call.is_multiple_of(self.full_every);
-        let first = self.full_passes() == 0;
+        // The first call of a run, or of a resumed one (its cache is empty): a full pass.
+        let refill = self.refill.swap(false, Ordering::SeqCst);
+        let first = refill || self.full_passes() == 0;
         let full = first || ((forced || periodic) && self.full_passes() < self.max_full_passes.max(1));
         self.cached.store(!full, Ordering::SeqCst);
         let started = std::time::Instant::now();

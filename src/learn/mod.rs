@@ -76,6 +76,16 @@ pub trait SeparationOracle: Sync {
     fn example_fingerprint(&self, _example: usize) -> u64 {
         0
     }
+    /// The oracle's own counters that a resumed run needs to continue its schedule where the interrupted
+    /// one stood (stored in every checkpoint, [`checkpoint::Checkpoint::oracle_state`]). Default: none.
+    fn run_state(&self) -> Vec<u64> {
+        Vec::new()
+    }
+    /// Takes back [`SeparationOracle::run_state`] from a checkpoint, on the first solve of a resumed run
+    /// (an empty state: a checkpoint written before there was one). Default: nothing to restore.
+    fn restore_run_state(&self, _state: &[u64]) -> Result<()> {
+        Ok(())
+    }
     /// Loss-augmented inference for example `i` at weights `w` (length `dim()`).
     fn most_violated(&self, example: usize, w: &[f64]) -> Result<Constraint>;
     /// Loss-augmented inference for several examples at the same `w`, in the order given.

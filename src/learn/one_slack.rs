@@ -105,6 +105,14 @@ impl<O: SeparationOracle + ?Sized> SeparationOracle for OneSlack<'_, O> {
         self.fingerprint
     }
 
+    fn run_state(&self) -> Vec<u64> {
+        self.inner.run_state()
+    }
+
+    fn restore_run_state(&self, state: &[u64]) -> Result<()> {
+        self.inner.restore_run_state(state)
+    }
+
     fn most_violated(&self, _example: usize, w: &[f64]) -> Result<Constraint> {
         let n = self.inner.num_examples();
         let dim = self.inner.dim();

@@ -127,6 +127,9 @@ pub struct CuttingPlane {
     ground_truth: Vec<Vec<f32>>,
     /// Whether `state` has been checked against an oracle (n, dim, data hash).
     bound_to_oracle: bool,
+    /// Made by [`CuttingPlane::resume`]: the first [`CuttingPlane::train`] gives the oracle back its
+    /// [`Checkpoint::oracle_state`].
+    restore_oracle: bool,
 }
 
 /// Trains from scratch with `options` (convenience for `CuttingPlane::new(options)?.train(oracle)`).
@@ -146,8 +149,16 @@ impl CuttingPlane {
             data_hash: 0,
             w: Vec::new(),
             constraints: Vec::new(),
+            oracle_state: Vec::new(),
         };
-        Ok(CuttingPlane { options, state, gram: Vec::new(), ground_truth: Vec::new(), bound_to_oracle: false })
+        Ok(CuttingPlane {
+            options,
+            state,
+            gram: Vec::new(),
+            ground_truth: Vec::new(),
+            bound_to_oracle: false,
+            restore_oracle: false,
+        })
     }
 
     /// Continues the run saved in the checkpoint at `path`. C must match the checkpoint's; the
@@ -162,7 +173,14 @@ impl CuttingPlane {
                 format!("checkpoint was trained with C = {}, this run asks for C = {}", state.c, options.c),
             ));
         }
-        Ok(CuttingPlane { options, state, gram: Vec::new(), ground_truth: Vec::new(), bound_to_oracle: false })
+        Ok(CuttingPlane {
+            options,
+            state,
+            gram: Vec::new(),
+            ground_truth: Vec::new(),
+            bound_to_oracle: false,
+            restore_oracle: true,
+        })
     }
 
     /// Changes the cap on total QP solves (e.g. to run a few iterations at a time with different oracles:
@@ -195,6 +213,9 @@ impl CuttingPlane {
     /// Stopping at the cap is not an error: the returned [`Solution`] says `converged: false`.
     pub fn train<O: SeparationOracle + ?Sized>(&mut self, oracle: &O) -> Result<Solution> {
         self.bind(oracle)?;
+        if std::mem::take(&mut self.restore_oracle) {
+            oracle.restore_run_state(&self.state.oracle_state)?;
+        }
         let progress = self.progress_bar();
         let mut history = Vec::new();
         let mut qp_seconds = 0.0;
@@ -248,6 +269,7 @@ impl CuttingPlane {
             self.state.iteration += 1;
             self.prune();
             if let Some(path) = &self.options.checkpoint {
+                self.state.oracle_state = oracle.run_state();
                 self.state.write(path)?;
             }
         };
