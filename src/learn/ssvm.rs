@@ -151,14 +151,7 @@ impl CuttingPlane {
             constraints: Vec::new(),
             oracle_state: Vec::new(),
         };
-        Ok(CuttingPlane {
-            options,
-            state,
-            gram: Vec::new(),
-            ground_truth: Vec::new(),
-            bound_to_oracle: false,
-            restore_oracle: false,
-        })
+        Ok(CuttingPlane::with_state(options, state, false))
     }
 
     /// Continues the run saved in the checkpoint at `path`. C must match the checkpoint's; the
@@ -173,14 +166,19 @@ impl CuttingPlane {
                 format!("checkpoint was trained with C = {}, this run asks for C = {}", state.c, options.c),
             ));
         }
-        Ok(CuttingPlane {
+        Ok(CuttingPlane::with_state(options, state, true))
+    }
+
+    /// A run at `state`, not yet bound to an oracle; `restore_oracle` for a resumed one.
+    fn with_state(options: SsvmOptions, state: Checkpoint, restore_oracle: bool) -> Self {
+        CuttingPlane {
             options,
             state,
             gram: Vec::new(),
             ground_truth: Vec::new(),
             bound_to_oracle: false,
-            restore_oracle: true,
-        })
+            restore_oracle,
+        }
     }
 
     /// Changes the cap on total QP solves (e.g. to run a few iterations at a time with different oracles:
