@@ -151,7 +151,6 @@ use crate::frame::Object;
 use crate::geometry::{footprint_overlap_area, intersection_volume, polygon_contains, Cuboid};
 use crate::learn::binary_svm::{balanced_costs, train_linear_svm_from, SvmSolution};
 use crate::learn::checkpoint::{fnv1a, FNV_OFFSET};
-use crate::limits::MAX_COORDINATE_M;
 use crate::model::{check_weight_magnitudes, Model};
 use glam::{Vec2, Vec3};
 
@@ -318,28 +317,12 @@ pub fn room_in(path: &Path, text: &str) -> Result<Option<Room>> {
     }
     let file: File = serde_json::from_str(text).map_err(|e| Error::invalid(path, e.to_string()))?;
     let Some(layout) = file.layout else { return Ok(None) };
-    if layout.corners.len() < 3 || layout.corners.iter().flatten().any(|v| !v.is_finite()) {
-        return Err(Error::invalid(path, "the layout's corners are not a polygon of finite points".to_string()));
-    }
-    let floor = match layout.floor {
-        Some(floor) if floor.is_finite() => floor,
-        _ => return Err(Error::invalid(path, "the layout has no finite floor height".to_string())),
-    };
-    // The layout file's own rules (`room_layout::LayoutFile::read`): the ceiling above the floor, every
-    // coordinate within ±MAX_COORDINATE_M of the camera — a room beyond them is no room `detect` predicts,
-    // and its wall distances would drive the stages' features far outside anything they were trained on.
-    if let Some(ceiling) = layout.ceiling {
-        if !ceiling.is_finite() || ceiling <= floor {
-            return Err(Error::invalid(path, format!("the layout's ceiling {ceiling} is not above its floor {floor}")));
-        }
-    }
-    let coordinates = || layout.corners.iter().flatten().chain([&floor]).chain(layout.ceiling.iter());
-    if coordinates().any(|v| f64::from(v.abs()) > MAX_COORDINATE_M) {
-        return Err(Error::invalid(
-            path,
-            format!("the layout has a coordinate beyond ±{MAX_COORDINATE_M} m of the camera"),
-        ));
-    }
+    // A missing floor (NaN) fails the check: the geometry features need it.
+    let floor = layout.floor.unwrap_or(f32::NAN);
+    // The layout file's own rules: a room beyond them is no room `detect` predicts, and its wall distances
+    // would drive the stages' features far outside anything they were trained on.
+    crate::room_layout::output::check_room(&layout.corners, floor, layout.ceiling)
+        .map_err(|problem| Error::invalid(path, problem))?;
     Ok(Some(Room { corners: layout.corners.into_iter().map(Vec2::from).collect(), floor }))
 }
 
@@ -1834,8 +1817,8 @@ mod tests {
         let room = room_in(path, &file(square, -1.3, 1.2)).unwrap().unwrap();
         assert_eq!((room.corners.len(), room.floor), (4, -1.3));
         for (text, says) in [
-            (file(square, 5.0, 1.3), "not above its floor"),
-            (file(square, -1.3, -1.3), "not above its floor"),
+            (file(square, 5.0, 1.3), "below the ceiling"),
+            (file(square, -1.3, -1.3), "below the ceiling"),
             (file(square, 1e6, 2e6), "beyond ±100 m"),
             (file("[[-2, 1], [2, 1], [1000000, 1000000]]", -1.3, 1.2), "beyond ±100 m"),
         ] {

@@ -642,8 +642,10 @@ pub fn read_objects(path: &Path) -> Result<Vec<Object>> {
 /// Reads `annotation3Dlayout/index.json`: the object named `room`.
 pub fn read_layout(path: &Path) -> Result<Option<RoomLayout>> {
     let root = read_json(path)?;
-    for (i, entry) in objects_array(path, &root)?.iter().enumerate() {
-        if entry.is_null() || entry.get("name").and_then(Value::as_str) != Some("room") {
+    let objects = objects_array(path, &root)?;
+    let is_room = |e: &Value| !e.is_null() && e.get("name").and_then(Value::as_str) == Some("room");
+    for (i, entry) in objects.iter().enumerate() {
+        if !is_room(entry) {
             continue;
         }
         let Some(poly) = parse_polygon(path, entry, &format!("objects[{i}]"))? else { continue };
@@ -655,10 +657,7 @@ pub fn read_layout(path: &Path) -> Result<Option<RoomLayout>> {
             return Ok(None);
         }
         let corners = poly.xs.iter().zip(&poly.zs).map(|(&x, &z)| Vec2::new(x as f32, z as f32)).collect();
-        let rooms = objects_array(path, &root)?
-            .iter()
-            .filter(|e| !e.is_null() && e.get("name").and_then(Value::as_str) == Some("room"))
-            .count();
+        let rooms = objects.iter().filter(|e| is_room(e)).count();
         if rooms > 1 {
             log::warn!("{}: {rooms} objects named 'room'; the first, objects[{i}], is the layout", path.display());
         }

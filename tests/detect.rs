@@ -367,11 +367,10 @@ fn resume_keeps_finished_frames_and_detects_the_others_again() {
     assert_eq!(read(&real), real_first, "the cut file is detected again, as the first time");
     assert!(stderr.contains("--resume: kept 1 frame(s)"), "{stderr}");
     assert!(stdout.contains("synth-bedroom-s52: 0 detections"), "the summary reads the kept file: {stdout}");
-    // Without --resume every frame is detected again; no partial file is left behind.
+    // Without --resume every frame is detected again; no temporary file is left behind.
     detect(&[]);
     assert_eq!(read(&synth), synth_first);
-    let partial =
-        std::fs::read_dir(&out).unwrap().flatten().any(|e| e.file_name().to_string_lossy().ends_with(".partial"));
+    let partial = std::fs::read_dir(&out).unwrap().flatten().any(|e| e.file_name().to_string_lossy().ends_with(".tmp"));
     assert!(!partial);
 }
 

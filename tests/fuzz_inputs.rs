@@ -751,7 +751,7 @@ fn extreme_numbers_unwritable_outputs_and_empty_directories_are_refused() {
     // A detections file's room: a ceiling below the floor or a wall a thousand kilometres away gave the
     // cascade's layout features any value (scores of 1); now the layout file's own rules.
     for (layout, says) in [
-        (r#"{"corners": [[-2, 1], [2, 1], [2, 5]], "floor": 5, "ceiling": 1.29}"#, "not above its floor"),
+        (r#"{"corners": [[-2, 1], [2, 1], [2, 5]], "floor": 5, "ceiling": 1.29}"#, "below the ceiling"),
         (r#"{"corners": [[-2, 1], [2, 1], [2, 5]], "floor": 1e6, "ceiling": 2e6}"#, "beyond ±100 m"),
         (r#"{"corners": [[-2, 1], [2, 1], [1e6, 1e6]], "floor": -1.3, "ceiling": 1.2}"#, "beyond ±100 m"),
     ] {

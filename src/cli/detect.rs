@@ -660,10 +660,7 @@ fn detect_one(dir: &Path, run: &DetectRun) -> anyhow::Result<FrameReport> {
     let json_path = args.out.join(format!("{}.json", frame.name));
     // Written beside and renamed into place: an interrupted run leaves no truncated `<frame>.json` that
     // `--resume` would have to tell from a finished one.
-    let partial = args.out.join(format!("{}.json.partial", frame.name));
-    std::fs::write(&partial, serde_json::to_string_pretty(&report)?)
-        .with_context(|| format!("writing {}", partial.display()))?;
-    std::fs::rename(&partial, &json_path).with_context(|| format!("renaming {} into place", partial.display()))?;
+    cog_gpu::error::write_whole(&json_path, serde_json::to_string_pretty(&report)?.as_bytes())?;
     let best = best_of(&report, args.overlay_top, args.overlay_min_score, args.nms_iou);
     let room = layout.as_ref().map(|(predicted, _)| &predicted.room);
     if !args.no_overlay {

@@ -24,7 +24,7 @@ pub struct Args {
 
 pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     // The same file under another spelling (`./a.json`, a link) counts too: it would be overwritten.
-    if args.cascades.iter().any(|c| c == &args.out || super::options::same_path(c, &args.out)) {
+    if args.cascades.iter().any(|c| super::options::same_path(c, &args.out)) {
         bail!("{}: --out must not be one of the cascades merged", args.out.display());
     }
     let cascades: Vec<Cascade> = args.cascades.iter().map(|p| Cascade::read(p)).collect::<Result<_, _>>()?;

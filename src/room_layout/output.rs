@@ -62,16 +62,23 @@ impl LayoutRecord {
     /// lies within ±[`MAX_COORDINATE_M`] of the camera (the free-space measure voxelises the rooms' bounding
     /// box, so a room kilometres wide would take hours and gigabytes to score).
     fn check(&self) -> std::result::Result<(), String> {
-        let values = || self.corners.iter().flatten().chain([&self.floor, &self.ceiling]);
-        let finite = values().all(|v| v.is_finite());
-        if self.corners.len() < 3 || !finite || self.floor >= self.ceiling {
-            return Err("layout needs at least 3 finite corners and floor < ceiling".into());
-        }
-        if values().any(|v| v.abs() as f64 > MAX_COORDINATE_M) {
-            return Err(format!("layout has a coordinate beyond ±{MAX_COORDINATE_M} m of the camera"));
-        }
-        Ok(())
+        check_room(&self.corners, self.floor, Some(self.ceiling))
     }
+}
+
+/// The rules of a predicted room read from a file (a layout file's record, the `"layout"` of a detections
+/// file, whose writers before the ceiling was recorded give none): at least 3 finite corners, a finite
+/// floor below the ceiling, every coordinate within ±[`MAX_COORDINATE_M`] of the camera.
+pub fn check_room(corners: &[[f32; 2]], floor: f32, ceiling: Option<f32>) -> std::result::Result<(), String> {
+    let values = || corners.iter().flatten().chain([&floor]).chain(ceiling.iter());
+    let finite = values().all(|v| v.is_finite());
+    if corners.len() < 3 || !finite || ceiling.is_some_and(|c| floor >= c) {
+        return Err("layout needs a polygon of at least 3 finite corners and a finite floor below the ceiling".into());
+    }
+    if values().any(|v| v.abs() as f64 > MAX_COORDINATE_M) {
+        return Err(format!("layout has a coordinate beyond ±{MAX_COORDINATE_M} m of the camera"));
+    }
+    Ok(())
 }
 
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
