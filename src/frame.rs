@@ -488,6 +488,22 @@ fn jpeg_runs_out(bytes: &[u8]) -> Option<String> {
 /// and ones and zeros mixed, so that Huffman codes read from them differ from codes read from zeros.
 const JPEG_FILLER: [u8; 64] = [0x5A; 64];
 
+/// The frame's colour picture as 8-bit RGB. Colour and 8-bit grey images convert as `image` converts them
+/// (16-bit colour scaled to 8 bits, grey copied to the three channels); a 16-bit grey image is refused:
+/// it is the frame's depth map put where its picture belongs (SUN RGB-D's depth PNGs are 16-bit grey),
+/// and read as a picture it gave gradients of the depth's bit pattern, without an error.
+fn colour_image(path: &Path, image: image::DynamicImage) -> Result<image::RgbImage> {
+    use image::ColorType::{La16, L16};
+    if matches!(image.color(), L16 | La16) {
+        return Err(Error::invalid(
+            path,
+            "is a 16-bit grey image (a depth map?), where the frame's colour picture belongs: image/ takes an \
+             RGB (or 8-bit grey) JPEG or PNG, depth/ the 16-bit depth PNG",
+        ));
+    }
+    Ok(image.to_rgb8())
+}
+
 /// Reads a depth PNG (16-bit grey, the toolbox's encoding) into decoded millimetres.
 pub fn read_depth_png(path: &Path) -> Result<(u32, u32, Vec<u16>)> {
     let img = open_image(path)?;
@@ -707,7 +723,7 @@ fn read_frame(dir: &Path, depth_source: DepthSource) -> Result<Frame> {
     }
     let name = frame_name(dir);
     let rgb_path = single_image(dir, "image")?;
-    let rgb = open_image(&rgb_path)?.to_rgb8();
+    let rgb = colour_image(&rgb_path, open_image(&rgb_path)?)?;
     let depth_path = single_image(dir, depth_source.dir_name())?;
     let (dw, dh, depth_mm) = read_depth_png(&depth_path)?;
     if (dw, dh) != rgb.dimensions() {

@@ -245,6 +245,17 @@ fn broken_images_are_errors() {
     image::GrayImage::new(2100, 2100).save(dir.join("image/huge.png")).unwrap();
     assert_rejected(&["info", text(&dir)], &["huge.png", "pixels"]);
 
+    // The depth map put where the picture belongs (a 16-bit grey PNG in image/) is refused; an 8-bit grey
+    // picture is a picture (its grey in every channel) and is read.
+    let dir = write_frame(tmp.path(), &good_frame("swapped"));
+    std::fs::copy(dir.join("depth/swapped.png"), dir.join("image/swapped.png")).unwrap();
+    assert_rejected(&["info", text(&dir)], &["image/swapped.png", "16-bit grey", "depth map"]);
+    let grey = image::GrayImage::from_fn(WIDTH, HEIGHT, |x, y| image::Luma([(x * 7 + y * 3) as u8]));
+    grey.save(dir.join("image/swapped.png")).unwrap();
+    let (stdout, _) = assert_accepted(&["info", text(&dir)]);
+    let frame = Frame::read(&dir, cog_gpu::frame::DepthSource::Raw).unwrap();
+    assert_eq!(frame.rgb.get_pixel(5, 3).0, [44, 44, 44], "{stdout}");
+
     let dir = write_frame(tmp.path(), &good_frame("size"));
     let mut small = good_frame("size");
     small.rgb = image::RgbImage::new(WIDTH / 2, HEIGHT / 2);

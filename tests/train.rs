@@ -270,6 +270,109 @@ fn one_slack_training_converges_and_reports_its_objective() {
     assert!(w.iter().any(|v| *v != 0.0));
 }
 
+/// A resumed training continues with the interrupted run's candidate cache (in the checkpoint since
+/// 2026-12-08) and ends with the uninterrupted run's weights, bit for bit — also past the full-pass
+/// budget, where every pass reads the cache (before, a resume refilled the cache with a full pass at the
+/// checkpoint's w, and its cached passes then read other candidates: other weights). The resumed oracle is
+/// a fresh one, as in a new process.
+#[test]
+fn a_resumed_training_reads_the_interrupted_runs_candidates_and_ends_with_its_weights() {
+    use cog_gpu::learn::detector::train_detector;
+    use cog_gpu::learn::{CuttingPlane, SsvmOptions};
+    let dir = tempfile::tempdir().unwrap();
+    let checkpoint = dir.path().join("run.ckpt");
+    let options = |iterations, checkpoint: Option<PathBuf>| SsvmOptions {
+        c: 1.0,
+        epsilon: 1e-6,
+        max_iterations: iterations,
+        quiet: true,
+        checkpoint,
+        ..SsvmOptions::default()
+    };
+    // One full pass, then only cached passes: the budget is spent at the first iteration.
+    let oracle = || {
+        let mut oracle = small_oracle();
+        oracle.max_full_passes = 1;
+        oracle
+    };
+    let straight_oracle = oracle();
+    let straight = train_detector(&straight_oracle, &mut CuttingPlane::new(options(6, None)).unwrap()).unwrap();
+    assert_eq!(straight.solution.iterations, 6, "the run must reach the cap to cover the cached passes");
+    let interrupted = oracle();
+    train_detector(&interrupted, &mut CuttingPlane::new(options(3, Some(checkpoint.clone()))).unwrap()).unwrap();
+    let resumed_oracle = oracle();
+    let mut resumed_solver = CuttingPlane::resume(options(6, Some(checkpoint.clone())), &checkpoint).unwrap();
+    let resumed = train_detector(&resumed_oracle, &mut resumed_solver).unwrap();
+    assert!(resumed.solution.w == straight.solution.w, "a resumed run must end with the uninterrupted weights");
+    assert_eq!(resumed_oracle.full_passes(), 1, "no full pass after the resume: the budget was spent");
+    assert_eq!(resumed.solution.iterations, 6);
+    assert!(straight.solution.w.iter().any(|&v| v != 0.0));
+    // A state that is not this training's is refused: cut short, for another number of examples, or with
+    // a candidate index beyond an example's window.
+    use cog_gpu::learn::SeparationOracle;
+    let state = straight_oracle.run_state();
+    let examples = straight_oracle.examples.len();
+    assert_eq!(state[4], examples as u64);
+    let first_count = state[5] as usize;
+    assert!(first_count > 0);
+    let mut too_far = state.clone();
+    too_far[5 + first_count] = u64::from(u32::MAX - 1);
+    let mut other_count = state.clone();
+    other_count[4] += 1;
+    for (bad, why) in [
+        (state[..state.len() - 1].to_vec(), "is not this training's"),
+        (other_count, "is not this training's"),
+        (too_far, "hypotheses of its window"),
+    ] {
+        let err = oracle().restore_run_state(&bad).unwrap_err().to_string();
+        assert!(err.contains(why), "{err}");
+    }
+}
+
+/// With latent surfaces, a CCCP round resumed from its start (its progress saved, no solver checkpoint of
+/// it yet) takes back the oracle's state of the round's start from the progress — the previous round's
+/// candidate cache, the counters and round cap — and training ends with the uninterrupted run's weights
+/// and slices. The resumed oracle is a fresh one, as in a new process.
+#[test]
+fn a_cccp_round_resumed_from_its_start_ends_as_the_uninterrupted_run() {
+    use cog_gpu::learn::detector::{train_latent_detector, LatentProgress, LatentSettings};
+    use cog_gpu::learn::SsvmOptions;
+    let ssvm = SsvmOptions { c: 1.0, epsilon: 1e-3, max_iterations: 4, quiet: true, ..SsvmOptions::default() };
+    let settings = LatentSettings { max_rounds: 2, tolerance: 0.0, full_passes_per_round: 1 };
+    // A full pass every third batch call, two in the first round (the second at w ≠ 0: the cache the
+    // second round starts from is not the one a full pass at its w = 0 would make), one more in the second.
+    let oracle = || {
+        let mut oracle = small_oracle_full(PositiveTarget::BestWindow, true);
+        oracle.full_every = 3;
+        oracle.max_full_passes = 2;
+        oracle
+    };
+    // The top slice for every example: the imputation moves the positive's slice, so a second round runs.
+    let start = |oracle: &DetectorOracle| LatentProgress {
+        next_round: 0,
+        latents: vec![6; oracle.examples.len()],
+        rounds: Vec::new(),
+        oracle_state: Vec::new(),
+    };
+    let mut straight_oracle = oracle();
+    let mut saved = Vec::new();
+    let first = start(&straight_oracle);
+    let straight = train_latent_detector(&mut straight_oracle, &ssvm, first, &settings, false, |p| {
+        saved.push(p.clone());
+        Ok(())
+    })
+    .unwrap();
+    assert_eq!(saved.len(), 2, "the second round must start: {:?}", straight.rounds);
+    let second_round = saved[1].clone();
+    assert!(!second_round.oracle_state.is_empty(), "the progress carries the oracle's state");
+    let mut resumed_oracle = oracle();
+    let resumed = train_latent_detector(&mut resumed_oracle, &ssvm, second_round, &settings, true, |_| Ok(())).unwrap();
+    assert!(resumed.last.solution.w == straight.last.solution.w, "the resumed round ends with other weights");
+    assert_eq!(resumed.latents, straight.latents);
+    assert_eq!(resumed_oracle.full_passes(), straight_oracle.full_passes());
+    assert_eq!(straight_oracle.full_passes(), 3, "two full passes in the first round, one in the second");
+}
+
 /// A tiny synthetic bedroom dataset written by `cog-gpu synth`.
 /// Example limits of the tests: up to 100 instances and `negatives` frames spread evenly, the other
 /// instances removed, the floor window, every instance.
@@ -377,33 +480,47 @@ fn train_writes_a_model_and_resumes_to_the_same_weights() {
     }
 }
 
+/// Borrowed views of owned arguments.
+fn strs(args: &[String]) -> Vec<&str> {
+    args.iter().map(String::as_str).collect()
+}
+
 /// A resumed training counts its full passes against the one `--max-full-passes` budget with the run it
 /// continues (the checkpoint carries the oracle's counters since 2026-12-07; before, a resumed run counted
-/// from zero, made up to the whole budget again and recorded only its own). Two iterations at one full
-/// pass each spend a budget of 2; the resume makes one more, the pass that refills the candidate cache
-/// (which the checkpoint does not hold), then only cached passes: 3 in all, recorded as 3.
+/// from zero, made up to the whole budget again and recorded only its own) and continues with its
+/// candidate cache (since 2026-12-08; before, it refilled the cache with one more full pass). Two
+/// iterations at one full pass each spend a budget of 2; the resumed process makes no full pass, records
+/// 2, and ends with the weights of a run that was never interrupted.
 #[test]
 fn a_resumed_training_keeps_the_full_pass_budget() {
     let dir = tempfile::tempdir().unwrap();
     let data = tiny_dataset(dir.path());
     let data = data.to_str().unwrap();
     let out = dir.path().join("budget/bed.json");
-    let args = |iterations| {
-        let mut args = train_args(data, out.to_str().unwrap(), iterations);
+    let straight = dir.path().join("straight/bed.json");
+    let args = |out: &Path, iterations| {
+        let mut args: Vec<String> =
+            train_args(data, out.to_str().unwrap(), iterations).into_iter().map(String::from).collect();
         let budget = args.iter().position(|a| *a == "--max-full-passes").unwrap() + 1;
-        args[budget] = "2";
+        args[budget] = "2".into();
         args
     };
-    let first = run(&args("2"));
+    let first = run(&strs(&args(&out, "2")));
     assert!(first.status.success(), "{}", String::from_utf8_lossy(&first.stderr));
-    let mut resumed = args("6");
-    resumed.push("--resume");
-    let second = run(&resumed);
+    let mut resumed = args(&out, "6");
+    resumed.push("--resume".into());
+    let second = run(&strs(&resumed));
     let log = String::from_utf8_lossy(&second.stderr);
     assert!(second.status.success(), "{log}");
-    assert_eq!(log.matches("full pass ").count(), 1, "the resumed process: one refilling full pass\n{log}");
-    let model: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
-    assert_eq!(model["training"]["full_passes"], 3, "{}", model["training"]);
+    assert_eq!(log.matches("full pass ").count(), 0, "the resumed process: no full pass\n{log}");
+    assert!(log.contains("restored the candidate cache"), "{log}");
+    let uninterrupted = run(&strs(&args(&straight, "6")));
+    assert!(uninterrupted.status.success(), "{}", String::from_utf8_lossy(&uninterrupted.stderr));
+    let read = |p: &Path| -> serde_json::Value { serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap() };
+    let (model, reference) = (read(&out), read(&straight));
+    assert_eq!(model["training"]["full_passes"], 2, "{}", model["training"]);
+    assert_eq!(reference["training"]["full_passes"], 2, "{}", reference["training"]);
+    assert!(model["weights"] == reference["weights"], "the resumed run ends with other weights");
 }
 
 /// Latent support surfaces end to end: a cuboid model, then `--surfaces-from` it (CCCP rounds recorded in

@@ -685,7 +685,13 @@ pub(super) fn lay_out(
     layout_model: Option<&cog_gpu::room_layout::model::LayoutModel>,
     backend: Backend,
 ) -> anyhow::Result<Option<(PredictedLayout, LayoutRecord)>> {
-    layout_model.map(|model| super::layout::frame_layout(frame, Some(model), backend)).transpose()
+    layout_model
+        .map(|model| {
+            super::layout::frame_layout(frame, Some(model), backend).with_context(|| {
+                format!("laying out the room of {} (the layout model of the models directory)", frame.name)
+            })
+        })
+        .transpose()
 }
 
 /// Rescores the detections with `cascade` (when there is one), whose layout features read the room.

@@ -619,7 +619,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
                     SurfaceInitArg::Upward => oracle.upward_slices(),
                     SurfaceInitArg::Centre => impute(&oracle, &initial_surface_weights(model, &layout)?)?,
                 };
-                LatentProgress { next_round: 0, latents, rounds: Vec::new() }
+                LatentProgress { next_round: 0, latents, rounds: Vec::new(), oracle_state: Vec::new() }
             };
             let settings = LatentSettings {
                 max_rounds: args.cccp_rounds.max(1),

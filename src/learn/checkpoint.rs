@@ -55,8 +55,9 @@ pub struct Checkpoint {
     pub data_hash: u64,
     pub w: Vec<f64>,
     pub constraints: Vec<WorkingConstraint>,
-    /// The oracle's own counters at the checkpoint ([`super::SeparationOracle::run_state`]), given back to
-    /// it on resume so that it continues its schedule (the detector: its batch calls and full passes).
+    /// The oracle's own state at the checkpoint ([`super::SeparationOracle::run_state`]), given back to it
+    /// on resume so that it continues where it stood (the detector: its batch calls, full passes and
+    /// candidate cache).
     pub oracle_state: Vec<u64>,
 }
 

@@ -431,6 +431,10 @@ fn tie_key(n: u32) -> u32 {
     x
 }
 
+/// The first word of [`SeparationOracle::run_state`]'s form with the candidate cache (ASCII "COGCACHE"),
+/// which tells it from the older forms of two numbers or none.
+const CANDIDATE_STATE_TAG: u64 = u64::from_be_bytes(*b"COGCACHE");
+
 /// Loss-augmented inference over training examples.
 ///
 /// # Candidate cache
@@ -459,10 +463,15 @@ pub struct DetectorOracle {
     pub full_every: usize,
     /// Most full passes (the first included).
     pub max_full_passes: usize,
+    /// With latent surfaces, the current CCCP round's cap on the full passes counted since the run began
+    /// ([`DetectorOracle::allow_more_full_passes`]); 0 until a round sets it: the cap is then
+    /// `max_full_passes`.
+    round_full_pass_cap: AtomicUsize,
     cached: AtomicBool,
     force_full: AtomicBool,
-    /// Set by [`SeparationOracle::restore_run_state`]: the candidate cache is not in the checkpoint, so a
-    /// resumed run's first batch call is a full pass, whatever the budget (it counts as one).
+    /// Set by [`SeparationOracle::restore_run_state`] from a checkpoint without the candidate cache (one
+    /// written before 2026-12-08): a resumed run's first batch call is then a full pass, whatever the
+    /// budget (it counts as one).
     refill: AtomicBool,
     batch_calls: AtomicUsize,
     full_passes: AtomicUsize,
@@ -521,6 +530,7 @@ impl DetectorOracle {
             candidate_count: 100,
             full_every: 0,
             max_full_passes: 4,
+            round_full_pass_cap: AtomicUsize::new(0),
             cached: AtomicBool::new(false),
             force_full: AtomicBool::new(false),
             refill: AtomicBool::new(false),
@@ -585,9 +595,19 @@ impl DetectorOracle {
     }
 
     /// Allows `extra` more full passes from now on (each CCCP round after the first gets its own budget; the
-    /// cached candidates of the previous round stay).
-    pub fn allow_more_full_passes(&mut self, extra: usize) {
-        self.max_full_passes = self.full_passes() + extra;
+    /// cached candidates of the previous round stay). A resumed round gets its cap back from the
+    /// checkpoint ([`SeparationOracle::restore_run_state`]).
+    pub fn allow_more_full_passes(&self, extra: usize) {
+        self.round_full_pass_cap.store(self.full_passes() + extra, Ordering::SeqCst);
+    }
+
+    /// The most full passes, counted since the run began, that may have run when the next one is
+    /// considered (at least 1).
+    fn full_pass_cap(&self) -> usize {
+        match self.round_full_pass_cap.load(Ordering::SeqCst) {
+            0 => self.max_full_passes.max(1),
+            cap => cap,
+        }
     }
 
     /// Whether the latest batch call was a full pass.
@@ -724,10 +744,56 @@ impl DetectorOracle {
         }
         order.sort_unstable();
         order.dedup();
-        let chosen: Vec<Hypothesis> = order.iter().map(|&n| hypotheses[n as usize]).collect();
+        self.store_candidates(example, &window, &scorer, order)
+    }
+
+    /// Caches the window's hypotheses `indices` (ascending) as example `example`'s candidates, with their
+    /// losses and features.
+    fn store_candidates(
+        &self,
+        example: usize,
+        window: &ExampleWindow,
+        scorer: &ExampleScorer,
+        indices: Vec<u32>,
+    ) -> Result<()> {
+        let chosen: Vec<Hypothesis> = indices.iter().map(|&n| window.hypotheses.hypotheses[n as usize]).collect();
         let (features, slices) = scorer.features(&chosen);
-        let losses = order.iter().map(|&n| window.losses[n as usize]).collect();
-        *self.lock_candidates(example)? = Candidates { indices: order, losses, features, slices };
+        let losses = indices.iter().map(|&n| window.losses[n as usize]).collect();
+        *self.lock_candidates(example)? = Candidates { indices, losses, features, slices };
+        Ok(())
+    }
+
+    /// Rebuilds each example's candidate cache from the window indices a checkpoint stored: its window
+    /// again (as a full pass builds it) and the features of those hypotheses, without scoring the window.
+    /// The features come from the same code on the same hypotheses, so the cache is the interrupted run's
+    /// bit for bit. Indices that are not ascending or not in the example's window are an error (the
+    /// checkpoint's data hash already tied it to these examples and settings).
+    fn restore_candidates(&self, cached: Vec<Vec<u32>>) -> Result<()> {
+        let started = std::time::Instant::now();
+        let restored = cached.iter().filter(|indices| !indices.is_empty()).count();
+        cached.into_par_iter().enumerate().try_for_each(|(example, indices)| {
+            if indices.is_empty() {
+                *self.lock_candidates(example)? = Candidates::default();
+                return Ok(());
+            }
+            let window = self.examples[example].window(&self.settings);
+            let count = window.hypotheses.hypotheses.len();
+            let ascending = indices.windows(2).all(|pair| pair[0] < pair[1]);
+            if !ascending || indices.last().is_some_and(|&n| n as usize >= count) {
+                return Err(Error::Input(format!(
+                    "the checkpoint's candidates of example {example} ({}) are not {} hypotheses of its window \
+                     of {count}",
+                    self.examples[example].name,
+                    indices.len()
+                )));
+            }
+            let scorer = ExampleScorer::new(&self.settings, &window.scene);
+            self.store_candidates(example, &window, &scorer, indices)
+        })?;
+        log::info!(
+            "restored the candidate cache of {restored} examples from the checkpoint in {:.1} s",
+            started.elapsed().as_secs_f64()
+        );
         Ok(())
     }
 
@@ -786,35 +852,72 @@ impl SeparationOracle for DetectorOracle {
         super::checkpoint::fnv1a(name, &self.settings_fingerprint.to_le_bytes())
     }
 
-    /// `[batch calls, full passes]`, so that a resumed run keeps the periodic schedule (`--full-every`) and
-    /// counts its full passes against the one budget (`--max-full-passes`) with the interrupted run's. With
-    /// latent surfaces nothing: each CCCP round sets its own budget of full passes
-    /// ([`DetectorOracle::allow_more_full_passes`]) before its solver resumes, and a resumed round keeps
-    /// counting from zero as before (README, "Progress and checkpoints").
+    /// Everything a resumed run needs to continue exactly where the interrupted one stood:
+    /// `[CANDIDATE_STATE_TAG, batch calls, full passes, round cap, examples, then per example its cached
+    /// candidates' count and window indices]`. The counters keep the periodic schedule (`--full-every`)
+    /// and the one budget (`--max-full-passes`; with latent surfaces the round's cap,
+    /// [`DetectorOracle::allow_more_full_passes`]); the indices let [`SeparationOracle::restore_run_state`]
+    /// rebuild the candidate cache, so the resumed run's cached passes read the interrupted run's
+    /// candidates (about 1 MB for a thousand examples of 125 candidates).
     fn run_state(&self) -> Vec<u64> {
-        if self.settings.surfaces {
-            return Vec::new();
+        let mut state = vec![
+            CANDIDATE_STATE_TAG,
+            self.batch_calls.load(Ordering::SeqCst) as u64,
+            self.full_passes() as u64,
+            self.round_full_pass_cap.load(Ordering::SeqCst) as u64,
+            self.examples.len() as u64,
+        ];
+        for example in 0..self.examples.len() {
+            // A poisoned lock (a panicked worker) leaves that example's cache out: refilled on resume.
+            let indices = self.lock_candidates(example).map(|c| c.indices.clone()).unwrap_or_default();
+            state.push(indices.len() as u64);
+            state.extend(indices.iter().map(|&n| u64::from(n)));
         }
-        vec![self.batch_calls.load(Ordering::SeqCst) as u64, self.full_passes() as u64]
+        state
     }
 
-    /// Takes back [`SeparationOracle::run_state`] (an empty state leaves the counters at zero, as resumes
-    /// did before it was stored) and makes the next batch call a full pass, which refills the candidate
-    /// cache.
+    /// Takes back [`SeparationOracle::run_state`]: the counters, and the candidate cache rebuilt from its
+    /// indices. The two older forms still read: `[batch calls, full passes]` (checkpoints of 2026-12-07,
+    /// without surfaces) and `[]` (before, and with surfaces until 2026-12-08) restore what they hold and
+    /// make the next batch call a full pass, which refills the cache.
     fn restore_run_state(&self, state: &[u64]) -> Result<()> {
+        let refused = || {
+            Error::Input(format!(
+                "the checkpoint's oracle state ({} numbers, starting {:?}) is not this training's",
+                state.len(),
+                &state[..state.len().min(5)]
+            ))
+        };
         match *state {
-            [] => {}
+            [] => self.refill.store(true, Ordering::SeqCst),
             [batch_calls, full_passes] if !self.settings.surfaces => {
                 self.batch_calls.store(batch_calls as usize, Ordering::SeqCst);
                 self.full_passes.store(full_passes as usize, Ordering::SeqCst);
+                self.refill.store(true, Ordering::SeqCst);
             }
-            _ => {
-                return Err(Error::Input(format!(
-                    "the checkpoint's oracle state {state:?} is not this training's ([batch calls, full passes])"
-                )))
+            [CANDIDATE_STATE_TAG, batch_calls, full_passes, round_cap, examples, ref rest @ ..]
+                if examples == self.examples.len() as u64 =>
+            {
+                let mut cached = Vec::with_capacity(self.examples.len());
+                let mut rest = rest;
+                for _ in 0..examples {
+                    let (&count, after) = rest.split_first().ok_or_else(refused)?;
+                    let count = usize::try_from(count).ok().filter(|&c| c <= after.len()).ok_or_else(refused)?;
+                    let indices =
+                        after[..count].iter().map(|&n| u32::try_from(n)).collect::<std::result::Result<Vec<_>, _>>();
+                    cached.push(indices.map_err(|_| refused())?);
+                    rest = &after[count..];
+                }
+                if !rest.is_empty() {
+                    return Err(refused());
+                }
+                self.batch_calls.store(batch_calls as usize, Ordering::SeqCst);
+                self.full_passes.store(full_passes as usize, Ordering::SeqCst);
+                self.round_full_pass_cap.store(round_cap as usize, Ordering::SeqCst);
+                self.restore_candidates(cached)?;
             }
+            _ => return Err(refused()),
         }
-        self.refill.store(true, Ordering::SeqCst);
         Ok(())
     }
 
@@ -825,7 +928,7 @@ impl SeparationOracle for DetectorOracle {
         // The first call of a run, or of a resumed one (its cache is empty): a full pass.
         let refill = self.refill.swap(false, Ordering::SeqCst);
         let first = refill || self.full_passes() == 0;
-        let full = first || ((forced || periodic) && self.full_passes() < self.max_full_passes.max(1));
+        let full = first || ((forced || periodic) && self.full_passes() < self.full_pass_cap());
         self.cached.store(!full, Ordering::SeqCst);
         let started = std::time::Instant::now();
         let w32: Vec<f32> = w.iter().map(|&v| v as f32).collect();
@@ -917,7 +1020,7 @@ pub fn train_detector(oracle: &DetectorOracle, solver: &mut CuttingPlane) -> Res
         if oracle.last_pass_was_full() {
             break (solution, true);
         }
-        if oracle.full_passes() >= oracle.max_full_passes.max(1) {
+        if oracle.full_passes() >= oracle.full_pass_cap() {
             log::info!("converged on the cached candidates; the full-pass budget is spent, so not verified");
             break (solution, false);
         }
@@ -987,7 +1090,7 @@ pub fn train_latent_detector(
     if settings.max_rounds == 0 {
         return Err(Error::Input("latent training: at least one CCCP round".into()));
     }
-    let LatentProgress { next_round, mut latents, mut rounds } = progress;
+    let LatentProgress { next_round, mut latents, mut rounds, oracle_state: resumed_state } = progress;
     let mut initial = [0usize; SLICES];
     (0..latents.len()).filter(|&i| oracle.num_latents(i) > 1).for_each(|i| initial[latents[i].min(SLICES - 1)] += 1);
     log::info!("CCCP starts at round {} with the slices (bottom to top) {initial:?}", next_round + 1);
@@ -1005,13 +1108,21 @@ pub fn train_latent_detector(
                 std::fs::remove_file(path).map_err(|e| Error::io(path, e))?;
             }
         }
-        save(&LatentProgress { next_round: round, latents: latents.clone(), rounds: rounds.clone() })?;
+        let solver_checkpoint = ssvm.checkpoint.as_ref().filter(|p| resumed_round && p.is_file());
+        // A round resumed from its start (no solver checkpoint of it yet) takes back the oracle's state
+        // of the round's start — the previous rounds' candidate cache and counters — so that it runs as
+        // the uninterrupted round did; one resumed from a solver checkpoint gets the later state from it.
+        if resumed_round && solver_checkpoint.is_none() {
+            SeparationOracle::restore_run_state(&*oracle, &resumed_state)?;
+        }
+        let oracle_state = if resumed_round { resumed_state.clone() } else { oracle.run_state() };
+        save(&LatentProgress { next_round: round, latents: latents.clone(), rounds: rounds.clone(), oracle_state })?;
         if round > 0 {
             oracle.allow_more_full_passes(settings.full_passes_per_round.max(1));
         }
-        let mut solver = match (&ssvm.checkpoint, resumed_round) {
-            (Some(path), true) if path.is_file() => CuttingPlane::resume(ssvm.clone(), path)?,
-            _ => CuttingPlane::new(ssvm.clone())?,
+        let mut solver = match solver_checkpoint {
+            Some(path) => CuttingPlane::resume(ssvm.clone(), path)?,
+            None => CuttingPlane::new(ssvm.clone())?,
         };
         let trained = train_detector(oracle, &mut solver)?;
         let w = &trained.solution.w;
@@ -1061,6 +1172,11 @@ pub struct LatentProgress {
     pub latents: Vec<usize>,
     /// The rounds done so far.
     pub rounds: Vec<CccpRound>,
+    /// The oracle's [`SeparationOracle::run_state`] when the round started (its candidate cache and
+    /// counters), restored when the round is resumed from its start, without a solver checkpoint of it.
+    /// Empty in progress files written before 2026-12-08: such a resumed round starts with a full pass.
+    #[serde(default)]
+    pub oracle_state: Vec<u64>,
 }
 
 /// How many examples to take from a dataset.

@@ -76,8 +76,9 @@ pub trait SeparationOracle: Sync {
     fn example_fingerprint(&self, _example: usize) -> u64 {
         0
     }
-    /// The oracle's own counters that a resumed run needs to continue its schedule where the interrupted
-    /// one stood (stored in every checkpoint, [`checkpoint::Checkpoint::oracle_state`]). Default: none.
+    /// The oracle's own state that a resumed run needs to continue where the interrupted one stood (its
+    /// counters, caches; stored in every checkpoint, [`checkpoint::Checkpoint::oracle_state`]). Default:
+    /// none.
     fn run_state(&self) -> Vec<u64> {
         Vec::new()
     }
