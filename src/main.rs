@@ -51,8 +51,9 @@ enum Command {
 }
 
 /// `cog-gpu detect DIR | head` must end quietly when `head` has read enough, as command-line tools do.
-/// Rust ignores SIGPIPE, so a write to the closed pipe fails and `println!` panics (status 101); with the
-/// default action restored the process ends by the signal, like `cat`.
+/// Rust ignores SIGPIPE, so a write to the closed pipe would fail (`println!` panics, status 101; the
+/// commands' `cli::out!` would report an error); with the default action restored the process ends by the
+/// signal, like `cat`.
 fn restore_default_sigpipe() {
     #[cfg(unix)]
     // SAFETY: runs first in `main`, before any other thread exists; SIG_DFL is a valid disposition.
@@ -61,26 +62,8 @@ fn restore_default_sigpipe() {
     }
 }
 
-/// `println!` panics when standard output cannot be written (a full disk, `> /dev/full`, an I/O error on
-/// the file it was sent to) — and the commands print their reports with it. That one panic becomes the
-/// commands' error exit instead: `error: writing standard output: <why>`, status 1. Every other panic keeps
-/// the default report (a bug to fix, with its location).
-fn stdout_errors_exit_cleanly() {
-    let default_hook = std::panic::take_hook();
-    std::panic::set_hook(Box::new(move |info| {
-        let payload = info.payload();
-        let message = payload.downcast_ref::<String>().map(String::as_str).or(payload.downcast_ref::<&str>().copied());
-        if let Some(why) = message.and_then(|m| m.strip_prefix("failed printing to stdout: ")) {
-            eprintln!("error: writing standard output: {why}");
-            std::process::exit(1);
-        }
-        default_hook(info);
-    }));
-}
-
 fn main() {
     restore_default_sigpipe();
-    stdout_errors_exit_cleanly();
     env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("info")).format_timestamp(None).init();
     // Bad options exit with status 1 like every other error (README); --help and --version with 0.
     let cli = Cli::try_parse().unwrap_or_else(|err| {
@@ -107,6 +90,9 @@ fn main() {
         Command::Layout(args) => cli::layout::run(args, &options),
         Command::TrainLayout(args) => cli::train_layout::run(args, &options),
     };
+    // Reports are written with `cli::out!`, whose failed writes are errors; what is still buffered is
+    // flushed here, so that a failure to write it is one too.
+    let result = result.and_then(|()| cli::flush_stdout());
     if let Err(err) = result {
         eprintln!("error: {}", cli::error_text(&err));
         std::process::exit(1);

@@ -870,10 +870,12 @@ fn extreme_numbers_unwritable_outputs_and_empty_directories_are_refused() {
     assert_accepted(&["info", text(&odd)]);
     assert_rejected(&["info", text(&data)], &["directory of", "frame(s), not a frame"]);
 
-    // A report that cannot be written (a full disk) panicked in println!.
-    let full = std::fs::OpenOptions::new().write(true).open("/dev/full").unwrap();
-    let out = cog_gpu(&["--cpu", "info", text(&frame)]).stdout(full).output().unwrap();
-    let err = stderr(&out);
-    assert_eq!(out.status.code(), Some(1), "{err}");
-    assert!(err.contains("error: writing standard output") && !err.contains("panicked"), "{err}");
+    // A report that cannot be written (a full disk) panicked in println!: the text report and the JSON one.
+    for args in [vec!["--cpu", "info", text(&frame)], vec!["--cpu", "info", "--json", text(&frame)]] {
+        let full = std::fs::OpenOptions::new().write(true).open("/dev/full").unwrap();
+        let out = cog_gpu(&args).stdout(full).output().unwrap();
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {err}");
+        assert!(err.contains("error: writing standard output") && !err.contains("panicked"), "{args:?}: {err}");
+    }
 }

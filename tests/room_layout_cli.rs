@@ -65,6 +65,32 @@ fn train_layout_eval_and_detect_end_to_end() {
     assert_eq!(model["weights"].as_array().unwrap().len(), 304);
     assert_eq!(model["version"], 3);
     assert_eq!(model["provenance"]["data_seed"], 5);
+    // A checkpoint after every iteration: one iteration, then `--resume` to three, ends with the weights
+    // of the uninterrupted three; a resume without a checkpoint, or with another C, is refused.
+    assert_eq!(model["provenance"]["qp_solves"], 3, "the run must go past the interruption");
+    assert!(dir.path().join("layout.json.ckpt").is_file());
+    ok(&["train-layout", "--data", &p("data"), "--out", &p("split.json"), "--max-iterations", "1"]);
+    let resumed = Command::new(env!("CARGO_BIN_EXE_cog-gpu"))
+        .args(["--cpu", "train-layout", "--data", &p("data"), "--out", &p("split.json"), "--max-iterations", "3"])
+        .arg("--resume")
+        .env("RUST_LOG", "info")
+        .output()
+        .unwrap();
+    let log = String::from_utf8_lossy(&resumed.stderr);
+    assert!(resumed.status.success(), "{log}");
+    // It continued at the checkpoint's iteration 1 (a fresh run starts at 0).
+    assert!(log.contains("SSVM iteration 1:") && !log.contains("SSVM iteration 0:"), "{log}");
+    let split = json(&dir.path().join("split.json"));
+    assert!(split["weights"] == model["weights"], "the resumed run ends with other weights");
+    assert_eq!(split["provenance"]["qp_solves"], 3);
+    rejected(&["train-layout", "--data", &p("data"), "--out", &p("none.json"), "--resume"], "no checkpoint");
+    rejected(&["train-layout", "--data", &p("data"), "--out", &p("split.json"), "--c", "1", "--resume"], "C = 10");
+    let checkpoint = dir.path().join("split.json.ckpt");
+    let mut bytes = std::fs::read(&checkpoint).unwrap();
+    let middle = bytes.len() / 2;
+    bytes[middle] ^= 0xff;
+    std::fs::write(&checkpoint, bytes).unwrap();
+    rejected(&["train-layout", "--data", &p("data"), "--out", &p("split.json"), "--resume"], "checksum");
 
     // With the image-gradient features: 648 COG weights after the voxel weights, 2 edge weights at the end;
     // the file says so and `layout` follows it.

@@ -253,10 +253,10 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         "fast_vs_exact_cosine": similarity,
     });
     if args.json {
-        println!("{}", serde_json::to_string(&report)?);
+        out!("{}", serde_json::to_string(&report)?);
         return Ok(());
     }
-    println!(
+    out!(
         "{} ({}×{}, {} points), category '{}', layout {}",
         frame.name,
         frame.width(),
@@ -265,7 +265,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         args.category,
         layout.id()
     );
-    println!(
+    out!(
         "hypotheses: {} generated, {} kept, {} scored; preprocessing {:.3} s",
         window.set.generated,
         kept.len(),
@@ -273,7 +273,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         window.preprocess_s
     );
     if let Some(sim) = &similarity {
-        println!(
+        out!(
             "fast vs exact features on {} hypotheses: cosine similarity mean {:.4}, min {:.4}",
             sim["hypotheses"],
             sim["mean"].as_f64().unwrap_or(f64::NAN),
@@ -281,7 +281,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         );
     }
     for (name, p) in &paths {
-        println!(
+        out!(
             "{name:>8}: score {:.3} s, {:.0} hypotheses/s, {:.3e} point·voxel updates/s  [{}]",
             p["score_s"].as_f64().unwrap_or(0.0),
             p["hypotheses_per_s"].as_f64().unwrap_or(0.0),

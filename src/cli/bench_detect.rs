@@ -188,9 +188,9 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         "gpu_vs_cpu": agreement,
     });
     if args.json {
-        println!("{}", serde_json::to_string(&report)?);
+        out!("{}", serde_json::to_string(&report)?);
     } else {
-        print_report(&report);
+        print_report(&report)?;
     }
     for (name, path) in report["paths"].as_object().into_iter().flatten() {
         if path["in_flight"]["same_as_one_at_a_time"] == json!(false) {
@@ -331,8 +331,8 @@ fn mean_times(times: &[FrameTimes]) -> serde_json::Value {
 }
 
 /// The text report: one row of mean stage seconds per path, and the GPU/CPU ratio.
-fn print_report(report: &serde_json::Value) {
-    println!(
+fn print_report(report: &serde_json::Value) -> anyhow::Result<()> {
+    out!(
         "{} frame(s) × {} repeat(s) after {} warm-up detection(s); models: {}; layout model: {}; cascade: {}; box voting: {}",
         report["frames"],
         report["repeat"],
@@ -360,17 +360,13 @@ fn print_report(report: &serde_json::Value) {
         "output_s",
         "total_s",
     ];
-    println!("mean seconds per frame:");
-    println!(
-        "{:>5} {}",
-        "path",
-        columns.iter().map(|c| format!(" {:>10}", c.trim_end_matches("_s"))).collect::<String>()
-    );
+    out!("mean seconds per frame:");
+    out!("{:>5} {}", "path", columns.iter().map(|c| format!(" {:>10}", c.trim_end_matches("_s"))).collect::<String>());
     let paths = report["paths"].as_object().cloned().unwrap_or_default();
     for (name, path) in &paths {
         let values: String =
             columns.iter().map(|c| format!(" {:>10.4}", path["mean"][c].as_f64().unwrap_or(f64::NAN))).collect();
-        println!("{name:>5} {values}");
+        out!("{name:>5} {values}");
     }
     let cpu_columns = [
         "preprocess_cpu_s",
@@ -381,8 +377,8 @@ fn print_report(report: &serde_json::Value) {
         "layout_cpu_s",
         "cpu_s",
     ];
-    println!("mean process CPU seconds per frame (all threads):");
-    println!(
+    out!("mean process CPU seconds per frame (all threads):");
+    out!(
         "{:>5} {}",
         "path",
         cpu_columns
@@ -393,10 +389,10 @@ fn print_report(report: &serde_json::Value) {
     for (name, path) in &paths {
         let values: String =
             cpu_columns.iter().map(|c| format!(" {:>10.4}", path["mean"][c].as_f64().unwrap_or(f64::NAN))).collect();
-        println!("{name:>5} {values}");
+        out!("{name:>5} {values}");
     }
     for (name, path) in &paths {
-        println!(
+        out!(
             "{name:>5}: {:.0} hypotheses/s in scoring; tables {:.3} thread-s per frame; fast kernel: {}  [{}]",
             path["mean"]["hypotheses_per_s"].as_f64().unwrap_or(0.0),
             path["mean"]["tables_thread_s"].as_f64().unwrap_or(0.0),
@@ -410,12 +406,12 @@ fn print_report(report: &serde_json::Value) {
                 per_category.iter().map(|(category, n)| (category, n.as_f64().unwrap_or(0.0))).collect();
             counts.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(b.0)));
             let listed: Vec<String> = counts.iter().map(|(category, n)| format!("{category} {n:.0}")).collect();
-            println!("{name:>5}: hypotheses per frame by model, most first: {}", listed.join(", "));
+            out!("{name:>5}: hypotheses per frame by model, most first: {}", listed.join(", "));
         }
     }
     for (name, path) in &paths {
         if let Some(pooled) = path["pooled_mb"].as_object() {
-            println!(
+            out!(
                 "{name:>5}: GPU memory kept in the buffer pools after a frame: {:.1} MB at most, {:.1} MB after the \
                  last",
                 pooled["max"].as_f64().unwrap_or(0.0),
@@ -425,7 +421,7 @@ fn print_report(report: &serde_json::Value) {
     }
     for (name, path) in &paths {
         if let Some(pass) = path["in_flight"].as_object() {
-            println!(
+            out!(
                 "{name:>5}: {} frames in flight: {:.4} s per frame wall-clock ({} detections in {:.3} s; one at a \
                  time: {:.4} s per frame); same detections: {}",
                 pass["frames_in_flight"],
@@ -439,11 +435,8 @@ fn print_report(report: &serde_json::Value) {
     }
     if let (Some(gpu), Some(cpu)) = (paths.get("gpu"), paths.get("cpu")) {
         let ratio = |c: &str| cpu["mean"][c].as_f64().unwrap_or(f64::NAN) / gpu["mean"][c].as_f64().unwrap_or(f64::NAN);
-        println!(
-            "GPU speed-up (CPU time / GPU time): total {:.2}×, scoring {:.2}×",
-            ratio("total_s"),
-            ratio("score_s")
-        );
-        println!("gpu vs cpu detections: {}", report["gpu_vs_cpu"]);
+        out!("GPU speed-up (CPU time / GPU time): total {:.2}×, scoring {:.2}×", ratio("total_s"), ratio("score_s"));
+        out!("gpu vs cpu detections: {}", report["gpu_vs_cpu"]);
     }
+    Ok(())
 }

@@ -66,16 +66,22 @@ pub fn run(args: Args, frames_args: &[PathBuf]) -> anyhow::Result<()> {
         "threads": rayon::current_num_threads(),
     });
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        out!("{}", serde_json::to_string_pretty(&report)?);
         return Ok(());
     }
-    println!("normal searches: kdtree (15 nearest of all points) against window (15 nearest in the 7×7 pixels)");
-    println!(
+    out!("normal searches: kdtree (15 nearest of all points) against window (15 nearest in the 7×7 pixels)");
+    out!(
         "{:<32} {:>8} {:>10} {:>10} {:>10} {:>12} {:>10}",
-        "frame", "points", "kdtree_s", "window_s", "same_code", "median_deg", "within_10"
+        "frame",
+        "points",
+        "kdtree_s",
+        "window_s",
+        "same_code",
+        "median_deg",
+        "within_10"
     );
     for r in &rows {
-        println!(
+        out!(
             "{:<32} {:>8} {:>10.4} {:>10.4} {:>9.1}% {:>12.2} {:>9.1}%",
             r.frame,
             r.agreement.points,
@@ -87,7 +93,7 @@ pub fn run(args: Args, frames_args: &[PathBuf]) -> anyhow::Result<()> {
         );
     }
     let m = &report["mean"];
-    println!(
+    out!(
         "{:<32} {:>8} {:>10.4} {:>10.4} {:>9.1}% {:>12.2} {:>9.1}%",
         "mean",
         "",

@@ -160,10 +160,10 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
             failures.join("\n  ")
         );
     }
-    println!("{:<12} {:>10} {:>6} {:>9} {:>9} {:>8} {:>8}", "category", "detections", "TP", "a", "b", "p(0)", "p(1)");
+    out!("{:<12} {:>10} {:>6} {:>9} {:>9} {:>8} {:>8}", "category", "detections", "TP", "a", "b", "p(0)", "p(1)");
     for model in &models {
         let Some(calibration) = &model.calibration else { continue };
-        println!(
+        out!(
             "{:<12} {:>10} {:>6} {:>9.4} {:>9.4} {:>8.4} {:>8.4}",
             model.category,
             calibration.detections,
@@ -179,7 +179,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         let path = out_dir.join(format!("{}.json", model.category));
         model.write(&path)?;
     }
-    println!("wrote {} calibrated model(s) to {}", models.len(), out_dir.display());
+    out!("wrote {} calibrated model(s) to {}", models.len(), out_dir.display());
     Ok(())
 }
 
@@ -194,12 +194,21 @@ fn calibrate_cascade(held_out: &HeldOutArgs, path: &Path, out: Option<&Path>, ch
     let (calibrated, report) = cascade
         .recalibrated(&held_out_frames, &categories, held_out.iou, &held_out.data.display().to_string())
         .with_context(|| format!("calibrating {} on {}", path.display(), held_out.detections.display()))?;
-    println!(
+    out!(
         "{:<12} {:>10} {:>6} {:>11} {:>9} {:>9} {:>9} {:>9} {:>10} {:>9}",
-        "category", "detections", "TP", "expected TP", "a before", "b before", "a", "b", "loss befor", "loss"
+        "category",
+        "detections",
+        "TP",
+        "expected TP",
+        "a before",
+        "b before",
+        "a",
+        "b",
+        "loss befor",
+        "loss"
     );
     for r in &report {
-        println!(
+        out!(
             "{:<12} {:>10} {:>6} {:>11.1} {:>9.4} {:>9.4} {:>9.4} {:>9.4} {:>10.4} {:>9.4}",
             r.category,
             r.after.detections,
@@ -219,18 +228,18 @@ fn calibrate_cascade(held_out: &HeldOutArgs, path: &Path, out: Option<&Path>, ch
     if check {
         let found: usize = report.iter().map(|r| r.after.true_positives).sum();
         let expected: f64 = report.iter().map(|r| r.expected_true_positives_before).sum();
-        println!("all stages: {found} true positives found, {expected:.1} expected by the stored calibrations; nothing written");
+        out!("all stages: {found} true positives found, {expected:.1} expected by the stored calibrations; nothing written");
         return Ok(());
     }
     let out = out.unwrap_or(path);
     calibrated.write(out)?;
-    println!(
+    out!(
         "wrote the cascade with {} stage calibration(s) fitted on {} frames to {}",
         report.len(),
         frames,
         out.display()
     );
-    say_final_calibration_dropped(&cascade);
+    say_final_calibration_dropped(&cascade)?;
     Ok(())
 }
 
@@ -268,59 +277,60 @@ fn fit_cascade_exclusion(held_out: &HeldOutArgs, path: &Path, out: Option<&Path>
         );
     }
     let map = |t: &ExclusionTrial| t.mean_ap.map_or("-".to_string(), |m| format!("{:.2}", 100.0 * m));
-    println!(
+    out!(
         "mean AP ({} categories, {frames} frames, IoU {}) by exclusion weight (rows) and IoU (columns); without: {}",
         fit.categories.len(),
         held_out.iou,
         map(fit.without())
     );
-    print!("{:>7}", "weight");
+    out_part!("{:>7}", "weight");
     for iou in IOU_GRID {
-        print!(" {iou:>7}");
+        out_part!(" {iou:>7}");
     }
-    println!();
+    out!();
     for &weight in &WEIGHT_GRID[1..] {
-        print!("{weight:>7}");
+        out_part!("{weight:>7}");
         for t in fit.trials.iter().filter(|t| t.exclusion.weight == weight) {
-            print!(" {:>7}", map(t));
+            out_part!(" {:>7}", map(t));
         }
-        println!();
+        out!();
     }
     let best = fit.best();
     let ap = |a: Option<f32>| a.map_or("-".to_string(), |a| format!("{:.1}", 100.0 * a));
-    println!("{:<12} {:>8} {:>8}", "category", "without", "with");
+    out!("{:<12} {:>8} {:>8}", "category", "without", "with");
     for (n, category) in fit.categories.iter().enumerate() {
-        println!("{category:<12} {:>8} {:>8}", ap(fit.without().aps[n]), ap(best.aps[n]));
+        out!("{category:<12} {:>8} {:>8}", ap(fit.without().aps[n]), ap(best.aps[n]));
     }
     match fit.chosen {
         Some(e) => {
-            println!("chosen: IoU {}, weight {} (mean AP {} → {})", e.iou, e.weight, map(fit.without()), map(best))
+            out!("chosen: IoU {}, weight {} (mean AP {} → {})", e.iou, e.weight, map(fit.without()), map(best))
         }
-        None => println!("chosen: no exclusion (no weight above 0 raises the mean AP)"),
+        None => out!("chosen: no exclusion (no weight above 0 raises the mean AP)"),
     }
     if check {
-        println!("nothing written");
+        out!("nothing written");
         return Ok(());
     }
     let out = out.unwrap_or(path);
     Cascade { exclusion: fit.chosen, final_calibration: None, ..cascade.clone() }.write(out)?;
-    println!(
+    out!(
         "wrote the cascade with {} to {}",
         fit.chosen.map_or("no exclusion".into(), |e| format!("exclusion IoU {}, weight {}", e.iou, e.weight)),
         out.display()
     );
-    say_final_calibration_dropped(&cascade);
+    say_final_calibration_dropped(&cascade)?;
     Ok(())
 }
 
 /// After refitting what a final calibration was fitted on: says that the written cascade has none.
-fn say_final_calibration_dropped(cascade: &Cascade) {
+fn say_final_calibration_dropped(cascade: &Cascade) -> anyhow::Result<()> {
     if cascade.final_calibration.is_some() {
-        println!(
+        out!(
             "the cascade's final calibration was fitted on the scores before this fit and is not kept: fit it \
              again (calibrate --cascade --final)"
         );
     }
+    Ok(())
 }
 
 /// `calibrate --cascade --final`: the cascade's final calibration fitted on the held-out frames
@@ -346,7 +356,7 @@ fn fit_cascade_final_calibration(
     let fit = fit_final_calibration(&detections, &truth, &categories, held_out.iou, &data, stored)
         .with_context(|| format!("fitting the final calibration on {}", held_out.detections.display()))?;
     let c = &fit.calibration;
-    println!(
+    out!(
         "final calibration logit p' = a·ln p − b·ln(1 − p) + c: a = {:.4}, b = {:.4}, c = {:.4} ({} categories, \
          {frames} frames, {} detections, {} true positives at IoU {})",
         c.a,
@@ -357,14 +367,15 @@ fn fit_cascade_final_calibration(
         c.true_positives,
         held_out.iou
     );
-    let summary = |name: &str, s: &ScoreSummary| {
-        println!("{name:<34} mean log loss {:.5}, expected true positives {:.1}", s.log_loss, s.expected_true_positives)
+    let summary = |name: &str, s: &ScoreSummary| -> anyhow::Result<()> {
+        out!("{name:<34} mean log loss {:.5}, expected true positives {:.1}", s.log_loss, s.expected_true_positives);
+        Ok(())
     };
-    summary("before (no map):", &fit.before);
+    summary("before (no map):", &fit.before)?;
     if let (Some(map), Some(s)) = (stored, &fit.stored) {
-        summary(&format!("the file's map (a = {:.4}, b = {:.4}, c = {:.4}):", map.a, map.b, map.c), s);
+        summary(&format!("the file's map (a = {:.4}, b = {:.4}, c = {:.4}):", map.a, map.b, map.c), s)?;
     }
-    summary("after (the fitted map):", &fit.after);
+    summary("after (the fitted map):", &fit.after)?;
     let mapped_by = |map: &FinalCalibration| {
         let mut mapped = detections.clone();
         for frame in &mut mapped {
@@ -372,24 +383,24 @@ fn fit_cascade_final_calibration(
         }
         mapped
     };
-    let print_bins = |name: &str, scored: &[Vec<Detection>]| {
+    let print_bins = |name: &str, scored: &[Vec<Detection>]| -> anyhow::Result<()> {
         let reliability = cog_gpu::diagnose::reliability(&truth, scored, &fit.categories, held_out.iou);
-        println!("{name}, on these frames:");
-        super::eval::print_reliability(&reliability);
+        out!("{name}, on these frames:");
+        super::eval::print_reliability(&reliability)
     };
-    print_bins("before (no map)", &detections);
+    print_bins("before (no map)", &detections)?;
     if let Some(map) = stored {
-        print_bins("with the file's map", &mapped_by(map));
+        print_bins("with the file's map", &mapped_by(map))?;
     }
-    print_bins("after (the fitted map)", &mapped_by(c));
+    print_bins("after (the fitted map)", &mapped_by(c))?;
     if check {
-        println!("nothing written");
+        out!("nothing written");
         return Ok(());
     }
     let out = out.unwrap_or(path);
     let replaced = if stored.is_some() { " (the map it had replaced)" } else { "" };
     Cascade { final_calibration: Some(fit.calibration), ..cascade.clone() }.write(out)?;
-    println!("wrote the cascade with its final calibration to {}{replaced}", out.display());
+    out!("wrote the cascade with its final calibration to {}{replaced}", out.display());
     Ok(())
 }
 

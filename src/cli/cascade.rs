@@ -180,18 +180,18 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         args.keep.into(),
     )?;
     if resumed > 0 {
-        println!(
+        out!(
             "resumed {resumed} of {} stage trainings from the checkpoints in {}",
             categories.len() * sets.len(),
             checkpoints.display()
         );
     }
-    print_stages(&cascade, &results, &sets, StageRule::from(args.keep).needs_nested());
+    print_stages(&cascade, &results, &sets, StageRule::from(args.keep).needs_nested())?;
     if cascade.stages.is_empty() {
         bail!("{}: no category could be trained; nothing written", held_out.detections.display());
     }
     cascade.write(&out)?;
-    println!("wrote the cascade ({} of {} categories) to {}", cascade.stages.len(), categories.len(), out.display());
+    out!("wrote the cascade ({} of {} categories) to {}", cascade.stages.len(), categories.len(), out.display());
     if !args.keep_checkpoints {
         // Only the files this training reads and writes, then the directory if that left it empty: a
         // `--checkpoints` directory may hold other things.
@@ -212,7 +212,12 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
 /// cross-validated APs and the gain's interval) or why it has none; with several candidate sets, each
 /// one's cross-validated AP ("none" for a set without a stage, or whose stage `--keep` refused); with
 /// `nested`, the nested cross-validated gain of the category's training.
-fn print_stages(cascade: &Cascade, results: &BTreeMap<String, StageOutcome>, sets: &[FeatureSet], nested: bool) {
+fn print_stages(
+    cascade: &Cascade,
+    results: &BTreeMap<String, StageOutcome>,
+    sets: &[FeatureSet],
+    nested: bool,
+) -> anyhow::Result<()> {
     let several = sets.len() > 1;
     let mut header = format!(
         "{:<12} {:>8} {:>10} {:>6} {:>7} {:>12} {:>13} {:>16}",
@@ -233,7 +238,7 @@ fn print_stages(cascade: &Cascade, results: &BTreeMap<String, StageOutcome>, set
             header.push_str(&format!(" {:>12}", format!("CV AP {}", set.short_name())));
         }
     }
-    println!("{header}");
+    out!("{header}");
     for (category, outcome) in results {
         let chosen = outcome.chosen();
         let mut line = match &chosen {
@@ -268,6 +273,7 @@ fn print_stages(cascade: &Cascade, results: &BTreeMap<String, StageOutcome>, set
                 }
             }
         }
-        println!("{line}");
+        out!("{line}");
     }
+    Ok(())
 }

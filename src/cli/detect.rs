@@ -441,9 +441,9 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         log::info!("--resume: kept {kept} frame(s) already detected in {}", args.out.display());
     }
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&results)?);
+        out!("{}", serde_json::to_string_pretty(&results)?);
     } else {
-        print_summary(&results, &args, started.elapsed().as_secs_f64());
+        print_summary(&results, &args, started.elapsed().as_secs_f64())?;
     }
     super::batch_result(&failures, frames.len())
 }
@@ -734,7 +734,7 @@ pub(super) fn overlay_picture(frame: &Frame, best: &FrameDetections, room: Optio
 
 /// One line per frame: detections per category and the best score, and how many boxes the overlay drew
 /// (so that a picture without a box is explained: nothing reached `--overlay-min-score`).
-fn print_summary(results: &[FrameReport], args: &Args, seconds: f64) {
+fn print_summary(results: &[FrameReport], args: &Args, seconds: f64) -> anyhow::Result<()> {
     for report in results {
         let r = &report.detections;
         let mut counts: Vec<(String, usize, f32)> = Vec::new();
@@ -751,7 +751,8 @@ fn print_summary(results: &[FrameReport], args: &Args, seconds: f64) {
             let boxes = best_of(report, args.overlay_top, args.overlay_min_score, args.nms_iou).detections.len();
             format!("; overlay: {boxes} box(es) (calibrated score ≥ {})", args.overlay_min_score)
         };
-        println!("{}: {} detections: {}{drawn}", r.frame, r.detections.len(), text.join(", "));
+        out!("{}: {} detections: {}{drawn}", r.frame, r.detections.len(), text.join(", "));
     }
-    println!("wrote {} frame(s) to {} in {seconds:.1} s", results.len(), args.out.display());
+    out!("wrote {} frame(s) to {} in {seconds:.1} s", results.len(), args.out.display());
+    Ok(())
 }

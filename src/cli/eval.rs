@@ -426,15 +426,15 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
                 objects,
                 ignored,
             };
-            println!("{}", serde_json::to_string_pretty(&report)?);
+            out!("{}", serde_json::to_string_pretty(&report)?);
         } else {
-            print_diagnosis(&args, &diagnosis, &overlay, &drawn, evaluated, missing);
-            print_reliability(&reliability);
+            print_diagnosis(&args, &diagnosis, &overlay, &drawn, evaluated, missing)?;
+            print_reliability(&reliability)?;
             if let Some(ignored) = &ignored {
-                print_ignored(ignored);
+                print_ignored(ignored)?;
             }
             if let Some(objects) = &objects {
-                print_objects(objects, args.iou);
+                print_objects(objects, args.iou)?;
             }
         }
         return super::batch_result(&failures, names.len());
@@ -484,17 +484,17 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
             surfaces_pooled,
             ignored,
         };
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        out!("{}", serde_json::to_string_pretty(&report)?);
     } else {
-        print_table(&args, &results, map, evaluated, missing);
+        print_table(&args, &results, map, evaluated, missing)?;
         if let Some(ignored) = &ignored {
-            print_ignored(ignored);
+            print_ignored(ignored)?;
         }
         if let Some(summary) = &bootstrap {
-            print_bootstrap(&results, map, summary);
+            print_bootstrap(&results, map, summary)?;
         }
         if let Some(surfaces) = &surfaces {
-            print_surfaces(surfaces, surfaces_pooled.as_ref());
+            print_surfaces(surfaces, surfaces_pooled.as_ref())?;
         }
     }
     super::batch_result(&failures, names.len())
@@ -531,24 +531,30 @@ fn surface_report(
     Ok((each, pooled))
 }
 
-fn print_surfaces(surfaces: &[SurfaceAccuracy], pooled: Option<&SurfaceAccuracy>) {
+fn print_surfaces(surfaces: &[SurfaceAccuracy], pooled: Option<&SurfaceAccuracy>) -> anyhow::Result<()> {
     if surfaces.is_empty() {
-        println!("support surfaces: no detection carries an inferred surface (no model with surfaces)");
-        return;
+        out!("support surfaces: no detection carries an inferred surface (no model with surfaces)");
+        return Ok(());
     }
-    println!(
+    out!(
         "support surfaces of the true positives (inferred surface_z against the true support heights, ≤ {} cm; \
          nearest and main of those measured, main also of all true positives):",
         SURFACE_TOLERANCE_M * 100.0
     );
-    println!(
+    out!(
         "{:<12} {:>8} {:>9} {:>15} {:>13} {:>13} {:>14}",
-        "category", "TP", "measured", "nearest ≤ tol", "main ≤ tol", "main, all TP", "median error"
+        "category",
+        "TP",
+        "measured",
+        "nearest ≤ tol",
+        "main ≤ tol",
+        "main, all TP",
+        "median error"
     );
     let share =
         |n: usize, of: usize| if of > 0 { format!("{:.1} %", 100.0 * n as f32 / of as f32) } else { "-".into() };
     for s in surfaces.iter().chain(pooled) {
-        println!(
+        out!(
             "{:<12} {:>8} {:>9} {:>15} {:>13} {:>13} {:>14}",
             s.category,
             s.true_positives,
@@ -569,27 +575,35 @@ fn print_surfaces(surfaces: &[SurfaceAccuracy], pooled: Option<&SurfaceAccuracy>
                 format!("{source} {} of {} ({})", c.within_main, c.measured, share(c.within_main, c.measured))
             })
             .collect();
-        println!("  {}: main ≤ tol by rule: {}", s.category, parts.join(", "));
+        out!("  {}: main ≤ tol by rule: {}", s.category, parts.join(", "));
     }
+    Ok(())
 }
 
 fn percent(ap: Option<f32>) -> String {
     ap.map(|a| format!("{:.1}", 100.0 * a)).unwrap_or_else(|| "-".into())
 }
 
-fn print_table(args: &Args, results: &[CategoryEvaluation], map: Option<f32>, frames: usize, missing: usize) {
-    println!(
+fn print_table(
+    args: &Args,
+    results: &[CategoryEvaluation],
+    map: Option<f32>,
+    frames: usize,
+    missing: usize,
+) -> anyhow::Result<()> {
+    out!(
         "{frames} frames from {}, detections from {} ({missing} frames without a file), 3D IoU ≥ {}",
         args.data.display(),
         args.detections.display(),
         args.iou
     );
-    println!("{:<12} {:>7} {:>11} {:>7}", "category", "#GT", "#detections", "AP");
+    out!("{:<12} {:>7} {:>11} {:>7}", "category", "#GT", "#detections", "AP");
     for r in results {
-        println!("{:<12} {:>7} {:>11} {:>7}", r.category, r.ground_truth, r.detections, percent(r.pr.ap));
+        out!("{:<12} {:>7} {:>11} {:>7}", r.category, r.ground_truth, r.detections, percent(r.pr.ap));
     }
     let defined = results.iter().filter(|r| r.pr.ap.is_some()).count();
-    println!("{:<12} {:>27}", format!("mAP ({defined})"), percent(map));
+    out!("{:<12} {:>27}", format!("mAP ({defined})"), percent(map));
+    Ok(())
 }
 
 /// The detections of `frames` read from another detections directory (`--versus`): a frame without a
@@ -692,8 +706,8 @@ fn interval_text(interval: Option<(f32, f32)>) -> String {
     interval.map(|(lo, hi)| format!("[{:.1}, {:.1}]", 100.0 * lo, 100.0 * hi)).unwrap_or_else(|| "-".into())
 }
 
-fn print_bootstrap(results: &[CategoryEvaluation], map: Option<f32>, summary: &BootstrapSummary) {
-    println!(
+fn print_bootstrap(results: &[CategoryEvaluation], map: Option<f32>, summary: &BootstrapSummary) -> anyhow::Result<()> {
+    out!(
         "bootstrap: {} resamples of the frames (seed {}), {:.0} % percentile intervals",
         summary.resamples,
         summary.seed,
@@ -706,29 +720,39 @@ fn print_bootstrap(results: &[CategoryEvaluation], map: Option<f32>, summary: &B
             .map(|v| (v.ap.get(name).copied().flatten(), v.difference_interval.get(name).copied().flatten()))
     };
     match &summary.versus {
-        None => println!("{:<12} {:>7} {:>16}", "category", "AP", "interval"),
+        None => out!("{:<12} {:>7} {:>16}", "category", "AP", "interval"),
         Some(v) => {
-            println!("versus: {} (difference = --detections minus --versus, paired resamples)", v.detections.display());
-            println!(
+            out!("versus: {} (difference = --detections minus --versus, paired resamples)", v.detections.display());
+            out!(
                 "{:<12} {:>7} {:>16} {:>8} {:>7} {:>16}",
-                "category", "AP", "interval", "versus", "diff", "interval of diff"
+                "category",
+                "AP",
+                "interval",
+                "versus",
+                "diff",
+                "interval of diff"
             );
         }
     }
-    let row =
-        |name: &str, ap: Option<f32>, interval: Option<Interval>, other: Option<(Option<f32>, Option<Interval>)>| {
-            let mut line = format!("{:<12} {:>7} {:>16}", name, percent(ap), interval_text(interval));
-            if let Some((other_ap, diff_interval)) = other {
-                let diff = ap.zip(other_ap).map(|(a, b)| a - b);
-                line += &format!(" {:>8} {:>7} {:>16}", percent(other_ap), percent(diff), interval_text(diff_interval));
-            }
-            println!("{line}");
-        };
+    let row = |name: &str,
+               ap: Option<f32>,
+               interval: Option<Interval>,
+               other: Option<(Option<f32>, Option<Interval>)>|
+     -> anyhow::Result<()> {
+        let mut line = format!("{:<12} {:>7} {:>16}", name, percent(ap), interval_text(interval));
+        if let Some((other_ap, diff_interval)) = other {
+            let diff = ap.zip(other_ap).map(|(a, b)| a - b);
+            line += &format!(" {:>8} {:>7} {:>16}", percent(other_ap), percent(diff), interval_text(diff_interval));
+        }
+        out!("{line}");
+        Ok(())
+    };
     for r in results {
-        row(&r.category, r.pr.ap, summary.ap_interval.get(&r.category).copied().flatten(), difference(&r.category));
+        row(&r.category, r.pr.ap, summary.ap_interval.get(&r.category).copied().flatten(), difference(&r.category))?;
     }
     let map_other = summary.versus.as_ref().map(|v| (v.map, v.map_difference_interval));
-    row("mAP", map, summary.map_interval, map_other);
+    row("mAP", map, summary.map_interval, map_other)?;
+    Ok(())
 }
 
 fn write_plots(dir: &Path, results: &[CategoryEvaluation]) -> anyhow::Result<()> {
@@ -909,9 +933,9 @@ impl OutOfView {
 }
 
 /// `--ignore-out-of-view` (text): what the table above left out.
-fn print_ignored(report: &IgnoredReport) {
+fn print_ignored(report: &IgnoredReport) -> anyhow::Result<()> {
     let (boxes, detections) = report.ignored.values().fold((0, 0), |(b, d), c| (b + c.boxes, d + c.detections));
-    println!(
+    out!(
         "ignored (--ignore-out-of-view {}): {boxes} ground-truth boxes with less than {:.0} % of their volume in \
          the picture and the {detections} detections whose best box they are (as PASCAL VOC's difficult objects); \
          per category, boxes/detections:",
@@ -919,12 +943,13 @@ fn print_ignored(report: &IgnoredReport) {
         100.0 * report.min_in_view
     );
     let parts: Vec<String> = report.ignored.iter().map(|(c, n)| format!("{c} {}/{}", n.boxes, n.detections)).collect();
-    println!("  {}", parts.join(", "));
+    out!("  {}", parts.join(", "));
+    Ok(())
 }
 
 /// `--objects` (text): one line per ground-truth box, then per category the boxes mostly out of view.
-fn print_objects(objects: &[NamedOutcome], iou: f32) {
-    println!("every ground-truth box (size w×d×h m, distance from the camera on the ground, m):");
+fn print_objects(objects: &[NamedOutcome], iou: f32) -> anyhow::Result<()> {
+    out!("every ground-truth box (size w×d×h m, distance from the camera on the ground, m):");
     for NamedOutcome { frame, in_view, outcome: o } in objects {
         let what = match &o.found {
             Some(f) => format!(
@@ -938,7 +963,7 @@ fn print_objects(objects: &[NamedOutcome], iou: f32) {
             None => String::new(),
         };
         let [w, d, h] = o.size;
-        println!(
+        out!(
             "{frame} #{} {:<12} {w:.2}×{d:.2}×{h:.2} at {:.1} m, {:.0} % in view: {what}{other}",
             o.object,
             o.category,
@@ -946,7 +971,7 @@ fn print_objects(objects: &[NamedOutcome], iou: f32) {
             100.0 * in_view
         );
     }
-    println!(
+    out!(
         "boxes mostly out of view (less than {:.0} % of the box in the picture), and how many of them are found:",
         100.0 * MOSTLY_OUT_OF_VIEW
     );
@@ -963,8 +988,9 @@ fn print_objects(objects: &[NamedOutcome], iou: f32) {
     let mut seen = HashSet::new();
     for o in objects.iter().map(|n| &n.outcome).filter(|o| seen.insert(o.category.as_str())) {
         let (boxes, out, found) = by_category[o.category.as_str()];
-        println!("{:<12} {out} of {boxes} mostly out of view, {found} of them found", o.category);
+        out!("{:<12} {out} of {boxes} mostly out of view, {found} of them found", o.category);
     }
+    Ok(())
 }
 
 fn print_diagnosis(
@@ -974,27 +1000,36 @@ fn print_diagnosis(
     drawn: &OverlayPrecision,
     frames: usize,
     missing: usize,
-) {
-    println!(
+) -> anyhow::Result<()> {
+    out!(
         "{frames} frames from {}, detections from {} ({missing} frames without a file), 3D IoU ≥ {}",
         args.data.display(),
         args.detections.display(),
         args.iou
     );
     match &args.models {
-        Some(dir) => println!(
+        Some(dir) => out!(
             "window recall: hypotheses of the models in {}{}",
             dir.display(),
             args.step.map(|s| format!(" at step {s} m")).unwrap_or_default()
         ),
-        None => println!("window recall: - (give --models DIR)"),
+        None => out!("window recall: - (give --models DIR)"),
     }
-    println!(
+    out!(
         "{:<12} {:>6} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>7} {:>7}",
-        "category", "#GT", "win≥.25", "win≥.50", "winIoU", "#frames", "#w/dets", "best=TP", "AP", "rankAP"
+        "category",
+        "#GT",
+        "win≥.25",
+        "win≥.50",
+        "winIoU",
+        "#frames",
+        "#w/dets",
+        "best=TP",
+        "AP",
+        "rankAP"
     );
     for d in diagnosis {
-        println!(
+        out!(
             "{:<12} {:>6} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>7} {:>7}",
             d.category,
             d.gt_boxes,
@@ -1008,15 +1043,22 @@ fn print_diagnosis(
             percent(d.rank_ap)
         );
     }
-    println!("highest-scoring false positives (as many as #GT), by kind (% of those examined):");
-    println!(
+    out!("highest-scoring false positives (as many as #GT), by kind (% of those examined):");
+    out!(
         "{:<12} {:>8} {:>6} {:>6} {:>6} {:>12} {:>8} {:>8}",
-        "category", "examined", "dup", "loc", "conf", "conf. with", "bg here", "bg else"
+        "category",
+        "examined",
+        "dup",
+        "loc",
+        "conf",
+        "conf. with",
+        "bg here",
+        "bg else"
     );
     for d in diagnosis {
         let fp = &d.false_positives;
         let share = |n: usize| percent((fp.examined > 0).then(|| n as f32 / fp.examined as f32));
-        println!(
+        out!(
             "{:<12} {:>8} {:>6} {:>6} {:>6} {:>12} {:>8} {:>8}",
             d.category,
             fp.examined,
@@ -1028,14 +1070,22 @@ fn print_diagnosis(
             share(fp.background_elsewhere)
         );
     }
-    println!("AP without the false positives of a kind (an oracle: every false positive, the kinds above):");
-    println!(
+    out!("AP without the false positives of a kind (an oracle: every false positive, the kinds above):");
+    out!(
         "{:<12} {:>7} {:>7} {:>7} {:>7} {:>7} {:>11} {:>7}",
-        "category", "AP", "-dup", "-loc", "-conf", "-bg", "-loc/conf/bg", "-allFP"
+        "category",
+        "AP",
+        "-dup",
+        "-loc",
+        "-conf",
+        "-bg",
+        "-loc/conf/bg",
+        "-allFP"
     );
-    let row = |name: &str, values: [Option<f32>; 7]| {
+    let row = |name: &str, values: [Option<f32>; 7]| -> anyhow::Result<()> {
         let [ap, dup, loc, conf, bg, lcb, all] = values.map(percent);
-        println!("{name:<12} {ap:>7} {dup:>7} {loc:>7} {conf:>7} {bg:>7} {lcb:>11} {all:>7}");
+        out!("{name:<12} {ap:>7} {dup:>7} {loc:>7} {conf:>7} {bg:>7} {lcb:>11} {all:>7}");
+        Ok(())
     };
     let columns = |d: &CategoryDiagnosis| {
         let o = &d.oracle_ap;
@@ -1050,35 +1100,47 @@ fn print_diagnosis(
         ]
     };
     for d in diagnosis {
-        row(&d.category, columns(d));
+        row(&d.category, columns(d))?;
     }
     let all: Vec<[Option<f32>; 7]> = diagnosis.iter().map(columns).collect();
-    row("mean", std::array::from_fn(|c| mean_ap(all.iter().map(|v| &v[c]))));
-    println!(
+    row("mean", std::array::from_fn(|c| mean_ap(all.iter().map(|v| &v[c]))))?;
+    out!(
         "ground-truth boxes: found ahead (a true positive at precision ≥ {FOUND_AHEAD_PRECISION}) or behind, missed \
          near (a detection at IoU ≥ {TOUCH_IOU}) or far; missed with another category's detection on it (IoU ≥ {}):",
         args.iou
     );
-    println!(
+    out!(
         "{:<12} {:>6} {:>7} {:>7} {:>7} {:>7} {:>7}",
-        "category", "#GT", "ahead", "behind", "m.near", "m.far", "m.other"
+        "category",
+        "#GT",
+        "ahead",
+        "behind",
+        "m.near",
+        "m.far",
+        "m.other"
     );
     for d in diagnosis {
         let o = &d.objects;
-        println!(
+        out!(
             "{:<12} {:>6} {:>7} {:>7} {:>7} {:>7} {:>7}",
-            d.category, d.gt_boxes, o.found_ahead, o.found_behind, o.missed_near, o.missed_far, o.missed_with_other
+            d.category,
+            d.gt_boxes,
+            o.found_ahead,
+            o.found_behind,
+            o.missed_near,
+            o.missed_far,
+            o.missed_with_other
         );
     }
-    println!(
+    out!(
         "overlay precision (per frame the top k detections, k = its ground-truth boxes): {}/{} = {}",
         overlay.true_positives,
         overlay.shown,
         percent(overlay.precision)
     );
-    println!("  {}", false_kinds_line(&overlay.false_kinds, args.iou));
+    out!("  {}", false_kinds_line(&overlay.false_kinds, args.iou));
     let per_frame = |n: usize| if drawn.frames > 0 { n as f32 / drawn.frames as f32 } else { 0.0 };
-    println!(
+    out!(
         "overlay as drawn (at most {} boxes, calibrated ones with probability ≥ {}): {}/{} = {}; {:.2} boxes per \
          frame, {} of {} frames without a box",
         args.overlay_top,
@@ -1090,19 +1152,20 @@ fn print_diagnosis(
         drawn.frames_without_boxes,
         drawn.frames
     );
-    println!("  {}", false_kinds_line(&drawn.false_kinds, args.iou));
+    out!("  {}", false_kinds_line(&drawn.false_kinds, args.iou));
+    Ok(())
 }
 
 /// The reliability table: per bin of the score its detections, true positives, the true positives its
 /// scores expect, their mean score and the bin's precision; then the expected calibration error.
-pub fn print_reliability(r: &Reliability) {
-    println!("scores as probabilities (every detection, labelled by the AP's matching), by bin of the score:");
-    println!("{:<12} {:>8} {:>7} {:>9} {:>6} {:>9}", "score", "#dets", "#TP", "expected", "mean", "precision");
+pub fn print_reliability(r: &Reliability) -> anyhow::Result<()> {
+    out!("scores as probabilities (every detection, labelled by the AP's matching), by bin of the score:");
+    out!("{:<12} {:>8} {:>7} {:>9} {:>6} {:>9}", "score", "#dets", "#TP", "expected", "mean", "precision");
     let last = r.bins.len().saturating_sub(1);
     for (n, b) in r.bins.iter().enumerate() {
         let upper = if n == last { ']' } else { ')' };
         let number = |v: Option<f64>| v.map(|v| format!("{v:.3}")).unwrap_or_else(|| "-".into());
-        println!(
+        out!(
             "{:<12} {:>8} {:>7} {:>9.1} {:>6} {:>9}",
             format!("[{:.1}, {:.1}{upper}", b.lower, b.upper),
             b.detections,
@@ -1114,11 +1177,12 @@ pub fn print_reliability(r: &Reliability) {
     }
     let binned: usize = r.bins.iter().map(|b| b.detections).sum();
     let ece = r.expected_calibration_error.map(|e| format!("{e:.4}")).unwrap_or_else(|| "-".into());
-    println!(
+    out!(
         "expected calibration error {ece} over {binned} detections ({} with a score outside [0, 1]: raw scores, not \
          binned)",
         r.outside_unit_interval
     );
+    Ok(())
 }
 
 /// The overlay's false boxes by kind (`iou`: the true positives' IoU), on one line: the three most frequent

@@ -182,30 +182,30 @@ pub fn run(
             bootstrap,
             per_frame,
         };
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        out!("{}", serde_json::to_string_pretty(&report)?);
     } else {
         for f in &per_frame {
             match f.iou {
-                Some(iou) => println!("{:<40} {:6.2}", f.frame, 100.0 * iou),
-                None => println!("{:<40}      - (no layout file, counted 0)", f.frame),
+                Some(iou) => out!("{:<40} {:6.2}", f.frame, 100.0 * iou),
+                None => out!("{:<40}      - (no layout file, counted 0)", f.frame),
             }
         }
-        println!(
+        out!(
             "mean free-space IoU {:.2} over {} annotated frames ({missing} without a layout, {unannotated} \
              frames without annotation not evaluated)",
             100.0 * mean,
             per_frame.len()
         );
         if let Some(b) = &bootstrap {
-            print_bootstrap(b);
+            print_bootstrap(b)?;
         }
     }
     super::batch_result(&failures, frames.len())
 }
 
-fn print_bootstrap(b: &BootstrapReport) {
+fn print_bootstrap(b: &BootstrapReport) -> anyhow::Result<()> {
     let pct = |(lo, hi): (f32, f32)| format!("[{:.2}, {:.2}]", 100.0 * lo, 100.0 * hi);
-    println!(
+    out!(
         "{:.0} % bootstrap interval of the mean ({} resamples of the annotated frames, seed {}): {}",
         100.0 * b.level,
         b.resamples,
@@ -213,7 +213,7 @@ fn print_bootstrap(b: &BootstrapReport) {
         pct(b.mean_iou_interval)
     );
     if let Some(v) = &b.versus {
-        println!(
+        out!(
             "versus {}: mean free-space IoU {:.2} {}; difference {:+.2} {} (paired)",
             v.layouts.display(),
             100.0 * v.mean_iou,
@@ -222,4 +222,5 @@ fn print_bootstrap(b: &BootstrapReport) {
             pct(v.difference_interval)
         );
     }
+    Ok(())
 }

@@ -124,46 +124,46 @@ fn fmt_opt(v: Option<f32>) -> String {
     v.map(|v| format!("{v:.3} m")).unwrap_or_else(|| "-".into())
 }
 
-fn print_text(info: &FrameInfo) {
-    println!("frame        {}{}", info.name, info.scene.as_ref().map(|s| format!(" ({s})")).unwrap_or_default());
-    println!("image        {} × {}", info.width, info.height);
+fn print_text(info: &FrameInfo) -> anyhow::Result<()> {
+    out!("frame        {}{}", info.name, info.scene.as_ref().map(|s| format!(" ({s})")).unwrap_or_default());
+    out!("image        {} × {}", info.width, info.height);
     for (i, row) in info.k.iter().enumerate() {
         let label = if i == 0 { "K" } else { "" };
-        println!("{label:<12} [{:10.4} {:10.4} {:10.4}]", row[0], row[1], row[2]);
+        out!("{label:<12} [{:10.4} {:10.4} {:10.4}]", row[0], row[1], row[2]);
     }
     for (i, row) in info.rtilt.iter().enumerate() {
         let label = if i == 0 { "Rtilt" } else { "" };
-        println!("{label:<12} [{:8.5} {:8.5} {:8.5}]", row[0], row[1], row[2]);
+        out!("{label:<12} [{:8.5} {:8.5} {:8.5}]", row[0], row[1], row[2]);
     }
     let pixels = (info.width * info.height) as f32;
-    println!("valid depth  {} pixels ({:.1}%)", info.valid_depth, 100.0 * info.valid_depth as f32 / pixels);
-    println!(
+    out!("valid depth  {} pixels ({:.1}%)", info.valid_depth, 100.0 * info.valid_depth as f32 / pixels);
+    out!(
         "bounds       {} … {}  (upright: x right, y forward, z up; m)",
         fmt_opt_vec(info.bounds_min),
         fmt_opt_vec(info.bounds_max)
     );
-    println!("floor        {}  (0.001 quantile of height)", fmt_opt(info.floor));
-    println!("ceiling      {}  (0.999 quantile of height)", fmt_opt(info.ceiling));
+    out!("floor        {}  (0.001 quantile of height)", fmt_opt(info.floor));
+    out!("ceiling      {}  (0.999 quantile of height)", fmt_opt(info.ceiling));
     match (info.floor_plane_cells, info.unseen_floor) {
         (Some(cells), None) => {
-            println!("floor seen   yes ({cells} cells of 0.2 m of upward points within 0.1 m of it)")
+            out!("floor seen   yes ({cells} cells of 0.2 m of upward points within 0.1 m of it)")
         }
         (Some(cells), Some(z)) => {
             let why = info.not_floor.map(|why| format!("the lowest points {why}: ")).unwrap_or_default();
-            println!(
+            out!(
                 "floor seen   no ({why}{cells} cells of 0.2 m of upward points within 0.1 m of them); `detect` also \
                  searches a floor at {z:.3} m"
             )
         }
-        (None, _) => println!("floor seen   - (too few points for normals)"),
+        (None, _) => out!("floor seen   - (too few points for normals)"),
     }
     if info.objects.is_empty() {
-        println!("objects      none annotated");
+        out!("objects      none annotated");
     } else {
-        println!("objects      {}", info.objects.len());
-        println!("  {:<16} {:>24} {:>22} {:>8} {:>8}", "category", "centre (m)", "size w×d×h (m)", "yaw°", "points");
+        out!("objects      {}", info.objects.len());
+        out!("  {:<16} {:>24} {:>22} {:>8} {:>8}", "category", "centre (m)", "size w×d×h (m)", "yaw°", "points");
         for o in &info.objects {
-            println!(
+            out!(
                 "  {:<16} ({:6.3}, {:6.3}, {:6.3}) {:6.3}×{:6.3}×{:6.3} {:8.1} {:8}",
                 o.category,
                 o.centre[0],
@@ -178,15 +178,16 @@ fn print_text(info: &FrameInfo) {
         }
     }
     match &info.layout {
-        Some(l) => println!(
+        Some(l) => out!(
             "layout       {} corners, floor {:.3} m, ceiling {:.3} m, {:.2}% of points inside",
             l.corners.len(),
             l.floor,
             l.ceiling,
             100.0 * l.fraction_inside
         ),
-        None => println!("layout       none annotated"),
+        None => out!("layout       none annotated"),
     }
+    Ok(())
 }
 
 pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
@@ -198,9 +199,9 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     let pre = (cloud.len() >= NORMAL_NEIGHBOURS).then(|| Preprocessed::from_frame(&frame)).transpose()?;
     let info = describe(&frame, &cloud, pre.as_ref());
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&info)?);
+        out!("{}", serde_json::to_string_pretty(&info)?);
     } else {
-        print_text(&info);
+        print_text(&info)?;
     }
     Ok(())
 }

@@ -101,7 +101,7 @@ fn layout_one(dir: &Path, model: Option<&LayoutModel>, backend: Backend, args: &
     if args.ply {
         write_scene_ply(&args.out.join(format!("{}.ply", frame.name)), &frame, Vec::new(), Some(&predicted.room))?;
     }
-    println!(
+    out!(
         "{}: {} room, yaw {:.0}°, {:.2} × {:.2} m, floor {:.2}, ceiling {:.2}, {} hypotheses, {seconds:.3} s",
         frame.name,
         record.method,
@@ -141,7 +141,7 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
     }
     if !seconds.is_empty() {
         let mean = seconds.iter().sum::<f64>() / seconds.len() as f64;
-        println!(
+        out!(
             "wrote {} layout(s) to {} ({} path); layout time per frame (after reading it): mean {mean:.3} s, max {:.3} s",
             seconds.len(),
             args.out.display(),

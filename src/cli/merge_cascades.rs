@@ -34,10 +34,10 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
             anyhow::anyhow!("{}: cannot be merged with {}: {problem}", path.display(), args.cascades[0].display())
         })?;
     }
-    println!("{:<12} {:>8} {:>13}   from", "category", "features", "CV AP cascade");
+    out!("{:<12} {:>8} {:>13}   from", "category", "features", "CV AP cascade");
     for category in &merged.categories {
         let Some(stage) = merged.stages.get(category) else {
-            println!("{category:<12} no second stage in any of the cascades");
+            out!("{category:<12} no second stage in any of the cascades");
             continue;
         };
         // The first file whose stage is the one kept.
@@ -46,14 +46,14 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
             .zip(&args.cascades)
             .find(|(c, _)| c.stages.get(category).is_some_and(|s| s.weights == stage.weights && s.bias == stage.bias))
             .map_or("?".to_string(), |(_, p)| p.display().to_string());
-        println!(
+        out!(
             "{category:<12} {:>8} {:>13.1}   {from}",
             merged.stage_feature_set(stage).map_or("?", FeatureSet::short_name),
             100.0 * stage.cv_ap_cascade
         );
     }
     merged.write(&args.out).with_context(|| format!("writing {}", args.out.display()))?;
-    println!(
+    out!(
         "wrote the merged cascade ({} of {} categories) to {}",
         merged.stages.len(),
         merged.categories.len(),

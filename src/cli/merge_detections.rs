@@ -189,14 +189,14 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         let out = args.out.join(name);
         cog_gpu::error::write_whole(&out, serde_json::to_string_pretty(file)?.as_bytes())?;
     }
-    println!("{:<12} {:>10} {:>10}", "category", "removed", "added");
+    out!("{:<12} {:>10} {:>10}", "category", "removed", "added");
     for (n, category) in categories.iter().enumerate() {
-        println!("{category:<12} {:>10} {:>10}", removed[n], added[n]);
+        out!("{category:<12} {:>10} {:>10}", removed[n], added[n]);
         if added[n] == 0 {
             log::warn!("{}: no {category} detection in any frame", args.update.display());
         }
     }
-    println!(
+    out!(
         "merged {} frame(s) of {} with {} of {} into {}",
         merged_files.len(),
         args.base.display(),

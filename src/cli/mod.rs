@@ -1,4 +1,26 @@
 //! Subcommands of the `cog-gpu` binary.
+//!
+//! Reports go to standard output through [`out!`] and [`out_part!`], never `println!`: a write that fails
+//! (a full disk, `> /dev/full`, a file system error) is the command's error,
+//! `error: writing standard output: <why>` with status 1, where `println!` panics (status 101).
+
+/// Writes one line of a command's report to standard output, as `println!` does, and returns from the
+/// enclosing function (which returns `anyhow::Result`) with [`write_stdout`]'s error when the write fails.
+macro_rules! out {
+    () => {
+        $crate::cli::write_stdout(format_args!("\n"))?
+    };
+    ($($arg:tt)*) => {
+        $crate::cli::write_stdout(format_args!("{}\n", format_args!($($arg)*)))?
+    };
+}
+
+/// Writes part of a line of a command's report to standard output, as `print!` does; errors as [`out!`].
+macro_rules! out_part {
+    ($($arg:tt)*) => {
+        $crate::cli::write_stdout(format_args!($($arg)*))?
+    };
+}
 
 pub mod bench;
 pub mod bench_detect;
@@ -46,6 +68,20 @@ pub fn batch_result(failures: &[(std::path::PathBuf, anyhow::Error)], frames: us
     let list: Vec<String> =
         failures.iter().map(|(dir, err)| format!("  {}: {}", dir.display(), error_text(err))).collect();
     anyhow::bail!("{} of {frames} frames failed (skipped):\n{}", failures.len(), list.join("\n"))
+}
+
+/// Writes formatted text to standard output (locked for the one write): the error, if any, says it was
+/// standard output that could not be written.
+pub fn write_stdout(text: std::fmt::Arguments) -> anyhow::Result<()> {
+    use std::io::Write;
+    std::io::stdout().lock().write_fmt(text).map_err(|e| anyhow::anyhow!("writing standard output: {e}"))
+}
+
+/// Flushes what standard output still buffers (a report's last part without a line end): called at the
+/// end of every command, so that a failed flush is the command's error, not lost at exit.
+pub fn flush_stdout() -> anyhow::Result<()> {
+    use std::io::Write;
+    std::io::stdout().lock().flush().map_err(|e| anyhow::anyhow!("writing standard output: {e}"))
 }
 
 /// Options shared by every subcommand.

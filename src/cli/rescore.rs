@@ -49,6 +49,6 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         let out = args.out.join(name);
         cog_gpu::error::write_whole(&out, serde_json::to_string_pretty(&file)?.as_bytes())?;
     }
-    println!("rescored {} file(s) from {} into {}", inputs.len(), args.detections.display(), args.out.display());
+    out!("rescored {} file(s) from {} into {}", inputs.len(), args.detections.display(), args.out.display());
     Ok(())
 }

@@ -69,10 +69,10 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
             "frame": frame.name, "category": model.category, "path": backend.name(),
             "hypotheses_generated": window.set.generated, "hypotheses_kept": hypotheses.len(), "top": rows,
         });
-        println!("{}", serde_json::to_string_pretty(&out)?);
+        out!("{}", serde_json::to_string_pretty(&out)?);
         return Ok(());
     }
-    println!(
+    out!(
         "{}: {} '{}' hypotheses generated, {} kept, scored on the {}",
         frame.name,
         window.set.generated,
@@ -80,10 +80,10 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         hypotheses.len(),
         backend.name()
     );
-    println!("{:>4} {:>10}  {:>24}  {:>20}  {:>7}", "rank", "score", "centre (m)", "size w×d×h (m)", "yaw°");
+    out!("{:>4} {:>10}  {:>24}  {:>20}  {:>7}", "rank", "score", "centre (m)", "size w×d×h (m)", "yaw°");
     for row in &rows {
         let v = |key: &str, i: usize| row[key][i].as_f64().unwrap_or(f64::NAN);
-        println!(
+        out!(
             "{:>4} {:>10.4}  ({:>6.2}, {:>6.2}, {:>6.2})  {:>5.2}×{:>5.2}×{:>5.2}  {:>7.1}",
             row["rank"],
             row["score"].as_f64().unwrap_or(f64::NAN),

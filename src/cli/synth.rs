@@ -94,7 +94,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         .with_context(|| format!("generating frames into {}", args.out.display()))?;
     bar.finish_and_clear();
     let seconds = start.elapsed().as_secs_f64();
-    println!(
+    out!(
         "wrote {} frames to {} in {:.1} s ({:.2} s per frame, {} threads)",
         summary.frames,
         args.out.display(),
@@ -103,14 +103,14 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         rayon::current_num_threads()
     );
     let total: usize = summary.objects.values().sum();
-    println!("annotated objects: {total}");
+    out!("annotated objects: {total}");
     for cat in cog_gpu::category::CATEGORIES {
-        println!("  {:<12} {}", cat, summary.objects.get(cat).copied().unwrap_or(0));
+        out!("  {:<12} {}", cat, summary.objects.get(cat).copied().unwrap_or(0));
     }
     let list = |m: &std::collections::BTreeMap<String, usize>| {
         m.iter().map(|(k, v)| format!("{k} {v}")).collect::<Vec<_>>().join(", ")
     };
-    println!("sensors: {}", list(&summary.sensors));
-    println!("rooms: {}", list(&summary.rooms));
+    out!("sensors: {}", list(&summary.sensors));
+    out!("rooms: {}", list(&summary.rooms));
     Ok(())
 }

@@ -721,7 +721,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         model = model.with_surface(surface_weights(&all_weights[layout.dim()..]))?;
     }
     model.write(&out)?;
-    println!(
+    out!(
         "wrote {} ({category}: {positives} positives, {} iterations, {}, {:.0} s)",
         out.display(),
         solution.iterations,

@@ -1,14 +1,17 @@
 //! `cog-gpu train-layout --data DIR --out FILE [--discretisation manhattan|cubical] [--cog] [--edges] [--c C] [--eps E]
-//! [--max-iterations N] [--limit N]`: trains a room-layout model (`cog_gpu::room_layout::learn`) on every
-//! frame under DIR with a room annotation and writes it with its provenance (the command line, the data
-//! directory and its `manifest.json` seed when it has one, frame and hypothesis counts, solver figures).
+//! [--max-iterations N] [--limit N] [--resume]`: trains a room-layout model (`cog_gpu::room_layout::learn`) on
+//! every frame under DIR with a room annotation and writes it with its provenance (the command line, the
+//! data directory and its `manifest.json` seed when it has one, frame and hypothesis counts, solver
+//! figures). A checkpoint `<out>.ckpt` is written after every iteration, as `train` writes one; `--resume`
+//! continues from it (the same examples and options: the checkpoint's data hash and C are checked) to the
+//! weights an uninterrupted run reaches.
 
 use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{bail, Context};
 use cog_gpu::frame::{Dataset, DepthSource, Frame};
-use cog_gpu::learn::{train, SsvmOptions};
+use cog_gpu::learn::{CuttingPlane, SsvmOptions};
 use cog_gpu::room_layout::learn::{LayoutExample, LayoutOracle};
 use cog_gpu::room_layout::model::LayoutModel;
 use cog_gpu::room_layout::voxels::{Descriptor, Discretisation};
@@ -48,6 +51,10 @@ pub struct Args {
     /// Use only the first N frames (in path order).
     #[arg(long, value_parser = options::at_least_one)]
     pub limit: Option<usize>,
+    /// Continue from the checkpoint `<out>.ckpt` (same data and options; --max-iterations counts the
+    /// interrupted run's QP solves too).
+    #[arg(long)]
+    pub resume: bool,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -77,6 +84,10 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     let descriptor = Descriptor::new(args.discretisation.into(), args.cog, args.edges);
     // The model's file checked before the training, as `train` does: not a failure after it.
     super::options::writable_output_file(&args.out)?;
+    let checkpoint = PathBuf::from(format!("{}.ckpt", args.out.display()));
+    if args.resume && !checkpoint.is_file() {
+        bail!("--resume: no checkpoint at {}", checkpoint.display());
+    }
     let mut frames = Dataset::open(&args.data)?.frames;
     if let Some(limit) = args.limit {
         frames.truncate(limit);
@@ -116,9 +127,20 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         ceiling
     );
     let oracle = LayoutOracle { descriptor, examples };
-    let options =
-        SsvmOptions { c: args.c, epsilon: args.eps, max_iterations: args.max_iterations, ..SsvmOptions::default() };
-    let solution = train(&oracle, options)?;
+    let options = SsvmOptions {
+        c: args.c,
+        epsilon: args.eps,
+        max_iterations: args.max_iterations,
+        checkpoint: Some(checkpoint.clone()),
+        ..SsvmOptions::default()
+    };
+    let mut solver = if args.resume {
+        log::info!("resuming from {}", checkpoint.display());
+        CuttingPlane::resume(options, &checkpoint)?
+    } else {
+        CuttingPlane::new(options)?
+    };
+    let solution = solver.train(&oracle)?;
     eprintln!(
         "trained in {:.1} s: {} QP solves, converged {}, primal {:.5}, dual {:.5}",
         started.elapsed().as_secs_f64(),
