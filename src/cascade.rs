@@ -482,6 +482,37 @@ pub struct CascadeTraining {
     pub calibrations: BTreeMap<String, Calibration>,
 }
 
+impl CascadeTraining {
+    /// What differs between two trainings' records, one phrase per field (data, detections, frames, IoU,
+    /// and the categories whose model calibration differs or is recorded in one only).
+    pub fn differences(&self, other: &CascadeTraining) -> Vec<String> {
+        let mut differences = Vec::new();
+        if self.data != other.data {
+            differences.push(format!("data '{}' and '{}'", self.data, other.data));
+        }
+        if self.detections != other.detections {
+            differences.push(format!("detections '{}' and '{}'", self.detections, other.detections));
+        }
+        if self.frames != other.frames {
+            differences.push(format!("{} and {} frames", self.frames, other.frames));
+        }
+        if self.iou != other.iou {
+            differences.push(format!("IoU {} and {}", self.iou, other.iou));
+        }
+        let categories: std::collections::BTreeSet<&String> =
+            self.calibrations.keys().chain(other.calibrations.keys()).collect();
+        let recalibrated: Vec<&str> = categories
+            .into_iter()
+            .filter(|c| self.calibrations.get(*c) != other.calibrations.get(*c))
+            .map(String::as_str)
+            .collect();
+        if !recalibrated.is_empty() {
+            differences.push(format!("the first-stage calibrations of {}", recalibrated.join(", ")));
+        }
+        differences
+    }
+}
+
 /// A trained cascade: the context categories (feature order) and a second stage per category.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Cascade {
@@ -659,16 +690,8 @@ impl Cascade {
         }
         if self.training != other.training {
             return Err(format!(
-                "the cascades were trained on different frames, detections or models (data '{}' and '{}', \
-                 detections '{}' and '{}', {} and {} frames, IoU {} and {}, or the models' calibrations)",
-                self.training.data,
-                other.training.data,
-                self.training.detections,
-                other.training.detections,
-                self.training.frames,
-                other.training.frames,
-                self.training.iou,
-                other.training.iou
+                "the cascades were not trained on the same frames, detections and models: {}",
+                self.training.differences(&other.training).join(", ")
             ));
         }
         if self.exclusion != other.exclusion {

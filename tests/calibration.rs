@@ -288,10 +288,37 @@ fn the_raw_score_at_a_probability_is_the_exact_boundary() {
     let c = calibration(2.0, -1.0);
     assert!((c.raw_score_at(0.5) - 0.5).abs() <= 1e-6);
     assert!((c.raw_score_at(0.75) - ((3.0f32).ln() + 1.0) / 2.0).abs() <= 1e-6);
-    for (a, b) in [(2.0, -1.0), (12.24, -9.39), (0.01, 3.0), (8.7, -6.4)] {
+    // With the cut near 0, where the f32 values are dense and the rounded probability flat over ~10⁹ of
+    // them ((1, 0) at 0.5; the shipped chair's slope with b = logit(0.001) at 0.001; a = 10⁻³ near 1), and
+    // at the coefficients' bounds.
+    let logit = |p: f64| (p / (1.0 - p)).ln();
+    let cases = [
+        (2.0, -1.0),
+        (12.24, -9.39),
+        (0.01, 3.0),
+        (8.7, -6.4),
+        (1.0, 0.0),
+        (1.0, 1e-3),
+        (15.43, logit(0.001)),
+        (1e-3, 0.0),
+        (1e-3, 1e6),
+        (1e-3, -1e6),
+        (1e6, 1e6),
+        (1e6, -1e6),
+    ];
+    for (a, b) in cases {
         let c = calibration(a, b);
-        for p in [1e-6f32, 0.001, 0.05, 0.3, 0.5, 0.9, 0.999] {
+        for p in [1e-6f32, 0.001, 0.05, 0.3, 0.5, 0.9, 0.999, 0.9999999] {
             let raw = c.raw_score_at(p);
+            if raw == f32::NEG_INFINITY {
+                // Every score reaches p (b = 10⁶ puts even −f32::MAX at probability 1).
+                assert!(c.probability(-f32::MAX) >= p, "a {a} b {b} p {p}");
+                continue;
+            }
+            if raw == f32::INFINITY {
+                assert!(c.probability(f32::MAX) < p, "a {a} b {b} p {p}");
+                continue;
+            }
             assert!(c.probability(raw) >= p, "a {a} b {b} p {p}: σ at {raw} is {}", c.probability(raw));
             assert!(c.probability(raw.next_down()) < p, "a {a} b {b} p {p}: {raw} is not the smallest");
         }

@@ -558,7 +558,8 @@ fn cli_trains_a_cascade_and_rescores_files() {
     let out = run(&["merge-cascades", &v4_file, other_file.to_str().unwrap(), "--out", merged_path]);
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("other.json") && err.contains("v4.json") && err.contains("different frames"), "{err}");
+    assert!(err.contains("other.json") && err.contains("v4.json") && err.contains("not trained on the same"), "{err}");
+    assert!(err.contains(" frames") && !err.contains("data '") && !err.contains("calibrations"), "{err}");
     // The output may not overwrite an input.
     let out = run(&["merge-cascades", &v4_file, &v6_file, "--out", &v6_file]);
     assert!(!out.status.success() && String::from_utf8_lossy(&out.stderr).contains("--out"));
@@ -1063,7 +1064,21 @@ fn merging_cascades_of_different_sets_equals_training_them_together() {
     .unwrap()
     .0;
     let err = v4_v5.merged_with(&fewer).unwrap_err();
-    assert!(err.contains("different frames") && err.contains("60"), "{err}");
+    assert!(err.contains("not trained on the same") && err.contains("60 frames"), "{err}");
+    // Only a model's calibration differs: the message names that model, not the data (it named every field).
+    let mut recalibrated = v6.clone();
+    let calibration = cog_gpu::calibration::Calibration {
+        a: 2.0,
+        b: -1.0,
+        detections: 10,
+        true_positives: 3,
+        iou: 0.25,
+        data: String::new(),
+        frames: 5,
+    };
+    recalibrated.training.calibrations.insert("bed".into(), calibration);
+    let err = v4_v5.merged_with(&recalibrated).unwrap_err();
+    assert!(err.ends_with("the first-stage calibrations of bed"), "{err}");
     let mut other_categories = v6.clone();
     other_categories.categories.pop();
     let err = v4_v5.merged_with(&other_categories).unwrap_err();

@@ -20,8 +20,9 @@
 //! along the width axis. A pixel's gradient is assigned through its edge: the image edge direction
 //! `e = (−dy, dx)` is written as `α·J·a + β·J·z`, which gives the edge's direction `ψ = atan2(β, α)` on the
 //! face; the gradient's direction on the face is the in-face normal of that edge, `φ = ψ + π/2 (mod π)`
-//! (for a fronto-parallel face this is exactly the image gradient's angle, so bin 0 holds horizontal
-//! gradients as in HOG). Working through the edge makes the descriptor exact for planar texture in any
+//! (for a fronto-parallel face this is the image gradient's angle measured with the face's up axis, i.e.
+//! image y **up**: bin 0 holds horizontal gradients as in HOG, and COG bin `k` is the HOG bin `(9 − k) mod 9`
+//! of `atan2(dy, dx) mod π` with image y down — the same bins, mirrored). Working through the edge makes the descriptor exact for planar texture in any
 //! pose: a 3D edge on the face lands in the same bin whatever the viewpoint, which comparing the gradient
 //! itself with projected bin directions would not do (perpendicularity is not preserved by projection).
 //! The magnitude is split linearly in φ between the bins `⌊9φ/π⌋` and the next one (mod 9), the two
