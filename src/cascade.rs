@@ -326,9 +326,10 @@ pub fn room_in(path: &Path, text: &str) -> Result<Option<Room>> {
     Ok(Some(Room { corners: layout.corners.into_iter().map(Vec2::from).collect(), floor }))
 }
 
-/// `(D, A)` of the module doc: the signed distance (metres) from `cuboid`'s footprint to the closest wall
-/// segment of `room`, and its angle to that wall folded into [0, 1] (1 = 45°). `None` when the polygon has
-/// no segment of positive length.
+/// `(D, A)` of the module doc: the signed distance (metres) from the nearest of `cuboid`'s four footprint
+/// corners to the closest wall segment of `room` (a footprint across a wall keeps its corners' distance,
+/// not 0), and its angle to that wall folded into [0, 1] (1 = 45°). `None` when the polygon has no segment
+/// of positive length.
 pub fn wall_context(cuboid: &Cuboid, room: &[Vec2]) -> Option<(f64, f64)> {
     let footprint = cuboid.footprint();
     let mut closest: Option<(f32, Vec2)> = None;
