@@ -611,6 +611,12 @@ fn objects_array<'a>(path: &Path, root: &'a Value) -> Result<&'a Vec<Value>> {
 /// polygon are skipped; a polygon that is not a 4-corner footprint, or is degenerate, is skipped with a
 /// warning (the real dataset has a few); a file of the wrong shape is an error.
 pub fn read_objects(path: &Path) -> Result<Vec<Object>> {
+    Ok(read_positioned_objects(path)?.into_iter().map(|(_, object)| object).collect())
+}
+
+/// [`read_objects`] with each object's position in the file's `objects` array (which counts the entries
+/// it skips), so that a report can name the entry a user finds in the file.
+pub fn read_positioned_objects(path: &Path) -> Result<PositionedObjects> {
     let root = read_json(path)?;
     let mut objects = Vec::new();
     for (i, entry) in objects_array(path, &root)?.iter().enumerate() {
@@ -642,7 +648,7 @@ pub fn read_objects(path: &Path) -> Result<Vec<Object>> {
         let corners = [0, 1, 2, 3].map(|j| Vec2::new(poly.xs[j] as f32, poly.zs[j] as f32));
         match Cuboid::from_polygon(corners, -poly.y_max as f32, -poly.y_min as f32) {
             Some(cuboid) if cuboid.size.max_element() <= MAX_OBJECT_SIZE_M => {
-                objects.push(Object { category, label, cuboid })
+                objects.push((i, Object { category, label, cuboid }))
             }
             Some(cuboid) => log::warn!(
                 "{}: {what} ('{name}') is {:?} m, larger than {MAX_OBJECT_SIZE_M} m on a side; skipped",
@@ -686,11 +692,21 @@ pub fn read_layout(path: &Path) -> Result<Option<RoomLayout>> {
 /// `annotation3Dlayout/index.json`, each optional) without decoding its images, for evaluating many frames.
 /// Gives the same objects and layout as [`Frame::read`].
 pub fn read_annotations(dir: &Path) -> Result<(Vec<Object>, Option<RoomLayout>)> {
+    let (objects, layout) = read_positioned_annotations(dir)?;
+    Ok((objects.into_iter().map(|(_, object)| object).collect(), layout))
+}
+
+/// Objects, each with its position in its annotation file's `objects` array ([`read_positioned_objects`]).
+pub type PositionedObjects = Vec<(usize, Object)>;
+
+/// [`read_annotations`] with each object's position in `annotation3Dfinal/index.json`'s `objects` array
+/// ([`read_positioned_objects`]).
+pub fn read_positioned_annotations(dir: &Path) -> Result<(PositionedObjects, Option<RoomLayout>)> {
     if !dir.is_dir() {
         return Err(not_a_frame_dir(dir));
     }
     let objects_path = dir.join("annotation3Dfinal").join("index.json");
-    let objects = if objects_path.is_file() { read_objects(&objects_path)? } else { Vec::new() };
+    let objects = if objects_path.is_file() { read_positioned_objects(&objects_path)? } else { Vec::new() };
     let layout_path = dir.join("annotation3Dlayout").join("index.json");
     let layout = if layout_path.is_file() { read_layout(&layout_path)? } else { None };
     Ok((objects, layout))

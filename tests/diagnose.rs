@@ -815,4 +815,27 @@ fn objects_keep_their_annotation_index_when_out_of_view_boxes_are_ignored() {
         !kept_keys.contains(&(frame.clone(), object)) && kept_keys.iter().any(|(f, o)| *f == frame && *o > object)
     });
     assert!(shifted, "no ignored box comes before a kept one of its frame");
+
+    // The index is the box's position in the file's `objects` array: with a null entry and a wall put
+    // before the boxes of one frame's file (entries the reader skips), that frame's boxes are listed two
+    // further on, and each names its own entry (it named the position among the boxes read, 2026-12-08).
+    let first = all[0]["frame"].as_str().unwrap().to_string();
+    let file = data.join(&first).join("annotation3Dfinal/index.json");
+    let mut annotation: Value = serde_json::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap();
+    let entries = annotation["objects"].as_array_mut().unwrap();
+    entries.insert(0, serde_json::json!({"name": "wall"}));
+    entries.insert(0, Value::Null);
+    std::fs::write(&file, annotation.to_string()).unwrap();
+    let moved = objects(&[]);
+    assert_eq!(moved.len(), all.len());
+    for (before, after) in all.iter().zip(&moved) {
+        let shift = if before["frame"] == first.as_str() { 2 } else { 0 };
+        assert_eq!(after["object"].as_u64().unwrap(), before["object"].as_u64().unwrap() + shift, "{after}");
+        if shift == 2 {
+            let entry = &annotation["objects"][after["object"].as_u64().unwrap() as usize];
+            let name = entry["name"].as_str().unwrap().to_lowercase();
+            let category = after["category"].as_str().unwrap();
+            assert!(name.starts_with(category), "entry {entry} for a {category}");
+        }
+    }
 }

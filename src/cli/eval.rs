@@ -43,7 +43,9 @@ use cog_gpu::eval::{
     CategoryEvaluation, Detection, FrameDetections, IgnoredCounts, SurfaceAccuracy, WithoutIgnored,
 };
 use cog_gpu::features::Preprocessed;
-use cog_gpu::frame::{frame_name, read_annotations, unique_frame_names, Dataset, DepthSource, Frame, Object};
+use cog_gpu::frame::{
+    frame_name, read_positioned_annotations, unique_frame_names, Dataset, DepthSource, Frame, Object, PositionedObjects,
+};
 use cog_gpu::geometry::{in_view_share, Camera};
 use cog_gpu::model::{read_models_dir, Model};
 use cog_gpu::nms::DEFAULT_NMS_IOU;
@@ -183,7 +185,8 @@ struct VersusSummary {
 }
 
 /// One frame's ground truth and its detections (`None`: no detections file).
-type FrameInputs = (Vec<Object>, Option<Vec<Detection>>);
+/// A frame's objects with their positions in its annotation file, and its detections (`None`: no file).
+type FrameInputs = (PositionedObjects, Option<Vec<Detection>>);
 
 /// The `--diagnose --json` document.
 #[derive(Serialize)]
@@ -336,7 +339,7 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         .par_iter()
         .zip(&names)
         .map(|(dir, name)| -> anyhow::Result<_> {
-            let (objects, _layout) = read_annotations(dir)?;
+            let (objects, _layout) = read_positioned_annotations(dir)?;
             let detections = match files.get(name) {
                 Some(path) => {
                     let file = FrameDetections::read(path)?;
@@ -376,8 +379,14 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     let evaluated = frames.len();
 
     let missing = per_frame.iter().filter(|(_, d)| d.is_none()).count();
-    let (truth, detections): (Vec<Vec<Object>>, Vec<Vec<Detection>>) =
+    // `positions[image][o]`: object o's position in its annotation file's `objects` array, which
+    // `--objects` prints (it counts the null entries and room structure that the reader skips).
+    let (positioned, detections): (Vec<PositionedObjects>, Vec<Vec<Detection>>) =
         per_frame.into_iter().map(|(t, d)| (t, d.unwrap_or_default())).unzip();
+    let positions: Vec<Vec<usize>> =
+        positioned.iter().map(|objects| objects.iter().map(|(p, _)| *p).collect()).collect();
+    let truth: Vec<Vec<Object>> =
+        positioned.into_iter().map(|objects| objects.into_iter().map(|(_, o)| o).collect()).collect();
     no_frame_detected(missing, evaluated, &args.detections)?;
     if missing > 0 {
         log::warn!(
@@ -409,7 +418,8 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         let drawn = overlay_of(OverlayRule::Drawn { top: args.overlay_top, min_probability: args.overlay_min_score });
         let reliability = reliability(&truth, &detections, &categories, args.iou);
         let objects = if args.objects {
-            Some(named_outcomes(&frames, &truth, annotation_index.as_deref(), &detections, &categories, args.iou)?)
+            let index = ObjectIndex { kept: annotation_index.as_deref(), positions: &positions };
+            Some(named_outcomes(&frames, &truth, index, &detections, &categories, args.iou)?)
         } else {
             None
         };
@@ -835,14 +845,22 @@ fn window_recall(
     Ok(all)
 }
 
+/// How `--objects` names a box: its position in its frame's annotation file.
+struct ObjectIndex<'a> {
+    /// With boxes left out (`--ignore-out-of-view`), `kept[image][o]`: kept box `o`'s index among the
+    /// frame's objects as read.
+    kept: Option<&'a [Vec<usize>]>,
+    /// `positions[image][r]`: read object `r`'s position in the file's `objects` array.
+    positions: &'a [Vec<usize>],
+}
+
 /// `--objects`: every ground-truth box of `categories` ([`object_outcomes`]) with its frame's name and its
-/// share in view, which reads each frame with such a box (its camera and image size). With boxes left out
-/// (`--ignore-out-of-view`), `annotation_index[image][o]` is kept box `o`'s index in the frame's
-/// annotation, which the outcome then names, as without them.
+/// share in view, which reads each frame with such a box (its camera and image size). The outcome names
+/// the box by its position in the frame's annotation file ([`ObjectIndex`]), with or without boxes left out.
 fn named_outcomes(
     frames: &[PathBuf],
     truth: &[Vec<Object>],
-    annotation_index: Option<&[Vec<usize>]>,
+    index: ObjectIndex,
     detections: &[Vec<Detection>],
     categories: &[String],
     iou: f32,
@@ -857,7 +875,8 @@ fn named_outcomes(
             let (camera, width, height) = &cameras[&outcome.image];
             let box_ = &truth[outcome.image][outcome.object].cuboid;
             let in_view = in_view_share(box_, camera, *width, *height);
-            let object = annotation_index.map_or(outcome.object, |index| index[outcome.image][outcome.object]);
+            let read = index.kept.map_or(outcome.object, |kept| kept[outcome.image][outcome.object]);
+            let object = index.positions[outcome.image][read];
             NamedOutcome {
                 frame: frame_name(&frames[outcome.image]),
                 in_view,
