@@ -464,6 +464,12 @@ fn train_writes_a_model_and_resumes_to_the_same_weights() {
     let read = |p: &Path| -> serde_json::Value { serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap() };
     let (a, b) = (read(&straight), read(&split));
     assert_eq!(a["category"], "bed");
+    // The options that shape the weights are in the file (the target, pruning and cap were not).
+    let training = &a["training"];
+    assert_eq!(
+        (&training["target"], &training["prune_after"], &training["max_iterations"]),
+        (&"best-window".into(), &10.into(), &3.into())
+    );
     assert_eq!(a["weights"].as_array().unwrap().len(), FeatureLayout::default().dim());
     assert_eq!(a["weights"], b["weights"], "a resumed run must end with the same weights");
     assert!(a["weights"].as_array().unwrap().iter().any(|v| v.as_f64().unwrap() != 0.0));
@@ -477,6 +483,9 @@ fn train_writes_a_model_and_resumes_to_the_same_weights() {
         let out = run(&changed);
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(!out.status.success() && err.contains("data hash"), "{extra:?}: {err}");
+        // A 1-slack run has one example whatever the data: no "1 examples against 1" (it said so).
+        let error = err.lines().find(|l| l.starts_with("error:")).unwrap_or_default();
+        assert!(!error.contains("1 examples"), "{extra:?}: {error}");
     }
 }
 
@@ -627,6 +636,19 @@ fn train_rejects_bad_input_with_clear_errors() {
         (
             vec!["train".into(), "--data".into(), FRAME.into(), "--category".into(), "spaceship".into()],
             "unknown category",
+        ),
+        // 0 dropped every constraint as it came in: the run learnt nothing, with exit 0.
+        (
+            vec![
+                "train".into(),
+                "--data".into(),
+                FRAME.into(),
+                "--category".into(),
+                "chair".into(),
+                "--prune-after".into(),
+                "0".into(),
+            ],
+            "--prune-after",
         ),
         (
             vec![

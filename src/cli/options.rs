@@ -200,6 +200,11 @@ pub fn negatives(text: &str) -> Result<usize, String> {
     Ok(count(text, 0, MAX_EXAMPLES)? as usize)
 }
 
+/// `--prune-after`: 1..=u32::MAX solves.
+pub fn positive_u32(text: &str) -> Result<u32, String> {
+    Ok(count(text, 1, u64::from(u32::MAX))? as u32)
+}
+
 /// Counts that must be at least 1 (`--limit`, `--max-per-category`).
 pub fn at_least_one(text: &str) -> Result<usize, String> {
     Ok(count(text, 1, usize::MAX as u64)? as usize)

@@ -177,8 +177,9 @@ pub struct Args {
     /// refused above this; every example's `--candidates` feature vectors).
     #[arg(long, default_value_t = 3.0)]
     pub cache_gib: f64,
-    /// Drop constraints whose α stayed 0 for this many solves.
-    #[arg(long, default_value_t = 10)]
+    /// Drop constraints whose α stayed 0 for this many solves (at least 1: with 0 every constraint left
+    /// the working set as it came in, and the run learnt nothing).
+    #[arg(long, default_value_t = 10, value_parser = options::positive_u32)]
     pub prune_after: u32,
     /// A positive's output: the window's hypothesis nearest the annotation (best-window), or the
     /// annotated cuboid itself (exact, the paper's choice).
@@ -378,7 +379,12 @@ fn check_examples(
         log::warn!("{} positive examples have no point inside their box; not trained on", before - examples.len());
     }
     if !examples.iter().any(|ex| ex.truth.is_some()) {
-        bail!("no positive example has points inside its box: nothing to train on");
+        bail!(
+            "no positive example left to train on ({} dropped here for having no point inside their box; \
+             --skip-unseen, --skip-out-of-view and --support surfaces leave out instances before, as the log \
+             says)",
+            before - examples.len()
+        );
     }
     for ex in examples.iter() {
         let yaws = ex.yaws(settings.yaw_anchor);
@@ -698,6 +704,13 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     });
     // Apart from the literal above, which is at serde_json's macro recursion limit.
     training["skip_out_of_view"] = serde_json::json!(args.skip_out_of_view);
+    // The rest of the options that shape the weights, so that a model says how to train it again.
+    training["target"] = serde_json::json!(match args.target {
+        TargetArg::BestWindow => "best-window",
+        TargetArg::Exact => "exact",
+    });
+    training["prune_after"] = serde_json::json!(args.prune_after);
+    training["max_iterations"] = serde_json::json!(args.max_iterations);
     let all_weights: Vec<f32> = solution.w.iter().map(|&v| v as f32).collect();
     let weights = all_weights[..layout.dim()].to_vec();
     let features = FeatureSettings {

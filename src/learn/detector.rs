@@ -1424,13 +1424,14 @@ fn choose_negatives(
     let mut chosen: Vec<usize> =
         spread(rest.len(), count - hard_count).into_iter().map(|n| rest[n]).chain(hard.iter().copied()).collect();
     chosen.sort_unstable();
+    let range = match (scores.iter().copied().reduce(f32::min), scores.iter().copied().reduce(f32::max)) {
+        (Some(low), Some(high)) => format!(" (their best detection scores {low:.3} to {high:.3})"),
+        _ => String::new(),
+    };
     log::info!(
-        "{category}: as negatives the {} hardest of {} frames without one (their best detection scores {:.3} to \
-         {:.3}) and {} spread over the others",
+        "{category}: as negatives the {} hardest of {} frames without one{range} and {} spread over the others",
         hard.len(),
         candidates.len(),
-        scores.iter().copied().fold(f32::INFINITY, f32::min),
-        scores.iter().copied().fold(f32::NEG_INFINITY, f32::max),
         count - hard_count,
     );
     Ok(chosen)

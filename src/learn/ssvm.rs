@@ -307,10 +307,20 @@ impl CuttingPlane {
             self.state.w = vec![0.0; dim];
         } else if self.state.num_examples != num_examples || self.state.dim != dim || self.state.data_hash != data_hash
         {
+            // Counts only where they differ: a 1-slack run ([`super::OneSlack`]) has one example whatever
+            // the training set, and "1 examples against 1" named no difference.
+            let mut differs = Vec::new();
+            if self.state.num_examples != num_examples {
+                differs.push(format!("{} examples against this run's {num_examples}", self.state.num_examples));
+            }
+            if self.state.dim != dim {
+                differs.push(format!("dimension {} against this run's {dim}", self.state.dim));
+            }
+            differs.push(format!("data hash {:016x} against this run's {data_hash:016x}", self.state.data_hash));
             return Err(Error::Input(format!(
-                "SSVM: the saved run has {} examples of dimension {} (data hash {:016x}); the oracle has {} of \
-                 dimension {} (data hash {:016x}): resume only with the same training data and features",
-                self.state.num_examples, self.state.dim, self.state.data_hash, num_examples, dim, data_hash
+                "SSVM: the saved run was trained on other examples, features or settings ({}): resume only with \
+                 the same training data and options",
+                differs.join(", ")
             )));
         }
         self.ground_truth = ground_truth;
