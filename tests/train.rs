@@ -628,6 +628,9 @@ fn train_rejects_bad_input_with_clear_errors() {
     let dir = tempfile::tempdir().unwrap();
     let missing = dir.path().join("nowhere");
     let out_model = dir.path().join("m/bed.json");
+    let chair = |extra: &[&str]| -> Vec<String> {
+        ["train", "--data", FRAME, "--category", "chair"].iter().chain(extra).map(|a| a.to_string()).collect()
+    };
     let cases: Vec<(Vec<String>, &str)> = vec![
         (
             vec!["train".into(), "--data".into(), missing.display().to_string(), "--category".into(), "bed".into()],
@@ -637,19 +640,10 @@ fn train_rejects_bad_input_with_clear_errors() {
             vec!["train".into(), "--data".into(), FRAME.into(), "--category".into(), "spaceship".into()],
             "unknown category",
         ),
+        // The latent training's options without --surfaces-from were accepted and did nothing.
+        (chair(&["--cccp-rounds", "2"]), "--surfaces-from"),
         // 0 dropped every constraint as it came in: the run learnt nothing, with exit 0.
-        (
-            vec![
-                "train".into(),
-                "--data".into(),
-                FRAME.into(),
-                "--category".into(),
-                "chair".into(),
-                "--prune-after".into(),
-                "0".into(),
-            ],
-            "--prune-after",
-        ),
+        (chair(&["--prune-after", "0"]), "--prune-after"),
         (
             vec![
                 "train".into(),

@@ -228,15 +228,15 @@ pub struct Args {
     /// With --surfaces-from: how the first CCCP round's slices are chosen: `upward`, each ground truth's
     /// slice with the most upward-facing points, or `centre`, the paper's initialisation (surface weights
     /// from the pre-trained model's centre layer, height biases random in [0, 1], slices imputed with them).
-    #[arg(long, value_enum, default_value_t = SurfaceInitArg::Upward)]
+    #[arg(long, value_enum, default_value_t = SurfaceInitArg::Upward, requires = "surfaces_from")]
     pub surface_init: SurfaceInitArg,
     #[arg(value_parser = options::iterations)]
     /// With --surfaces-from: most CCCP rounds (each a full S-SVM solve with the slices imputed).
-    #[arg(long, default_value_t = 3)]
+    #[arg(long, default_value_t = 3, requires = "surfaces_from")]
     pub cccp_rounds: usize,
     #[arg(value_parser = options::iterations)]
     /// With --surfaces-from: full passes over the sliding windows allowed to each CCCP round after the first.
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = 2, requires = "surfaces_from")]
     pub round_full_passes: usize,
 }
 
