@@ -324,3 +324,61 @@ fn the_raw_score_at_a_probability_is_the_exact_boundary() {
         }
     }
 }
+
+/// `calibrate` checks that every model file can be written before it writes the first: with a directory
+/// in the place of the second model's file, the run fails naming it and the first model is not written
+/// either (it was: the models before the failure calibrated, the rest not). Eight synthetic frames; per
+/// annotated bed and chair one detection on the box (raw 2) and one beside it (raw −1), so both fit.
+#[test]
+fn calibrate_writes_no_model_when_one_cannot_be_written() {
+    use cog_gpu::eval::FrameDetections;
+    use cog_gpu::synth::{self, SynthOptions};
+    let tmp = tempfile::tempdir().unwrap();
+    let (data, dets, models) = (tmp.path().join("data"), tmp.path().join("dets"), tmp.path().join("models"));
+    std::fs::create_dir_all(&dets).unwrap();
+    std::fs::create_dir_all(&models).unwrap();
+    let categories = ["bed", "chair"];
+    for index in 0..8 {
+        let options = SynthOptions { rooms: vec![synth::room::RoomType::Bedroom], ..SynthOptions::small(160, 120) };
+        let synthetic = synth::generate_frame(5, index, &options).unwrap();
+        let frame = &synthetic.frame;
+        synthetic.write(&data.join(&frame.name), None).unwrap();
+        let mut detections = Vec::new();
+        for object in frame.objects.iter().filter(|o| categories.contains(&o.category.as_str())) {
+            let mut hit = Detection::new(&object.category, &object.cuboid, 2.0);
+            hit.raw_score = Some(2.0);
+            let beside = Cuboid { centre: object.cuboid.centre + Vec3::new(5.0, 0.0, 0.0), ..object.cuboid };
+            let mut miss = Detection::new(&object.category, &beside, -1.0);
+            miss.raw_score = Some(-1.0);
+            detections.extend([hit, miss]);
+        }
+        FrameDetections { frame: frame.name.clone(), detections }
+            .write(&dets.join(format!("{}.json", frame.name)))
+            .unwrap();
+    }
+    for category in categories {
+        std::fs::copy(format!("assets/models/{category}.json"), models.join(format!("{category}.json"))).unwrap();
+    }
+    let out = tmp.path().join("out");
+    std::fs::create_dir_all(out.join("chair.json")).unwrap();
+    let run = |out: &std::path::Path| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_cog-gpu"))
+            .args(["calibrate", "--data", data.to_str().unwrap(), "--detections", dets.to_str().unwrap()])
+            .args(["--models", models.to_str().unwrap(), "--out", out.to_str().unwrap()])
+            .output()
+            .unwrap()
+    };
+    let failed = run(&out);
+    let err = String::from_utf8_lossy(&failed.stderr);
+    assert_eq!(failed.status.code(), Some(1), "{err}");
+    assert!(err.contains("chair.json") && err.contains("nothing written"), "{err}");
+    assert!(!out.join("bed.json").exists(), "the bed model was written before the chair failed");
+    // The same run into a writable directory calibrates both.
+    let written = tmp.path().join("written");
+    let ok = run(&written);
+    assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stderr));
+    for category in categories {
+        let model = Model::read(&written.join(format!("{category}.json"))).unwrap();
+        assert!(model.calibration.is_some(), "{category}");
+    }
+}

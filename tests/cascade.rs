@@ -618,18 +618,22 @@ fn cli_trains_a_cascade_and_rescores_files() {
     let mut detections = frame(0).detections;
     detections[0].score = 0.5;
     FrameDetections { frame: "f00".into(), detections }.write(&other.join("f00.json")).unwrap();
+    // A good file read before it: nothing is written all the same (it was).
+    std::fs::copy(first.join("f01.json"), other.join("a01.json")).unwrap();
+    let other_rescored = tmp.path().join("other-rescored");
     let out = run(&[
         "rescore",
         "--detections",
         other.to_str().unwrap(),
         "--out",
-        tmp.path().join("other-rescored").to_str().unwrap(),
+        other_rescored.to_str().unwrap(),
         "--cascade",
         cascade_file.to_str().unwrap(),
     ]);
     assert_eq!(out.status.code(), Some(1));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("f00.json") && err.contains("another model than the one the cascade"), "{err}");
+    assert!(!other_rescored.join("a01.json").exists(), "a refused run wrote part of its files");
 
     // Rescoring in place would lose the first-stage files: refused. Rescored files are not cascade input.
     let out = run(&["rescore", "--detections", first.to_str().unwrap(), "--out", first.to_str().unwrap()]);

@@ -100,6 +100,10 @@ fn sizes_come_from_the_statistics_file() {
     assert_eq!(sizes[44], Vec3::new(2.191, 2.244, 1.42));
     let err = SizeQuantiles::from_stats_file(Path::new(STATS), "spaceship").unwrap_err();
     assert!(err.to_string().contains("spaceship"));
+    // The file names the nightstand as SUN RGB-D does, `night_stand` (median width 0.61 m): found under
+    // cog-gpu's name (it was not).
+    let nightstand = SizeQuantiles::from_stats_file(Path::new(STATS), "nightstand").unwrap();
+    assert_eq!(nightstand.widths[2], 0.61);
     // From cuboids: quantiles by linear interpolation.
     let cuboids: Vec<Cuboid> =
         (0..11).map(|i| Cuboid::new(Vec3::ZERO, Vec3::new(1.0 + 0.1 * i as f32, 1.0, 1.0), 0.0)).collect();

@@ -318,7 +318,8 @@ fn mean_times(times: &[FrameTimes]) -> serde_json::Value {
     let hypotheses: f64 = times.iter().map(|t| t.stages.hypotheses as f64).sum();
     let score_s: f64 = times.iter().map(|t| t.stages.score_s).sum();
     mean.insert("hypotheses_per_s".into(), json!(hypotheses / score_s.max(f64::MIN_POSITIVE)));
-    // Each model's window per frame (categories without a model left out), as `hypotheses` is.
+    // Each model's window per frame, as `hypotheses` is (categories whose window scored nothing over the
+    // run — without a model, or a surface model with no surface to search — left out).
     let per_category: serde_json::Map<String, serde_json::Value> = cog_gpu::category::CATEGORIES
         .iter()
         .enumerate()
@@ -368,12 +369,16 @@ fn print_report(report: &serde_json::Value) -> anyhow::Result<()> {
             columns.iter().map(|c| format!(" {:>10.4}", path["mean"][c].as_f64().unwrap_or(f64::NAN))).collect();
         out!("{name:>5} {values}");
     }
+    // Every per-stage CPU figure of the JSON (select, nms and cross_scores were left out of this table).
     let cpu_columns = [
         "preprocess_cpu_s",
         "yaw_grids_cpu_s",
         "window_cpu_s",
         "lattices_cpu_s",
         "score_cpu_s",
+        "select_cpu_s",
+        "nms_cpu_s",
+        "cross_scores_cpu_s",
         "layout_cpu_s",
         "cpu_s",
     ];

@@ -131,9 +131,9 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     let LabelledDetections { frames, truth, detections, .. } =
         read_labelled_detections(&held_out.data, &held_out.detections)?;
     let out_dir = args.out.clone().unwrap_or_else(|| held_out.models.clone());
-    std::fs::create_dir_all(&out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
-    // Fit every model first: a category that cannot be fitted stops the run before any file is written,
-    // so a models directory is never left half calibrated.
+    // Fit every model first, and check that every model file can be written: a category that cannot be
+    // fitted, or a file that cannot be written (a directory in its place, no permission), stops the run
+    // before any file is written, so a models directory is never left half calibrated.
     let mut failures = Vec::new();
     for model in &mut models {
         let samples = label_detections(&detections, &truth, &model.category, held_out.iou);
@@ -160,6 +160,10 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
             failures.join("\n  ")
         );
     }
+    let paths: Vec<PathBuf> = models.iter().map(|m| out_dir.join(format!("{}.json", m.category))).collect();
+    for path in &paths {
+        super::options::writable_output_file(path).context("nothing written")?;
+    }
     out!("{:<12} {:>10} {:>6} {:>9} {:>9} {:>8} {:>8}", "category", "detections", "TP", "a", "b", "p(0)", "p(1)");
     for model in &models {
         let Some(calibration) = &model.calibration else { continue };
@@ -176,8 +180,9 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         if let Some(shortage) = calibration.shortage() {
             log::warn!("{}: calibration {shortage}", model.category);
         }
-        let path = out_dir.join(format!("{}.json", model.category));
-        model.write(&path)?;
+    }
+    for (model, path) in models.iter().zip(&paths) {
+        model.write(path)?;
     }
     out!("wrote {} calibrated model(s) to {}", models.len(), out_dir.display());
     Ok(())

@@ -59,8 +59,13 @@ pub struct Args {
 }
 
 pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
-    let categories: Vec<String> =
-        super::options::names("--categories", &args.categories)?.iter().map(|c| normalise_name(c).0).collect();
+    let mut categories: Vec<String> = Vec::new();
+    // Each category once (`chair,chair` printed its report row twice).
+    for category in super::options::names("--categories", &args.categories)?.iter().map(|c| normalise_name(c).0) {
+        if !categories.contains(&category) {
+            categories.push(category);
+        }
+    }
     let models_dir = super::detect::shipped_or(&args.models, super::detect::SHIPPED_MODELS);
     let models = read_models_dir(&models_dir, None)?;
     for category in &categories {

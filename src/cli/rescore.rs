@@ -37,7 +37,9 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
     if inputs.is_empty() {
         bail!("{}: no detections files (<frame>.json)", args.detections.display());
     }
-    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    // Every file rescored in memory first: a file the cascade refuses stops the run before any is
+    // written, so --out never holds part of a run (it held the files before the refused one).
+    let mut rescored = Vec::with_capacity(inputs.len());
     for path in &inputs {
         // One read: the detections, the room the cascade reads, and every other field, kept as it was.
         let text = cog_gpu::frame::read_text(path)?;
@@ -46,8 +48,11 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         cascade.rescore(&mut frame.detections, room.as_ref()).with_context(|| format!("{}", path.display()))?;
         let file = super::options::with_detections(&text, path, &frame.detections)?;
         let name = path.file_name().context("a detections file without a name")?;
-        let out = args.out.join(name);
-        cog_gpu::error::write_whole(&out, serde_json::to_string_pretty(&file)?.as_bytes())?;
+        rescored.push((args.out.join(name), serde_json::to_string_pretty(&file)?));
+    }
+    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    for (out, text) in &rescored {
+        cog_gpu::error::write_whole(out, text.as_bytes())?;
     }
     out!("rescored {} file(s) from {} into {}", inputs.len(), args.detections.display(), args.out.display());
     Ok(())

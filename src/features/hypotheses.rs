@@ -56,13 +56,19 @@ pub struct SizeQuantiles {
 impl SizeQuantiles {
     /// Reads a category's quantiles from a size statistics file (`sunrgbd-size-stats.json` format:
     /// `{category: {width_m: {q: [...], v: [...]}, depth_m: ..., height_m: ...}}`). The `q` levels must be
-    /// the paper's.
+    /// the paper's. Category keys are compared as annotation names are ([`crate::category::normalise_name`]):
+    /// the SUN RGB-D file's `night_stand` is the `nightstand` (it was not found).
     pub fn from_stats_file(path: &Path, category: &str) -> Result<SizeQuantiles> {
         let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
         let root: serde_json::Value =
             serde_json::from_str(&text).map_err(|e| Error::invalid(path, format!("malformed JSON: {e}")))?;
+        let wanted = crate::category::normalise_name(category).0;
         let entry = root
             .get(category)
+            .or_else(|| {
+                let entries = root.as_object()?;
+                entries.iter().find(|(key, _)| crate::category::normalise_name(key).0 == wanted).map(|(_, v)| v)
+            })
             .ok_or_else(|| Error::invalid(path, format!("no size statistics for category '{category}'")))?;
         let field = |name: &str, levels: &[f64]| -> Result<Vec<f32>> {
             let what = format!("{category}.{name}");
