@@ -368,6 +368,8 @@ fn numeric_options_are_range_checked_naming_flag_value_and_range() {
         (vec!["calibrate", "--data", f, "--detections", f, "--iou", "2"], vec!["--iou", "'2'"]),
         (vec!["detect", f, "--step", "0.0001"], vec!["--step", "0.0001"]),
         (vec!["detect", f, "--max-per-category", "0"], vec!["--max-per-category", "'0'"]),
+        // `score --top 0` scored the whole window to print an empty table.
+        (vec!["score", f, "--weights", f, "--top", "0"], vec!["--top", "'0'"]),
         (vec!["detect", f, "--support-min-score", "NaN"], vec!["--support-min-score", "NaN"]),
         (vec!["detect", f, "--support-min-score", "1.5"], vec!["--support-min-score", "1.5", "[0, 1]"]),
         (vec!["detect", f, "--overlay-min-score=-0.1"], vec!["--overlay-min-score", "-0.1", "[0, 1]"]),

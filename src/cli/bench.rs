@@ -281,11 +281,16 @@ pub fn run(args: Args, options: &GlobalOptions) -> anyhow::Result<()> {
         );
     }
     for (name, p) in &paths {
+        // The fast paths count no point·voxel updates (their JSON leaves the figure out): none printed
+        // rather than "0.000e0".
+        let updates = p["point_voxel_updates_per_s"]
+            .as_f64()
+            .map(|u| format!(", {u:.3e} point·voxel updates/s"))
+            .unwrap_or_default();
         out!(
-            "{name:>8}: score {:.3} s, {:.0} hypotheses/s, {:.3e} point·voxel updates/s  [{}]",
+            "{name:>8}: score {:.3} s, {:.0} hypotheses/s{updates}  [{}]",
             p["score_s"].as_f64().unwrap_or(0.0),
             p["hypotheses_per_s"].as_f64().unwrap_or(0.0),
-            p["point_voxel_updates_per_s"].as_f64().unwrap_or(0.0),
             p["adapter"].as_str().unwrap_or("?")
         );
     }

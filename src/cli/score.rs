@@ -19,8 +19,8 @@ pub struct Args {
     /// Weights file (JSON, see `features::weights`).
     #[arg(long)]
     pub weights: PathBuf,
-    /// How many hypotheses to print.
-    #[arg(long, default_value_t = 10)]
+    /// How many hypotheses to print (at least 1: 0 scored the whole window to print nothing).
+    #[arg(long, default_value_t = 10, value_parser = options::at_least_one)]
     pub top: usize,
     /// Size statistics the hypotheses' sizes come from (the weights' category is looked up in it).
     #[arg(long, default_value = DEFAULT_SIZE_STATS)]
