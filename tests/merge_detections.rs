@@ -4,6 +4,7 @@
 
 mod common;
 use common::run_cog_gpu as run;
+use common::strs;
 use std::path::{Path, PathBuf};
 
 fn ok(args: &[&str]) -> String {
@@ -79,10 +80,6 @@ fn files(dir: &Path) -> Vec<(String, serde_json::Value)> {
         .collect()
 }
 
-fn as_str(v: &[String]) -> Vec<&str> {
-    v.iter().map(String::as_str).collect()
-}
-
 fn count(files: &[(String, serde_json::Value)], category: &str) -> usize {
     files.iter().flat_map(|(_, f)| f["detections"].as_array().unwrap()).filter(|d| d["category"] == category).count()
 }
@@ -145,18 +142,18 @@ fn merging_re_detected_categories_equals_detecting_everything_again() {
             text(&path(out)),
         ]
     };
-    let summary = ok(&as_str(&merge("base", "chair-new", "chair", "step1")));
+    let summary = ok(&strs(&merge("base", "chair-new", "chair", "step1")));
     assert!(summary.lines().any(|l| l.starts_with("chair")), "{summary}");
     let step1 = files(&path("step1"));
     assert_ne!(step1, reference, "the desk and its monitors are still the old model's");
     assert_eq!(count(&step1, "chair"), count(&reference, "chair"));
 
     // The desk: the monitor is searched on its surfaces, so it must be replaced with it.
-    let err = failure(&as_str(&merge("step1", "chair-new", "desk", "refused")));
+    let err = failure(&strs(&merge("step1", "chair-new", "desk", "refused")));
     assert!(err.contains("monitor") && err.contains("desk"), "{err}");
     assert!(!path("refused").exists());
     detect(&data, &new, &path("desk-new"), Some("desk,monitor"));
-    ok(&as_str(&merge("step1", "desk-new", "desk,monitor", "step2")));
+    ok(&strs(&merge("step1", "desk-new", "desk,monitor", "step2")));
     // Detection for detection and in the same order: the full detection with the new models — but for the
     // cross scores (first-stage files carry them), which a merge that replaced a chair or a desk model drops:
     // the kept boxes' would hold the old model's scores.
@@ -187,10 +184,10 @@ fn merging_re_detected_categories_equals_detecting_everything_again() {
         args.extend(["--data".to_string(), text(&data)]);
         args
     };
-    ok(&as_str(&with_data("base", "chair-new", "chair", "step1-data")));
+    ok(&strs(&with_data("base", "chair-new", "chair", "step1-data")));
     let step1_data = files(&path("step1-data"));
     assert_eq!(cross_scores(&step1_data), cross_scores(&reference));
-    ok(&as_str(&with_data("step1-data", "desk-new", "desk,monitor", "step2-data")));
+    ok(&strs(&with_data("step1-data", "desk-new", "desk,monitor", "step2-data")));
     assert_eq!(files(&path("step2-data")), reference);
     // Only the chair replaced: its boxes and the kept desks' carry the new chair model's cross score, which
     // differs from the old one's (the old chair's bias was moved by −0.7), and the desks keep the old desk's.
@@ -207,7 +204,7 @@ fn merging_re_detected_categories_equals_detecting_everything_again() {
     for (o, n) in old_desk.iter().zip(&new_desk) {
         assert!((n - o - 0.7).abs() < 1e-4, "a desk box's chair score moves with the chair's bias: {o} → {n}");
     }
-    let err = failure(&as_str(&{
+    let err = failure(&strs(&{
         let mut args = merge("base", "chair-new", "chair", "x");
         args.extend(["--data".to_string(), text(&path("new"))]);
         args
@@ -216,7 +213,7 @@ fn merging_re_detected_categories_equals_detecting_everything_again() {
     // Replacing the monitor alone (no cross category) keeps the base's cross scores, box for box.
     let monitor_new = path("monitor-new");
     detect(&data, &old, &monitor_new, Some("monitor"));
-    ok(&as_str(&merge("base", "monitor-new", "monitor", "step-monitor")));
+    ok(&strs(&merge("base", "monitor-new", "monitor", "step-monitor")));
     assert_eq!(files(&path("step-monitor")), base);
 
     // Refused: cascaded files, a frame missing from --update, an --update without the categories, --out
@@ -227,17 +224,17 @@ fn merging_re_detected_categories_equals_detecting_everything_again() {
         file["detections"][0]["first_stage_score"] = 0.5.into();
         std::fs::write(cascaded.join(name), file.to_string()).unwrap();
     }
-    let err = failure(&as_str(&merge("cascaded", "chair-new", "chair", "x")));
+    let err = failure(&strs(&merge("cascaded", "chair-new", "chair", "x")));
     assert!(err.contains("cascade") && err.contains("cascaded"), "{err}");
     let partial = path("partial");
     std::fs::create_dir_all(&partial).unwrap();
     let (first, _) = &files(&path("chair-new"))[0];
     std::fs::copy(path("chair-new").join(first), partial.join(first)).unwrap();
-    let err = failure(&as_str(&merge("base", "partial", "chair", "x")));
+    let err = failure(&strs(&merge("base", "partial", "chair", "x")));
     assert!(err.contains("missing") && err.contains("partial"), "{err}");
-    let err = failure(&as_str(&merge("base", "chair-new", "desk,monitor", "x")));
+    let err = failure(&strs(&merge("base", "chair-new", "desk,monitor", "x")));
     assert!(err.contains("no detection of desk, monitor"), "{err}");
-    let err = failure(&as_str(&merge("base", "chair-new", "chair", "base")));
+    let err = failure(&strs(&merge("base", "chair-new", "chair", "base")));
     assert!(err.contains("--out must differ"), "{err}");
     assert!(!path("x").exists());
 }

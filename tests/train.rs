@@ -6,6 +6,7 @@ mod common;
 use cog_gpu::features::LatticePhase;
 use cog_gpu::features::Support;
 use common::run_cog_gpu as run;
+use common::strs;
 use std::path::{Path, PathBuf};
 
 use cog_gpu::features::fast::{FastEngine, FastOptions};
@@ -487,11 +488,6 @@ fn train_writes_a_model_and_resumes_to_the_same_weights() {
         let error = err.lines().find(|l| l.starts_with("error:")).unwrap_or_default();
         assert!(!error.contains("1 examples"), "{extra:?}: {error}");
     }
-}
-
-/// Borrowed views of owned arguments.
-fn strs(args: &[String]) -> Vec<&str> {
-    args.iter().map(String::as_str).collect()
 }
 
 /// A resumed training counts its full passes against the one `--max-full-passes` budget with the run it

@@ -171,3 +171,9 @@ pub fn cascade_without_stages(
         final_calibration,
     }
 }
+
+/// Borrowed views of owned command-line arguments (for `run_cog_gpu` and the like).
+#[allow(dead_code)]
+pub fn strs(args: &[String]) -> Vec<&str> {
+    args.iter().map(String::as_str).collect()
+}
