@@ -573,21 +573,15 @@ impl Cascade {
     /// 10⁻⁵ relative, for files written by other builds): detections of another model than the cascade's
     /// (as [`Cascade::check_models`] refuses for `detect`), found in the files `rescore` reads.
     fn check_scores(&self, detections: &[Detection]) -> Result<()> {
-        for d in detections {
-            let (Some(calibration), Some(raw)) = (self.training.calibrations.get(&d.category), d.raw_score) else {
-                continue;
-            };
-            let expected = calibration.probability(raw);
-            if (d.score - expected).abs() > 1e-5 * d.score.abs().max(expected.abs()) {
-                return Err(Error::Input(format!(
-                    "a '{}' detection has score {} where the cascade's '{}' model gives its raw score {raw} \
-                     the probability {expected}: the detections come from another model than the one the \
-                     cascade was trained with (retrain the cascade on them: cog-gpu cascade)",
-                    d.category, d.score, d.category
-                )));
-            }
+        match score_off_its_calibration(&self.training.calibrations, detections) {
+            Some((d, raw, expected)) => Err(Error::Input(format!(
+                "a '{}' detection has score {} where the cascade's '{}' model gives its raw score {raw} the \
+                 probability {expected}: the detections come from another model than the one the cascade was \
+                 trained with (retrain the cascade on them: cog-gpu cascade)",
+                d.category, d.score, d.category
+            ))),
+            None => Ok(()),
         }
-        Ok(())
     }
 
     /// Writes the file — only a cascade that [`Cascade::check`] accepts, so that nothing this writes is
@@ -913,7 +907,7 @@ fn combined(detection: &Detection, context: f32) -> f32 {
 }
 
 /// Errors unless every detection is a calibrated first-stage one.
-fn check_first_stage(detections: &[Detection]) -> Result<()> {
+pub fn check_first_stage(detections: &[Detection]) -> Result<()> {
     let rescored = |d: &&Detection| {
         d.context_score.is_some() || d.score_before_exclusion.is_some() || d.score_before_final_calibration.is_some()
     };
@@ -1209,17 +1203,19 @@ fn samples_of(
     s
 }
 
-/// AP of the samples `subset` scored by `scores` (one per sample of `subset`).
-fn subset_ap(s: &Samples, subset: &[usize], scores: &[f32], iou_threshold: f32) -> f32 {
+/// AP on the frames of fold `fold` ([`in_fold`]) of their samples `subset` scored by `scores` (one per
+/// sample of `subset`): the ground truth of every frame of the fold counts, also of a frame without a
+/// detection of the category (until 2026-12-08 only the frames holding one of `subset`'s samples counted,
+/// which left such a frame's boxes out and raised both APs, each fold by its own factor — so the mean
+/// gain could change sign — while [`cv_gain_interval`] counted them).
+fn subset_ap(s: &Samples, subset: &[usize], scores: &[f32], fold: usize, iou_threshold: f32) -> f32 {
     let boxes: Vec<ScoredBox> = subset
         .iter()
         .zip(scores)
         .map(|(&n, &score)| ScoredBox { image: s.frame[n], score, cuboid: s.cuboids[n] })
         .collect();
-    // Ground truth of the frames in the subset only.
-    let frames: std::collections::BTreeSet<usize> = subset.iter().map(|&n| s.frame[n]).collect();
     let truth: Vec<Vec<Cuboid>> =
-        s.truth.iter().enumerate().map(|(f, t)| if frames.contains(&f) { t.clone() } else { vec![] }).collect();
+        s.truth.iter().enumerate().map(|(f, t)| if in_fold(f, fold) { t.clone() } else { vec![] }).collect();
     average_precision(&boxes, &truth, iou_threshold).ap.unwrap_or(0.0)
 }
 
@@ -1305,12 +1301,12 @@ fn fold_scores(s: &Samples, fold: usize, iou_threshold: f32) -> FoldScores {
     let train: Vec<usize> = (0..s.labels.len()).filter(|&n| !in_fold(s.frame[n], fold)).collect();
     let test: Vec<usize> = (0..s.labels.len()).filter(|&n| in_fold(s.frame[n], fold)).collect();
     let base: Vec<f32> = test.iter().map(|&n| s.raw[n]).collect();
-    let first = subset_ap(s, &test, &base, iou_threshold);
+    let first = subset_ap(s, &test, &base, fold, iou_threshold);
     let per_c = combined_scores_per_c(s, &train, &test)
         .into_iter()
         .map(|combined| {
             combined.map(|combined| {
-                let cascade = subset_ap(s, &test, &combined, iou_threshold);
+                let cascade = subset_ap(s, &test, &combined, fold, iou_threshold);
                 (combined, cascade)
             })
         })
@@ -1446,6 +1442,20 @@ impl StageOutcome {
     }
 }
 
+/// The first detection of a category with a calibration in `calibrations` whose score is not the probability
+/// that calibration gives its raw score (within 10⁻⁵ relative, for files written by other builds), with its
+/// raw score and that probability: a detection of another model than the one the calibration is of.
+pub fn score_off_its_calibration<'a>(
+    calibrations: &BTreeMap<String, Calibration>,
+    detections: &'a [Detection],
+) -> Option<(&'a Detection, f32, f32)> {
+    detections.iter().find_map(|d| {
+        let (calibration, raw) = (calibrations.get(&d.category)?, d.raw_score?);
+        let expected = calibration.probability(raw);
+        ((d.score - expected).abs() > 1e-5 * d.score.abs().max(expected.abs())).then_some((d, raw, expected))
+    })
+}
+
 /// Trains the second stage of each of `categories` on `frames` (annotated objects and first-stage
 /// detections per frame), with `categories` also the context categories. Each category's stage is trained
 /// with every feature set of `sets` (not empty) and keeps the one with the highest cross-validated AP
@@ -1488,6 +1498,17 @@ pub fn train_cascade_resumable(
     };
     for frame in frames {
         check_first_stage(&frame.detections)?;
+        // The training records these calibrations as those of the models its detections came from
+        // (`detect` and `rescore` refuse detections or models that disagree with them): detections of other
+        // models are refused here too (since 2026-12-08; they trained a cascade its own files were refused by).
+        if let Some((d, raw, expected)) = score_off_its_calibration(&training.calibrations, &frame.detections) {
+            return Err(Error::Input(format!(
+                "a '{}' detection has score {} where the '{}' model's calibration gives its raw score {raw} the \
+                 probability {expected}: the detections come from another model than the models the cascade is \
+                 trained for (detect them again with those models, or give the models they came from)",
+                d.category, d.score, d.category
+            )));
+        }
     }
     if let Some(dir) = checkpoints {
         std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
@@ -1872,6 +1893,25 @@ mod tests {
             }
         }
         s
+    }
+
+    /// A fold's AP counts the boxes of its frames without a detection: fold 0 holds frames 0 and 2, each
+    /// with one box; frame 0's one detection hits its box, frame 2 has none. Recall reaches ½ at
+    /// precision 1: AP ½ (it read 1 when frame 2 was left out).
+    #[test]
+    fn a_folds_ap_counts_the_boxes_of_its_frames_without_detections() {
+        let unit = Cuboid::new(Vec3::new(0.0, 0.0, 0.5), Vec3::ONE, 0.0);
+        let s = Samples {
+            psi: vec![vec![]],
+            raw: vec![1.0],
+            labels: vec![true],
+            frame: vec![0],
+            cuboids: vec![unit],
+            truth: vec![vec![unit], vec![], vec![unit], vec![unit]],
+        };
+        assert_eq!(subset_ap(&s, &[0], &[1.0], 0, 0.25), 0.5);
+        // Fold 1 (frames 1 and 3): one box, no detection.
+        assert_eq!(subset_ap(&s, &[], &[], 1, 0.25), 0.0);
     }
 
     /// The interval is the percentile interval of the gains that the materialised resamples give: each

@@ -1055,7 +1055,8 @@ pub const DEFAULT_OVERLAY_MIN_PROBABILITY: f32 = 0.5;
 
 /// The 3D IoU from which the overlay skips a detection overlapping an already chosen one **of its own
 /// category** ([`overlay_selection`]) where the detection's NMS IoU is not known (`eval --diagnose`): the
-/// NMS's default, [`DEFAULT_NMS_IOU`] — a box the NMS would have dropped; `detect` passes its own
+/// NMS's default, [`DEFAULT_NMS_IOU`] — a box the NMS would have dropped, or one exactly at its IoU (the NMS
+/// keeps that one: it drops above the threshold, the overlay skips from it); `detect` passes its own
 /// `--nms-iou`. Since 2026-12-06 the NMS run again after box voting demotes such boxes instead of dropping
 /// them (for the AP, "Demoted, not dropped"), and the context cascade can lift one back above its keeper,
 /// so one object could be drawn twice (on the selection set, seeds 2500–2506, one of the 388 drawn boxes).

@@ -26,6 +26,11 @@ pub enum Error {
     /// Bad input that is not tied to one file (an argument, a parameter).
     #[error("{0}")]
     Input(String),
+    /// The room layout has no room to offer for a frame (no hypothesis meets its rules: a view from close
+    /// to a wall, too few points): a property of the frame, which `detect` answers with no room rather
+    /// than with no detections.
+    #[error("{0}")]
+    NoRoom(String),
     #[error("GPU: {0}")]
     Gpu(String),
     /// The learning solver failed (QP not solved, corrupt checkpoint content).

@@ -108,7 +108,7 @@ impl Bounds {
         let (va, vb) = (self.volume as f64, other.volume as f64);
         let intersection = (overlap.x as f64 * overlap.y as f64 * dz as f64).min(va.min(vb));
         let union = va + vb - intersection;
-        union > 0.0 && intersection / union * (1.0 - 1e-6) <= threshold as f64
+        union > 0.0 && intersection / union * (1.0 + 1e-6) <= threshold as f64
     }
 }
 

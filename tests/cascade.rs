@@ -473,6 +473,37 @@ fn cli_trains_a_cascade_and_rescores_files() {
             cascade_file.to_str().unwrap(),
         ])
     };
+    // Models whose table calibration is not the one that made the detections' scores: refused before any
+    // training, the first file named (a cascade was trained and written before 2026-12-08, which `rescore`
+    // then refused on its own training files). And an `--out` in a directory not made yet, with the
+    // checkpoints elsewhere, is made before the training (the write failed after it before).
+    let other_models = tmp.path().join("other-models");
+    std::fs::create_dir_all(&other_models).unwrap();
+    std::fs::copy(models_dir.join("bed.json"), other_models.join("bed.json")).unwrap();
+    let mut table: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(models_dir.join("table.json")).unwrap()).unwrap();
+    table["calibration"]["b"] = 1.0.into();
+    std::fs::write(other_models.join("table.json"), table.to_string()).unwrap();
+    // `cascade` on the first-stage files with `models`, `--out out` and `extra` arguments.
+    let cascade_run = |models: &str, out: &std::path::Path, extra: &[&str]| {
+        let mut args = vec!["cascade", "--data", data.to_str().unwrap(), "--detections", first.to_str().unwrap()];
+        args.extend(["--models", models, "--out", out.to_str().unwrap()]);
+        args.extend(extra);
+        run(&args)
+    };
+    let refused = cascade_run(other_models.to_str().unwrap(), &tmp.path().join("o/c.json"), &[]);
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success());
+    assert!(
+        stderr.contains("f00.json") && stderr.contains("'table' detection") && stderr.contains("another model"),
+        "{stderr}"
+    );
+    let fresh_out = tmp.path().join("new-dir/cascade.json");
+    let elsewhere = tmp.path().join("elsewhere");
+    let out =
+        cascade_run(models, &fresh_out, &["--categories", "bed,table", "--checkpoints", elsewhere.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(fresh_out.is_file());
     let out = train(&first);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let text = String::from_utf8_lossy(&out.stdout);

@@ -203,3 +203,25 @@ fn voting_can_move_a_weak_kept_box_onto_a_strong_one_which_the_nms_run_again_dro
     let again = nms_detections(&detections, &options(DEFAULT_NMS_IOU));
     assert_eq!(again, vec![detections[0].clone()]);
 }
+
+/// The cheap bound's slack widens it (it shrank it before 2026-12-08): a box whose exact IoU with a kept one
+/// is a rounding step above the threshold is suppressed, and a voter whose IoU is exactly the vote IoU
+/// votes. Boxes on one footprint from one bottom: their IoU is the ratio of their heights, and the bound
+/// (footprints' overlap × heights' overlap) is exact.
+#[test]
+fn a_box_a_rounding_step_above_the_threshold_is_suppressed_and_a_voter_at_it_votes() {
+    let tall = Cuboid::new(Vec3::new(0.0, 0.0, 0.5), Vec3::ONE, 0.0);
+    let threshold = 0.15f32;
+    let height = threshold.next_up();
+    let low = Cuboid::new(Vec3::new(0.0, 0.0, 0.5 * height), Vec3::new(1.0, 1.0, height), 0.0);
+    let iou = iou_3d(&tall, &low);
+    assert!(iou > threshold && iou < threshold * (1.0 + 1e-6), "{iou}");
+    assert_eq!(suppress(&[tall, low], &[1.0, 0.5], &options(threshold)), [0]);
+    // A voter of half the height: IoU exactly 0.5, the vote IoU. Equal scores, weight 1 each: the mean
+    // centre height (0.5 + 0.25) / 2, the mean height (1 + 0.5) / 2.
+    let half = Cuboid::new(Vec3::new(0.0, 0.0, 0.25), Vec3::new(1.0, 1.0, 0.5), 0.0);
+    assert_eq!(iou_3d(&tall, &half), 0.5);
+    let boxes = [tall, half];
+    let voted = vote(&[0], [0, 1], |i| boxes[i], |_| 1.0, &vote_options(1.0));
+    assert!((voted[0].centre.z - 0.375).abs() < 1e-6 && (voted[0].size.z - 0.75).abs() < 1e-6, "{:?}", voted[0]);
+}

@@ -257,6 +257,30 @@ fn all_descriptors() -> Vec<Descriptor> {
         .concat()
 }
 
+/// A model whose voxel (and COG) weights are all zero, or tiny, scores its box and edge features to the
+/// fixed point's resolution: before 2026-12-08 zero voxel weights made the scale 1 (the box term rounded to
+/// whole units) and weights of 1e-30 an overflowing one.
+#[test]
+fn a_model_of_box_features_alone_is_scored_to_full_resolution() {
+    let scene = turned(&room_scene(), 14.0);
+    let (cells, _) = cog_gpu::room_layout::hypotheses(&scene, false, true);
+    let desc = Descriptor::new(Discretisation::Manhattan, false, true);
+    let b = RoomBox { yaw_index: orientation_at(14.0) as u32, u0: -2000, u1: 2000, v0: 0, v1: 5000 };
+    let start = desc.voxel_dim() + desc.cog_dim();
+    for voxel_weight in [0.0, 1e-30] {
+        let w: Vec<f64> = (0..desc.dim())
+            .map(|i| if i < start { voxel_weight } else { ((i * 37 % 101) as f64 - 50.0) / 7.3 })
+            .collect();
+        let tables = ScoringTables::new(desc, &cells, &w);
+        let s = cog_gpu::room_layout::voxels::scores_cpu(&cells, &tables, &[b])[0];
+        let phi = features(desc, &cells[b.yaw_index as usize], &b);
+        let dot: f64 = phi.iter().zip(&w).map(|(&x, &w)| x as f64 * w).sum();
+        let total = tables.total(&cells[b.yaw_index as usize], &b, s) as f64 / tables.scale;
+        assert!((total - dot).abs() < 1e-6 * (1.0 + dot.abs()), "voxel weights {voxel_weight}: {total} vs {dot}");
+        assert!(dot.fract().abs() > 1e-3, "a dot product that is no whole number tests the resolution: {dot}");
+    }
+}
+
 #[test]
 fn scoring_tables_give_the_dot_product_with_the_features() {
     // The scene turned by 14°, so that the orientation features differ between orientations (the cells of

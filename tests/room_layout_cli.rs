@@ -233,3 +233,52 @@ fn bad_layout_inputs_are_errors_naming_the_file() {
     rejected(&["eval", "--layout", "--data", &p("nowhere"), "--detections", &p("out")], "nowhere");
     rejected(&["train-layout", "--data", &p("nowhere"), "--out", &p("m.json")], "nowhere");
 }
+
+/// A frame seen from half a metre before a wall (its points span 0.64 m across, under the layout's 1 m
+/// sides): `layout` fails naming that cause, and `detect` with a layout model keeps the frame's detections
+/// and writes them without a room (it skipped the whole frame before 2026-12-08).
+#[test]
+fn a_frame_too_close_to_a_wall_for_a_room_keeps_its_detections() {
+    let root = tempfile::tempdir().unwrap();
+    let data = root.path().join("data");
+    let frame = cog_gpu::frame::Frame {
+        name: "wall".into(),
+        rgb: image::RgbImage::from_fn(64, 48, |x, y| image::Rgb([(x * 4) as u8, (y * 5) as u8, 90])),
+        depth_mm: vec![500; 64 * 48],
+        k: [[50.0, 0.0, 32.5], [0.0, 50.0, 24.5], [0.0, 0.0, 1.0]],
+        extrinsics: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        scene: None,
+        objects: Vec::new(),
+        layout: None,
+    };
+    frame.write(data.join("wall")).unwrap();
+    let models = root.path().join("models");
+    std::fs::create_dir_all(&models).unwrap();
+    let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/models");
+    for file in ["chair.json", "layout.json"] {
+        std::fs::copy(shipped.join(file), models.join(file)).unwrap();
+    }
+    let (data_arg, models_arg) = (data.to_str().unwrap(), models.to_str().unwrap());
+    let out = root.path().join("out");
+    rejected(
+        &[
+            "layout",
+            data_arg,
+            "--model",
+            &shipped.join("layout.json").to_string_lossy(),
+            "--out",
+            &out.to_string_lossy(),
+        ],
+        "no room hypothesis",
+    );
+    let detections = root.path().join("detections");
+    let run_out =
+        run(&["detect", data_arg, "--models", models_arg, "--out", detections.to_str().unwrap(), "--no-overlay"]);
+    let err = String::from_utf8_lossy(&run_out.stderr);
+    assert!(run_out.status.success(), "{err}");
+    assert!(err.contains("wall: no room laid out"), "{err}");
+    let written = json(&detections.join("wall.json"));
+    assert_eq!(written["frame"], "wall");
+    assert!(written.get("layout").is_none_or(Value::is_null), "{written}");
+    assert!(written["detections"].is_array());
+}

@@ -590,3 +590,43 @@ fn an_unseen_top_is_the_upper_edge_of_the_front_face() {
     assert_eq!(source(&seen), Some(SurfaceSource::Face));
     assert_eq!(source(&scene(1, 0)), None);
 }
+
+/// The front face's upper edge is where the face ends: a face that runs on up through the whole reach
+/// ([`FRONT_REACH_M`] above the box's top — a wall behind a false dresser) has none (it reported the reach's
+/// top, 0.6 m above the box, before 2026-12-08); and a box less than [`FRONT_WALK_FROM_M`] tall walks its
+/// face from the bottom, so its edge is where its points stop, not under its bottom (it reported the box's
+/// bottom − 2 cm before).
+#[test]
+fn the_front_edge_is_where_the_face_ends_within_the_reach() {
+    use cog_gpu::features::surface::{front_edge_height, FRONT_REACH_M, FRONT_WALK_FROM_M, MEASURED_BIN_M};
+    // A face of 9 columns in the box's front plane (local y = −0.25, normals −y), 1 cm rows from z = 0.005 to
+    // `face_top`, the box standing on z = 0.
+    let scene = |cuboid: &Cuboid, face_top: f32| {
+        let toward = |local: Vec3| cuboid.from_local(local) - cuboid.from_local(Vec3::ZERO);
+        let mut points = Vec::new();
+        for i in 0..9 {
+            let mut z = 0.005;
+            while z < face_top {
+                points.push(cuboid.from_local(Vec3::new(-0.4 + 0.1 * i as f32, -0.25, z - cuboid.size.z / 2.0)));
+                z += 0.01;
+            }
+        }
+        let normals = vec![toward(-Vec3::Y); points.len()];
+        let gradients = vec![Vec2::ZERO; points.len()];
+        let camera = Camera::new([500.0, 500.0, 320.5, 240.5], Mat3::IDENTITY);
+        Preprocessed { camera, image_size: [640, 480], points, normals, gradients, floor: 0.0 }
+    };
+    let dresser = Cuboid::new(Vec3::new(0.3, 3.0, 0.5), Vec3::new(0.9, 0.5, 1.0), 25f32.to_radians());
+    // The face ends 0.2 m above the box's top, within the reach: that is its edge (a window box's case).
+    let edge = front_edge_height(&scene(&dresser, 1.2), &dresser).expect("an edge within the reach");
+    assert!((edge - 1.2).abs() < 1e-4, "{edge}");
+    // The face runs 0.2 m past the reach: no edge.
+    const { assert!(FRONT_REACH_M < 0.8) };
+    assert_eq!(front_edge_height(&scene(&dresser, 1.0 + FRONT_REACH_M + 0.2), &dresser), None);
+    // A box 0.25 m tall (under FRONT_WALK_FROM_M) whose face ends at 0.15 m: the edge is 0.16 m, the top of
+    // the 2 cm bin holding the face's last row (z = 0.145).
+    const { assert!(FRONT_WALK_FROM_M > 0.25 && MEASURED_BIN_M == 0.02) };
+    let low = Cuboid::new(Vec3::new(0.3, 3.0, 0.125), Vec3::new(0.9, 0.5, 0.25), 25f32.to_radians());
+    let edge = front_edge_height(&scene(&low, 0.15), &low).expect("an edge on the low box");
+    assert!((edge - 0.16).abs() < 1e-4, "{edge}");
+}

@@ -12,7 +12,7 @@
 //! How (choices; the stage's own two folds, even and odd frames, are the outer folds): outer fold `f` is
 //! scored by the SVM trained on the other fold `g` at the (set, `C`) that an inner two-fold
 //! cross-validation **within `g`** chooses — `g`'s frames split again by [`in_inner_fold`] (frame index / 2
-//! even or odd), the same rule as the stage's (highest mean AP; ties: the smaller `C`, then the earlier set)
+//! even or odd), the same rule as the stage's (highest mean AP; ties: the earlier set, then the smaller `C`)
 //! —, or by the first-stage score when no inner choice beats the first stage's inner AP. The outer SVMs
 //! are the stage's own cross-validation's (their per-fold APs are kept, no extra fit); the inner
 //! cross-validation is the stage's own run on `g`'s samples (`fold_samples`): 2 × 2 × |C_GRID| fits on

@@ -15,8 +15,8 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Context};
 use cog_gpu::cascade::{
-    check_cross_scores, stage_checkpoint_path, train_cascade_resumable, Cascade, CascadeFrame, CascadeTraining,
-    FeatureSet, StageOutcome, StageRule, FILE_NAME, GAIN_LEVEL,
+    check_cross_scores, check_first_stage, score_off_its_calibration, stage_checkpoint_path, train_cascade_resumable,
+    Cascade, CascadeFrame, CascadeTraining, FeatureSet, StageOutcome, StageRule, FILE_NAME, GAIN_LEVEL,
 };
 
 use super::calibrate::{read_labelled_detections, HeldOutArgs, LabelledDetections};
@@ -140,7 +140,27 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         // Checked above: every model is calibrated.
         calibrations: models.iter().filter_map(|m| Some((m.category.clone(), m.calibration.clone()?))).collect(),
     };
+    // Detections of other models than `--models` (whose calibrations the cascade records as theirs): refused
+    // here, naming the file, as `detect` and `rescore` would refuse the cascade with them.
+    for (name, input) in names.iter().zip(&inputs) {
+        let file = || held_out.detections.join(format!("{name}.json"));
+        check_first_stage(&input.detections).with_context(|| file().display().to_string())?;
+        if let Some((d, raw, expected)) = score_off_its_calibration(&training.calibrations, &input.detections) {
+            bail!(
+                "{}: a '{}' detection has score {} where the calibration of the '{}' model in {} gives its raw score \
+                 {raw} the probability {expected}: these detections come from another model (detect them again \
+                 with --models, or give the models they came from)",
+                file().display(),
+                d.category,
+                d.score,
+                d.category,
+                held_out.models.display()
+            );
+        }
+    }
     let out = args.out.clone().unwrap_or_else(|| held_out.models.join(FILE_NAME));
+    // Before the training, not after it: its directory made, the file writable.
+    super::options::writable_output_file(&out)?;
     let checkpoints = args.checkpoints.clone().unwrap_or_else(|| {
         let mut name = out.clone().into_os_string();
         name.push(".stages");

@@ -685,13 +685,22 @@ pub(super) fn lay_out(
     layout_model: Option<&cog_gpu::room_layout::model::LayoutModel>,
     backend: Backend,
 ) -> anyhow::Result<Option<(PredictedLayout, LayoutRecord)>> {
-    layout_model
-        .map(|model| {
-            super::layout::frame_layout(frame, Some(model), backend).with_context(|| {
-                format!("laying out the room of {} (the layout model of the models directory)", frame.name)
-            })
-        })
-        .transpose()
+    let Some(model) = layout_model else { return Ok(None) };
+    match super::layout::frame_layout(frame, Some(model), backend) {
+        Ok(layout) => Ok(Some(layout)),
+        // A frame the layout has no room for keeps its detections: no room in its file, the cascade's
+        // no-room input (since 2026-12-08; the frame was skipped before).
+        Err(error)
+            if matches!(error.downcast_ref::<cog_gpu::error::Error>(), Some(cog_gpu::error::Error::NoRoom(_))) =>
+        {
+            log::warn!("{}: no room laid out ({error}); its detections are written without a room", frame.name);
+            Ok(None)
+        }
+        Err(error) => {
+            Err(error
+                .context(format!("laying out the room of {} (the layout model of the models directory)", frame.name)))
+        }
+    }
 }
 
 /// Rescores the detections with `cascade` (when there is one), whose layout features read the room.

@@ -153,7 +153,9 @@ pub fn best_slice(scores: &[f32; SLICES]) -> (usize, f32) {
     best
 }
 
-/// The reported surface height (upright z, metres) of slice `h` of a hypothesis: the slice's centre.
+/// The height (upright z, metres) of slice `h` of a hypothesis: the slice's centre. What a detection reports
+/// is measured from the points ([`category_surface_height`], [`refined_surface_height`]); this is the
+/// latter's fallback for a slice without upward points, and the tests' reference.
 pub fn surface_height(hyp: &Hypothesis, h: usize) -> f32 {
     hyp.bottom + (h as f32 + 0.5) * hyp.size.z / SLICES as f32
 }
@@ -340,7 +342,9 @@ const FRONT_SIDE_SIN: f32 = 0.4;
 /// [`MEASURED_BIN_M`] bins from the box's bottom; its median per bin over the body
 /// ([`FRONT_BODY_MARGIN_M`] above the bottom to as far under the top) must be at least
 /// [`FRONT_MIN_MEDIAN`]; walking up from [`FRONT_WALK_FROM_M`] under the box's top, the face ends at the
-/// first bin with fewer than [`FRONT_EDGE_SHARE`] of that median, and the edge is that bin's bottom. Things
+/// first bin with fewer than [`FRONT_EDGE_SHARE`] of that median, and the edge is that bin's bottom (the walk
+/// starts at the bottom bin for a box less than [`FRONT_WALK_FROM_M`] tall; a face that runs on up to the
+/// reach, [`FRONT_REACH_M`] above the top, has no edge there: a wall, not a front — since 2026-12-08). Things
 /// on the top (a TV, a lamp) stand back from the front and leave its slab. The constants were chosen on
 /// the selection set's dressers (margins 0, 0.05, 0.1 m × slabs 0.02, 0.03, 0.05 m × shares 0.2, 0.3, 0.5:
 /// 19–21 of 24 within 5 cm against 17 without the fallback; an early variant had been looked at on the
@@ -379,11 +383,15 @@ pub fn front_edge_height(pre: &Preprocessed, cuboid: &Cuboid) -> Option<f32> {
     if median < FRONT_MIN_MEDIAN {
         return None;
     }
-    let mut b = ((cuboid.top() - FRONT_WALK_FROM_M - bottom) / MEASURED_BIN_M) as i64;
+    // From the box's bottom bin at the lowest: a box under FRONT_WALK_FROM_M tall walks its whole face.
+    let mut b = (((cuboid.top() - FRONT_WALK_FROM_M - bottom) / MEASURED_BIN_M) as i64).max(0);
     while count(b + 1) as f32 >= FRONT_EDGE_SHARE * median {
         b += 1;
     }
-    Some(bottom + (b + 1) as f32 * MEASURED_BIN_M)
+    // A face that runs on up to the reach (the points stop there, not the face) has no upper edge within
+    // it: a wall behind the box, not its front.
+    let edge = bottom + (b + 1) as f32 * MEASURED_BIN_M;
+    (edge < reach - 0.5 * MEASURED_BIN_M).then_some(edge)
 }
 
 /// The front face's plane for [`front_edge_height`]: the horizontal axis (0: the box's width axis, 1: its

@@ -199,7 +199,7 @@ impl LayoutScene {
             })
             .collect();
         if points.len() < NORMAL_NEIGHBOURS {
-            return Err(Error::Input(format!(
+            return Err(Error::NoRoom(format!(
                 "frame '{}': {} points (subsampled); the room layout needs at least {NORMAL_NEIGHBOURS}",
                 frame.name,
                 points.len(),
@@ -419,7 +419,12 @@ pub fn predict(
     let descriptor = model.descriptor;
     let (cells, boxes) = hypotheses(scene, descriptor.cog, descriptor.edges);
     if boxes.is_empty() {
-        return Err(Error::Input("no room hypothesis holds 80 % of the points".into()));
+        return Err(Error::NoRoom(format!(
+            "no room hypothesis: no box with sides of at least {} m around the camera holds {:.0} % of the \
+             points (a view from close to a wall, whose points span less than that)",
+            MIN_SIDE_MM as f64 / 1000.0,
+            100.0 * MIN_INSIDE_FRACTION
+        )));
     }
     let tables = voxels::ScoringTables::new(descriptor, &cells, &model.weights_f64());
     let scores = score_hypotheses(&cells, &tables, &boxes)?;

@@ -4,7 +4,7 @@
 //! Layout file (`cog-gpu layout`, `<out>/<frame>.json`; `detect` puts the same record under `"layout"`):
 //!
 //! ```json
-//! {"frame": "NAME", "layout": {"method": "manhattan" | "cubical" | "manhattan+cog" | "cubical+cog" | "heuristic",
+//! {"frame": "NAME", "layout": {"method": "manhattan" | "cubical" (either followed by "+cog" and/or "+edges") | "heuristic",
 //!   "corners": [[x, y] × 4], "floor": z, "ceiling": z, "yaw_deg": d, "score": s, "hypotheses": n}}
 //! ```
 //! Corners are upright metres, counter-clockwise seen from above; `yaw_deg` is the direction of the first

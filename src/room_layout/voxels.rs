@@ -121,6 +121,12 @@ pub const CUBICAL_REGIONS: u32 = (CUBICAL_SPLITS * CUBICAL_SPLITS) as u32;
 pub const NO_REGION: u32 = u32::MAX;
 /// Fixed-point budget: per-orientation sums of the largest |contribution| stay below 2^30.
 const SCORE_BUDGET: f64 = (1u64 << 30) as f64;
+/// The largest fixed-point scale, and the scale of a model whose voxel weights are all zero: the box and
+/// edge features' term (`ScoringTables::total`, rounded to 1/scale in an `i64`) keeps 2⁻³² of resolution
+/// without overflowing, where the voxel budget alone would give a scale of 1 (zero voxel weights: the box
+/// term rounded to whole units, until 2026-12-08) or an overflowing one (tiny voxel weights). Trained models
+/// have scales far below it (their voxel sums reach the budget at about 2²⁰).
+const MAX_SCALE: f64 = (1u64 << 32) as f64;
 
 /// How a hypothesis's space is divided into feature cells.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -696,7 +702,11 @@ impl ScoringTables {
             .iter()
             .map(|yaw| yaw.chunks(regions).map(|c| c.iter().fold(0f64, |m, x| m.max(x.abs()))).sum::<f64>())
             .fold(0f64, f64::max);
-        let scale = if bound > 0.0 { 2f64.powi((SCORE_BUDGET / bound).log2().floor() as i32) } else { 1.0 };
+        let scale = if bound > 0.0 {
+            2f64.powi((SCORE_BUDGET / bound).log2().floor() as i32).min(MAX_SCALE)
+        } else {
+            MAX_SCALE
+        };
         let contributions = real.iter().map(|yaw| yaw.iter().map(|x| (x * scale).round() as i32).collect()).collect();
         let mut box_weights = [0.0; BOX_FEATURES];
         box_weights.copy_from_slice(&w[desc.box_start()..desc.box_start() + BOX_FEATURES]);
