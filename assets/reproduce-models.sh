@@ -55,6 +55,11 @@ cd "$(dirname "$0")/.."
 WORK=${WORK:-/tmp/cog-gpu-repro}
 ANNOTATE=${ANNOTATE:-visible}
 BIN=${BIN:-target/release/cog-gpu}
+# NORMALS (default kdtree, the shipped models') is every `train`'s --normals: kdtree-40 trains on the 40
+# nearest neighbours' normals (README, "Normals"; not shipped). The models record it and `detect` follows
+# them; the models of one directory must agree, so give it to `models` and `small` alike.
+NORMALS=${NORMALS:-kdtree}
+NORMALS_ARGS=(--normals "$NORMALS")
 CASCADE_BLOCKS=${CASCADE_BLOCKS:-4}
 case "$CASCADE_BLOCKS" in
     [1-8]) ;;
@@ -155,7 +160,7 @@ train_and_eval() {
             read -r -a extra <<< "${CATEGORY_ARGS[$category]:-}"
             "$BIN" train --data "${CATEGORY_DATA[$category]:-$WORK/train}" --category "$category" \
                 --out "$dir/models/$category.json" \
-                "${resume[@]}" "$@" "${extra[@]}" 2> "$dir/$category.log"
+                "${resume[@]}" "${NORMALS_ARGS[@]}" "$@" "${extra[@]}" 2> "$dir/$category.log"
             echo "$name $category $((SECONDS - started)) s" >> "$dir/times.txt"
         fi
     done
@@ -374,7 +379,7 @@ case "$mode" in
             cuboid_resume=()
             [ -f "$WORK/cuboid/table.json.ckpt" ] && cuboid_resume=(--resume)
             "$BIN" train --data "$WORK/train" --category table --out "$WORK/cuboid/table.json" \
-                "${cuboid_resume[@]}" 2> "$WORK/cuboid/table.log"
+                "${cuboid_resume[@]}" "${NORMALS_ARGS[@]}" 2> "$WORK/cuboid/table.log"
         fi
         CATEGORY_ARGS[table]="--surfaces-from $WORK/cuboid/table.json"
         CATEGORY_ARGS[nightstand]="--detect-step 0.1"
@@ -621,7 +626,7 @@ PY
                 read -r -a window <<< "${WINDOW[$category]}"
             fi
             "$BIN" train --data "$WORK/train" --category "$category" --out "$dir/models/$category.json" \
-                "${resume[@]}" "${window[@]}" 2> "$dir/$category.log"
+                "${resume[@]}" "${window[@]}" "${NORMALS_ARGS[@]}" 2> "$dir/$category.log"
             echo "small $category $((SECONDS - started)) s" >> "$dir/times.txt"
         done
         for group in floor surfaces; do

@@ -369,3 +369,46 @@ fn weights_files_round_trip_and_reject_other_layouts() {
     w[COG] = 1.0;
     assert!(WeightsFile::new(geom, "bed", w, 0.0).unwrap_err().to_string().contains("cog bin 0"));
 }
+
+/// A floor seen by a structured-light camera (320×240, fx 285, 7.5 cm baseline, disparity in eighths of a
+/// pixel, camera 1.3 m up looking level): the quantised depths put the floor's points on fronto-parallel
+/// strips, and the 15 nearest of a point mostly lie on its strip, whose plane is the optical axis's; the 40
+/// nearest of `NormalSearch::KdTreeWide` reach the neighbouring strips and find the floor: the shares of
+/// the floor's points in the up cone (the normal code's bin 0). And each search's name round trip, as model
+/// files and the command line write it.
+#[test]
+fn forty_neighbours_find_a_floor_on_quantised_depth() {
+    use cog_gpu::features::preprocess::{estimate_normals_of, NormalSearch, NORMAL_NEIGHBOURS, WIDE_NORMAL_NEIGHBOURS};
+    let (fx, baseline, height) = (285.0f32, 0.075f32, 1.3f32);
+    let mut points = Vec::new();
+    for row in 125..240 {
+        for col in 0..320 {
+            // The ray through the pixel (x right, y forward, z up), to the floor z = −1.3.
+            let ray = Vec3::new((col as f32 + 0.5 - 160.0) / fx, 1.0, -(row as f32 + 0.5 - 120.0) / fx);
+            let depth = height / -ray.z;
+            if depth > 4.0 {
+                continue;
+            }
+            let disparity = (fx * baseline / depth * 8.0).round() / 8.0;
+            points.push(ray * (fx * baseline / disparity));
+        }
+    }
+    let up_share = |neighbours: usize| {
+        let normals = estimate_normals_of(&points, neighbours);
+        normals.iter().filter(|n| normal_bin(**n) == 0).count() as f64 / normals.len() as f64
+    };
+    let (narrow, wide) = (up_share(NORMAL_NEIGHBOURS), up_share(WIDE_NORMAL_NEIGHBOURS));
+    eprintln!("up cone: {narrow:.3} with 15 neighbours, {wide:.3} with 40");
+    assert!(narrow < 0.5 && wide > 0.8, "up cone: {narrow:.3} with 15 neighbours, {wide:.3} with 40");
+    assert_eq!(estimate_normals_of(&points, NORMAL_NEIGHBOURS), estimate_normals(&points));
+    // `Preprocessed` with the search fits each point's 40 nearest.
+    let frame = Frame::read(FRAME, DepthSource::Raw).unwrap();
+    let pre = Preprocessed::from_frame_with(&frame, NormalSearch::KdTreeWide).unwrap();
+    assert_eq!(pre.normals, estimate_normals_of(&frame.point_cloud().points, WIDE_NORMAL_NEIGHBOURS));
+    for search in NormalSearch::ALL {
+        assert_eq!(search.name().parse::<NormalSearch>().unwrap(), search);
+        let json = serde_json::to_string(&search).unwrap();
+        assert_eq!(json, format!("\"{}\"", search.name()));
+        assert_eq!(serde_json::from_str::<NormalSearch>(&json).unwrap(), search);
+    }
+}

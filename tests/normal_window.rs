@@ -261,6 +261,13 @@ fn model_files_record_their_normal_search_only_when_not_the_default() {
     let text = std::fs::read_to_string(&path).unwrap();
     assert!(text.contains(r#""normals":"window""#), "{text}");
     assert_eq!(Model::read(&path).unwrap().features.normals, NormalSearch::Window);
+    // So with the 40 nearest (`kdtree-40`).
+    let mut wide = bed.clone();
+    wide.features.normals = NormalSearch::KdTreeWide;
+    let wide_path = dir.path().join("wide.json");
+    wide.write(&wide_path).unwrap();
+    assert!(std::fs::read_to_string(&wide_path).unwrap().contains(r#""normals":"kdtree-40""#));
+    assert_eq!(Model::read(&wide_path).unwrap().features.normals, NormalSearch::KdTreeWide);
     // The models of a run must agree; an error names two that do not.
     assert_eq!(common_normal_search(&[]).unwrap(), NormalSearch::KdTree);
     assert_eq!(common_normal_search(&[window.clone(), window.clone()]).unwrap(), NormalSearch::Window);

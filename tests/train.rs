@@ -101,6 +101,31 @@ fn small_oracle_with(target: PositiveTarget) -> DetectorOracle {
     small_oracle_full(target, false)
 }
 
+/// A full pass caches at most `cached_rows_per_example` rows per example, the size `train` plans the cache
+/// by: for counts under 4 too, whose quarter of boxes nearest the truth is none (it kept every box with a
+/// loss under 1 before 2026-12-08: thousands per positive).
+#[test]
+fn a_full_pass_caches_no_more_rows_than_planned() {
+    use cog_gpu::learn::detector::{cached_rows_per_example, train_detector};
+    use cog_gpu::learn::{CuttingPlane, SeparationOracle, SsvmOptions};
+    for count in [1, 3, 8] {
+        let mut oracle = small_oracle();
+        oracle.candidate_count = count;
+        let options = SsvmOptions { c: 1.0, max_iterations: 1, quiet: true, ..SsvmOptions::default() };
+        train_detector(&oracle, &mut CuttingPlane::new(options).unwrap()).unwrap();
+        let state = oracle.run_state();
+        // [tag, batch calls, full passes, round cap, examples, then per example its count and indices]
+        let (mut at, mut rows) = (5, Vec::new());
+        for _ in 0..state[4] {
+            rows.push(state[at] as usize);
+            at += 1 + state[at] as usize;
+        }
+        assert_eq!(at, state.len());
+        assert!(rows.iter().all(|&r| r <= cached_rows_per_example(count)), "count {count}: rows {rows:?}");
+        assert!(rows[0] >= count, "the positive caches its count at least: {rows:?}");
+    }
+}
+
 fn frame_instances(frame: &Frame, category: &str) -> Vec<Cuboid> {
     frame.objects.iter().filter(|o| o.category == category).map(|o| o.cuboid).collect()
 }

@@ -16,7 +16,8 @@ use std::path::PathBuf;
 use anyhow::{bail, Context};
 use cog_gpu::cascade::{
     check_cross_scores, check_first_stage, score_off_its_calibration, stage_checkpoint_path, train_cascade_resumable,
-    Cascade, CascadeFrame, CascadeTraining, FeatureSet, StageOutcome, StageRule, FILE_NAME, GAIN_LEVEL,
+    v7_adds_nothing, Cascade, CascadeFrame, CascadeTraining, FeatureSet, StageOutcome, StageRule, FILE_NAME,
+    GAIN_LEVEL,
 };
 
 use super::calibrate::{read_labelled_detections, HeldOutArgs, LabelledDetections};
@@ -200,11 +201,10 @@ pub fn run(args: Args, _options: &GlobalOptions) -> anyhow::Result<()> {
         args.keep.into(),
     )?;
     if resumed > 0 {
-        out!(
-            "resumed {resumed} of {} stage trainings from the checkpoints in {}",
-            categories.len() * sets.len(),
-            checkpoints.display()
-        );
+        // Of the trainings that run: a skipped v7 training (`v7_adds_nothing`) has no checkpoint to resume.
+        let trainings: usize =
+            categories.iter().map(|c| sets.iter().filter(|&&set| !v7_adds_nothing(set, c, &sets)).count()).sum();
+        out!("resumed {resumed} of {trainings} stage trainings from the checkpoints in {}", checkpoints.display());
     }
     print_stages(&cascade, &results, &sets, StageRule::from(args.keep).needs_nested())?;
     if cascade.stages.is_empty() {

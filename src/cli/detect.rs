@@ -93,9 +93,9 @@ pub struct Args {
     /// hypotheses at 0.1) and places boxes more precisely.
     #[arg(long, value_parser = options::step)]
     pub step: Option<f32>,
-    /// How each point's normal finds its 15 plane-fit neighbours: `kdtree` (all points, by a k-d tree; the
-    /// shipped models were trained so) or `window` (the nearest within the 7×7 pixels around it; README,
-    /// "Normals in an image window").
+    /// How each point's normal finds its plane-fit neighbours: `kdtree` (the 15 nearest of all points, by a
+    /// k-d tree; the shipped models were trained so), `window` (the 15 nearest within the 7×7 pixels around
+    /// it; README, "Normals in an image window") or `kdtree-40` (the 40 nearest, by the k-d tree).
     /// Default: the one the models were trained with (`features.normals` in their files; every shipped
     /// model's is `kdtree`).
     #[arg(long, value_parser = options::normal_search)]

@@ -29,7 +29,7 @@ pub fn min_points(text: &str) -> Result<u32, String> {
     Ok(value)
 }
 
-/// `--normals`: how the points' normals find their neighbours (`kdtree`, `window`).
+/// `--normals`: how the points' normals find their neighbours (`kdtree`, `window`, `kdtree-40`).
 pub fn normal_search(text: &str) -> Result<cog_gpu::features::preprocess::NormalSearch, String> {
     text.trim().parse().map_err(|e: cog_gpu::error::Error| e.to_string())
 }

@@ -94,9 +94,11 @@ pub struct Args {
     /// Cap on cutting-plane iterations (QP solves), counted across resumes.
     #[arg(long, default_value_t = 300)]
     pub max_iterations: usize,
-    /// How the training frames' normals find their 15 plane-fit neighbours: `kdtree` (the default, every
-    /// shipped model's) or `window` (the 7×7 pixels around each point; README, "Normals in an image
-    /// window"). The model file records it and `detect` preprocesses with it.
+    /// How the training frames' normals find their plane-fit neighbours: `kdtree` (the 15 nearest; the
+    /// default, every shipped model's), `window` (the 15 nearest within the 7×7 pixels around each point;
+    /// README, "Normals in an image window") or `kdtree-40` (the 40 nearest, which reach across the depth
+    /// steps of structured-light sensors; README, "Normals"). The model file records it and `detect`
+    /// preprocesses with it.
     #[arg(long, default_value = "kdtree", value_parser = options::normal_search)]
     pub normals: NormalSearch,
     /// Continue from the checkpoint `<out>.ckpt`.
@@ -221,8 +223,10 @@ pub struct Args {
     #[arg(long, default_value = "5x5x5")]
     pub grid: [u32; 3],
     /// Train with latent support surfaces (paper §4.1; a version-2 model): MODEL is the pre-trained cuboid
-    /// model of the same category and features (e.g. assets/models/table.json), whose centre voxel layer
-    /// initialises the surface weights.
+    /// model of the same category and features (e.g. assets/models/table.json). Its category and layout are
+    /// checked; its weights are read only by `--surface-init centre` (its centre voxel layer, with random
+    /// height biases, imputes the first round's slices). Every CCCP round's solve starts from w = 0, so
+    /// with the default `upward` the trained model does not depend on MODEL's weights.
     #[arg(long, value_name = "MODEL")]
     pub surfaces_from: Option<PathBuf>,
     /// With --surfaces-from: how the first CCCP round's slices are chosen: `upward`, each ground truth's

@@ -266,7 +266,9 @@ impl Default for ColumnAccumulator {
 fn axis_index(p: i32, lo: i32, extent: i32, n: u32) -> Option<u32> {
     let d = p.wrapping_sub(lo);
     if d >= 0 && d < extent {
-        // d < extent ≤ 2³¹/9 for any box under 3 km, so d·n cannot overflow.
+        // d·n < extent·n fits in i32 while extent·n < 2³¹: extent in 2⁻¹⁶ m, n at most 64 (a grid of
+        // `MAX_COLUMNS` along one axis), so boxes under 512 m along that axis — the GPU twin computes the
+        // same i32 product.
         Some((d * n as i32 / extent) as u32)
     } else {
         None

@@ -16,7 +16,8 @@ use super::normal_window::NormalWindowParams;
 use super::{Arena, GpuContext};
 use crate::error::{Error, Result};
 use crate::features::preprocess::{
-    estimate_normals, normals_from_window_masks, point_grid, ImageGradients, NormalSearch,
+    estimate_normals, estimate_normals_of, normals_from_window_masks, point_grid, ImageGradients, NormalSearch,
+    WIDE_NORMAL_NEIGHBOURS,
 };
 use crate::frame::PointCloud;
 
@@ -175,7 +176,7 @@ pub fn gradients_and_normals_gpu(
     let (width, height) = rgb.dimensions();
     let grid = match search {
         NormalSearch::Window => Some(point_grid([width, height], &cloud.points, &cloud.pixels)),
-        NormalSearch::KdTree => None,
+        NormalSearch::KdTree | NormalSearch::KdTreeWide => None,
     };
     let output = preprocess_gpu(ctx, Some(rgb), grid.as_deref().map(|grid| PointGrid { grid, width, height }))?;
     let gradients = output.gradients.unwrap_or_default().into_iter().map(glam::Vec2::from).collect();
@@ -186,7 +187,10 @@ pub fn gradients_and_normals_gpu(
                 cloud.pixels.iter().map(|&[col, row]| all[(row * width + col) as usize]).collect();
             normals_from_window_masks(grid, width, &cloud.pixels, &masks)
         }
-        _ => estimate_normals(&cloud.points),
+        _ => match search {
+            NormalSearch::KdTreeWide => estimate_normals_of(&cloud.points, WIDE_NORMAL_NEIGHBOURS),
+            _ => estimate_normals(&cloud.points),
+        },
     };
     Ok((image, normals))
 }

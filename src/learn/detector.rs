@@ -734,7 +734,9 @@ impl DetectorOracle {
             let mut nearest: Vec<u32> =
                 (0..hypotheses.len() as u32).filter(|&n| window.losses[n as usize] < 1.0).collect();
             let extra = nearest_truth_count(self.candidate_count).min(nearest.len());
-            if extra > 0 && extra < nearest.len() {
+            // None for a count under 4 (until 2026-12-08 a quarter of 0 kept them all: every box with a
+            // loss under 1, nearly the whole window under the regret target — gigabytes of features).
+            if extra < nearest.len() {
                 let by_loss =
                     |a: &u32, b: &u32| window.losses[*a as usize].total_cmp(&window.losses[*b as usize]).then(a.cmp(b));
                 nearest.select_nth_unstable_by(extra, by_loss);

@@ -425,7 +425,7 @@ impl CuttingPlane {
         let w = combine(constraints, &alpha, self.state.dim);
         for (constraint, a) in self.state.constraints.iter_mut().zip(&alpha) {
             constraint.alpha = *a;
-            let zero = *a <= 1e-9 * bound;
+            let zero = alpha_is_zero(*a, bound);
             constraint.inactive_iterations = if zero { constraint.inactive_iterations.saturating_add(1) } else { 0 };
         }
         self.state.w = w;
@@ -490,4 +490,31 @@ fn combine(constraints: &[WorkingConstraint], alpha: &[f64], dim: usize) -> Vec<
         }
     });
     w
+}
+
+/// Whether a constraint's α counts as zero for pruning ([`SsvmOptions::prune_after`]): at most 10⁻⁹ of
+/// its bound `C/n`, the bound taken at most 10. Beyond that the threshold stays 10⁻⁸: the α of active
+/// constraints do not grow with C once C exceeds what the optimum needs, and a threshold growing with C
+/// pruned active ones (an audit's run at C = 10⁹ dropped constraints with α 0.05–0.17 every solve and
+/// cycled to its iteration cap; fixed 2026-12-08, with the threshold unchanged up to C/n = 10, so the shipped
+/// models, C = 10 in the 1-slack form, train as before). The interior-point solver leaves inactive α near
+/// its tolerance (10⁻⁸–10⁻⁷), so some inactive constraints are never counted zero and stay.
+fn alpha_is_zero(alpha: f64, bound: f64) -> bool {
+    alpha <= 1e-9 * bound.min(10.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::alpha_is_zero;
+
+    #[test]
+    fn an_active_alpha_is_not_zero_at_a_large_c() {
+        // The audit's case: α 0.05 with the 1-slack bound C = 10⁹.
+        assert!(!alpha_is_zero(0.05, 1e9));
+        assert!(!alpha_is_zero(2e-8, 1e9));
+        // Up to a bound of 10 the threshold is 10⁻⁹ of it, as before.
+        assert!(alpha_is_zero(1e-8, 10.0) && !alpha_is_zero(1.1e-8, 10.0));
+        assert!(alpha_is_zero(1e-9, 1.0) && !alpha_is_zero(2e-9, 1.0));
+        assert!(alpha_is_zero(0.0, 0.5));
+    }
 }
