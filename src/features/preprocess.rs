@@ -218,8 +218,9 @@ pub enum NormalSearch {
     /// neighbours often lie on one step and fit the optical axis (46 % of the points of 40 training frames,
     /// seed 1000, 320×240; their floor points in the up bin 35 %); 40 reach across steps (15 % and 80 %).
     /// Models trained with it on the 1 000 training frames and scored on the 325 selection frames (first
-    /// stage, no voting): desk +5.8 [2.2, 8.3], table's cuboid model +3.8 [−0.6, 9.5], bed −0.8 [−4.0, 2.8]
-    /// against the same training with 15 (docs/measurements.md, "The normals' neighbourhood").
+    /// stage, no voting): desk +5.8 [2.2, 8.3], table's cuboid model +3.8 [−0.6, 9.5], bed −0.8 [−4.0, 2.8],
+    /// dresser −11.6 [−18.1, −2.2] against the same training with 15 — no uniform win (docs/measurements.md,
+    /// "The normals' neighbourhood").
     #[serde(rename = "kdtree-40")]
     KdTreeWide,
     /// The nearest among the points of the [`NORMAL_WINDOW`]×[`NORMAL_WINDOW`] image window around the
